@@ -1,0 +1,51 @@
+"""cmbs — simulation, inverse dynamics and control of constrained multibody systems.
+
+The public API::
+
+    model = cmbs.load("four-bar")                 # a library model, or a path to a TOML file
+    q = cmbs.assemble(model)                      # position analysis
+    motion = cmbs.kinematic_analysis(model, t)    # kinematics of a driven model
+    motion.save("out.npz")
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cmbs.errors import CmbsError, ConvergenceError, ExpressionError, ModelError, SingularSystemError
+from cmbs.kinematics import (ConstraintReport, accelerations, assemble, constraint_report, kinematic_analysis,
+                             singular_configurations, velocities)
+from cmbs.model.drivers import Constant, Expression, PythonFunction, Table
+from cmbs.model.model import Model, Terms
+from cmbs.model.natural import NaturalModelBuilder
+from cmbs.trajectory import Trajectory
+
+__version__ = "0.1.0"
+
+
+def load(name_or_path: str | Path, **parameters: object) -> Model:
+    """A model by library name (``cmbs models`` lists them) or from a TOML model file.
+
+    The returned model is assembled: ``model.q0`` satisfies Φ(q0, 0) = 0 and ``model.qd0`` the
+    velocity constraints.  ``parameters`` go to library builders (e.g. ``links=14``).
+    """
+    from cmbs.library import load_library_model, names
+    from cmbs.model.files import load_model_file
+
+    text = str(name_or_path)
+    if text in names():
+        return load_library_model(text, **parameters)
+    if parameters:
+        raise ModelError(f"parameters {sorted(parameters)} apply to library models only, not to files",
+                         source=text)
+    if text.endswith(".toml") or Path(text).exists():
+        return load_model_file(text)
+    raise ModelError(f"no library model or file {text!r}; library models: {', '.join(names())}")
+
+
+__all__ = [
+    "CmbsError", "ConvergenceError", "ExpressionError", "ModelError", "SingularSystemError",
+    "ConstraintReport", "accelerations", "assemble", "constraint_report", "kinematic_analysis",
+    "singular_configurations", "velocities", "Constant", "Expression", "PythonFunction", "Table",
+    "Model", "Terms", "NaturalModelBuilder", "Trajectory", "load",
+]

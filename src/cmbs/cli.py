@@ -1,0 +1,151 @@
+"""The ``cmbs`` command: a thin argparse layer over the public API.
+
+User mistakes (a bad model file, an unknown name, a bad option) print one line and exit with
+status 2; a run that fails on a valid input (e.g. assembly that does not converge) exits 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Sequence
+
+import numpy as np
+
+import cmbs
+from cmbs.errors import CmbsError
+
+
+class _UsageError(CmbsError):
+    """A bad command-line option."""
+
+
+def _parameter(text: str) -> tuple[str, object]:
+    """``key=value`` with value read as bool, int, float or string."""
+    key, sep, raw = text.partition("=")
+    if not sep or not key:
+        raise _UsageError(f"--param expects key=value, got {text!r}")
+    lowered = raw.strip().lower()
+    if lowered in ("true", "false"):
+        return key, lowered == "true"
+    for kind in (int, float):
+        try:
+            return key, kind(raw)
+        except ValueError:
+            pass
+    return key, raw
+
+
+def _load(args: argparse.Namespace) -> cmbs.Model:
+    return cmbs.load(args.model, **dict(_parameter(p) for p in args.param))
+
+
+def _models(args: argparse.Namespace) -> int:
+    from cmbs.library import entry, names
+
+    width = max(len(name) for name in names())
+    for name in names():
+        library_entry = entry(name)
+        parameters = library_entry.parameters()
+        extra = f"  [{', '.join(f'{k}={v}' for k, v in parameters.items())}]" if parameters else ""
+        print(f"{name:<{width}}  {library_entry.summary}{extra}")
+    return 0
+
+
+def _describe(args: argparse.Namespace) -> int:
+    model = _load(args)
+    report = cmbs.constraint_report(model, model.q0, 0.0)
+    print(f"model        {model.name}")
+    if model.description:
+        print(f"description  {model.description}")
+    if model.source:
+        print(f"source       {model.source}")
+    print(f"coordinates  n = {model.n}")
+    for name, kind, value in zip(model.coordinate_names, model.coordinate_kinds, model.q0):
+        print(f"  {name:<18} {kind:<9} q0 = {value: .6g}")
+    print(f"constraints  m = {model.m} ({int(np.sum(model.drivers))} driver(s))")
+    for name, is_driver in zip(model.constraint_names, model.drivers):
+        print(f"  {name}{'   [driver]' if is_driver else ''}")
+    print(f"rank of A    {report.rank} at q0 (smallest singular value {min(report.singular_values, default=0.0):.3g})")
+    print(f"DOF          {report.dof}")
+    print(f"redundant    {', '.join(report.redundant) if report.redundant else 'none'}")
+    if model.actuator_names:
+        print(f"actuators    {', '.join(model.actuator_names)}")
+    if model.segment_masses:
+        masses = ", ".join(f"{name} {mass:g}" for name, mass in model.segment_masses)
+        print(f"masses [kg]  {masses}; total {model.total_mass:g}")
+    print(f"energy at q0 T = {model.kinetic_energy(model.q0, model.qd0):.6g} J, "
+          f"V = {model.potential_energy(model.q0):.6g} J")
+    return 0
+
+
+def _kinematics(args: argparse.Namespace) -> int:
+    from cmbs.plotting import plot_trajectory, save_figure
+
+    if args.t_end <= 0 or args.dt <= 0:
+        raise _UsageError(f"--t-end and --dt must be > 0, got {args.t_end} and {args.dt}")
+    _check_output(args.out, (".npz", ".csv"), "--out")
+    if args.plot:
+        _check_output(args.plot, (".png", ".pdf", ".svg"), "--plot")
+    model = _load(args)
+    times = np.linspace(0.0, args.t_end, int(round(args.t_end / args.dt)) + 1)
+    motion = cmbs.kinematic_analysis(model, times)
+    singular = cmbs.singular_configurations(model, motion)
+    path = motion.save(args.out)
+    print(f"{model.name}: kinematics of {len(times)} instants over [0, {args.t_end:g}] s -> {path}")
+    for name in model.coordinate_names:
+        column = motion[name]
+        print(f"  {name:<18} min {column.min(): .5g}  max {column.max(): .5g}")
+    for configuration in singular:
+        print(f"  singular configuration at t = {configuration.t:.6g} s: rank {configuration.rank} "
+              f"< {configuration.nominal_rank}")
+    if args.plot:
+        print(f"  figure -> {save_figure(plot_trajectory(motion, model=model), args.plot)}")
+    return 0
+
+
+def _check_output(path: str, suffixes: tuple[str, ...], option: str) -> None:
+    if not path.lower().endswith(suffixes):
+        raise _UsageError(f"{option} {path!r}: expected a file ending in {' or '.join(suffixes)}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="cmbs", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"cmbs {cmbs.__version__}")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    listing = commands.add_parser("models", help="list the library models", description="List the library models.")
+    listing.set_defaults(run=_models)
+
+    def model_command(name: str, text: str) -> argparse.ArgumentParser:
+        command = commands.add_parser(name, help=text, description=text)
+        command.add_argument("model", metavar="MODEL", help="library model name or path to a .toml model file")
+        command.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                             help="parameter of a library model, e.g. links=14 (repeatable)")
+        return command
+
+    describe = model_command("describe", "coordinates, constraints, DOF, rank, redundant constraints, masses")
+    describe.set_defaults(run=_describe)
+
+    kinematics = model_command("kinematics", "kinematic analysis of a fully driven model over time")
+    kinematics.add_argument("--t-end", type=float, required=True, help="final time [s]")
+    kinematics.add_argument("--dt", type=float, required=True, help="time step of the output grid [s]")
+    kinematics.add_argument("--out", required=True, help="result file (.npz or .csv)")
+    kinematics.add_argument("--plot", help="figure of the motion (.png, .pdf or .svg)")
+    kinematics.set_defaults(run=_kinematics)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``cmbs`` console script; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.run(args)
+    except CmbsError as error:
+        print(f"cmbs: error: {error}", file=sys.stderr)
+        return error.exit_status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,59 @@
+"""The one exception hierarchy of cmbs.
+
+Every message names the item at fault, what was expected and what was received, so that a
+user reading one line can fix the model file or the call.  The command-line interface turns
+:class:`CmbsError` into a one-line message and exit status 2 (user mistake) or 1 (a run that
+failed, e.g. a non-convergent assembly of a valid model).
+"""
+
+from __future__ import annotations
+
+
+class CmbsError(Exception):
+    """Base class of every error cmbs raises on purpose."""
+
+    exit_status = 2
+
+
+class ModelError(CmbsError):
+    """A model definition is invalid: unknown name, duplicate, bad value, bad expression.
+
+    Parameters
+    ----------
+    message
+        What is wrong and what was expected.
+    source
+        The file (or builder) the definition came from, if any.
+    entry
+        The entry at fault, e.g. ``segment 'crank'`` or ``driver 'alpha-drive'.expression``.
+    """
+
+    def __init__(self, message: str, *, source: str | None = None, entry: str | None = None):
+        self.problem = message
+        self.source = source
+        self.entry = entry
+        super().__init__(self._format())
+
+    def _format(self) -> str:
+        where = ": ".join(part for part in (self.source, self.entry) if part)
+        return f"{where}: {self.problem}" if where else self.problem
+
+    def located(self, source: str | None = None, entry: str | None = None) -> "ModelError":
+        """Return a copy that also names the file and/or entry (keeps the ones already set)."""
+        return type(self)(self.problem, source=self.source or source, entry=self.entry or entry)
+
+
+class ExpressionError(ModelError):
+    """A time expression could not be parsed (see :mod:`cmbs.model.expressions`)."""
+
+
+class ConvergenceError(CmbsError):
+    """A Newton iteration (assembly, implicit step) did not converge within its limits."""
+
+    exit_status = 1
+
+
+class SingularSystemError(CmbsError):
+    """A linear system is singular: redundant constraints or a singular configuration."""
+
+    exit_status = 1

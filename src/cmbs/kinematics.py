@@ -1,0 +1,225 @@
+"""Kinematic analysis: assembly, velocity and acceleration analysis, rank/DOF/redundancy.
+
+Position analysis is Newton-Raphson on Φ(q, t) = 0 (thesis eq. 3.38-3.40): the step solves
+``A_f Δq_f = -Φ`` for the free coordinates (all but the ones held ``fixed``) in the least-squares
+minimum-norm sense, ``Δq_f = -A_f⁺ Φ``, which is the plain Newton step when A_f is square and
+regular and still converges (quadratically, to the nearest point of the constraint manifold) for
+under-determined or redundant systems.  Velocities solve ``A q̇ = -Φ_t``, accelerations
+``A q̈ = γ``, with the fixed coordinates' values held.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import scipy.linalg
+from scipy.optimize import minimize_scalar
+
+from cmbs.errors import ConvergenceError, ModelError
+from cmbs.model.model import Model
+from cmbs.trajectory import Trajectory
+
+
+@dataclass(frozen=True)
+class ConstraintReport:
+    """Rank analysis of A at one configuration.
+
+    ``rank`` (numerical, relative tolerance ``tolerance``), ``dof = n - rank``, ``redundant``
+    constraint names (rows dependent on earlier ones: pivoted QR of Aᵀ), ``singular_values``.
+    """
+
+    n: int
+    m: int
+    rank: int
+    dof: int
+    redundant: tuple[str, ...]
+    singular_values: np.ndarray
+    tolerance: float
+
+
+def constraint_report(model: Model, q: np.ndarray, t: float = 0.0, *, tolerance: float = 1e-9) -> ConstraintReport:
+    """Rank of A = Φ_q, DOF and the redundant constraints at (q, t).
+
+    A singular value counts as zero below ``tolerance · σ_max``.  Redundant rows: the rows left
+    out by QR with column pivoting of Aᵀ, i.e. those that depend linearly on the others
+    (rows are normalised first so that units do not decide).
+    """
+    A = model.jacobian(q, t)
+    n, m = model.n, model.m
+    if m == 0:
+        return ConstraintReport(n, 0, 0, n, (), np.zeros(0), tolerance)
+    sigma = np.linalg.svd(A, compute_uv=False)
+    threshold = tolerance * max(sigma[0], 1.0)
+    rank = int(np.sum(sigma > threshold))
+    norms = np.linalg.norm(A, axis=1)
+    scaled = A / np.where(norms > 0, norms, 1.0)[:, None]
+    _, _, pivots = scipy.linalg.qr(scaled.T, pivoting=True, mode="economic")
+    redundant = tuple(model.constraint_names[k] for k in sorted(pivots[rank:]))
+    return ConstraintReport(n, m, rank, n - rank, redundant, sigma, tolerance)
+
+
+def _free_mask(model: Model, fixed: Sequence[str | int]) -> np.ndarray:
+    mask = np.ones(model.n, dtype=bool)
+    mask[model.coordinate_indices(list(fixed))] = False
+    return mask
+
+
+def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed: Sequence[str | int] = (),
+             tolerance: float = 1e-10, max_iterations: int = 50) -> np.ndarray:
+    """Solve Φ(q, t) = 0 by Newton-Raphson from ``q`` (default ``model.q0``).
+
+    Parameters
+    ----------
+    fixed
+        Coordinates (names or indices) held at their given values: the independent coordinates
+        of a position analysis.
+    tolerance
+        Convergence when max |Φ_i| < tolerance (in the constraints' own units).
+
+    Raises
+    ------
+    ConvergenceError
+        Naming the iteration count, the largest residual and its constraint.
+    """
+    q = np.array(model.q0 if q is None else q, dtype=float)
+    if model.m == 0:
+        return q
+    free = _free_mask(model, fixed)
+    terms = model.new_terms()
+    zeros = np.zeros(model.n)
+    for iteration in range(max_iterations + 1):
+        model.evaluate(q, zeros, t, out=terms)
+        residual = np.max(np.abs(terms.phi))
+        if not np.isfinite(residual):
+            break
+        if residual < tolerance:
+            return q
+        if iteration == max_iterations:
+            break
+        step, *_ = np.linalg.lstsq(terms.A[:, free], -terms.phi, rcond=None)
+        q[free] += step
+    worst = int(np.nanargmax(np.abs(terms.phi))) if np.any(np.isfinite(terms.phi)) else 0
+    raise ConvergenceError(
+        f"model {model.name!r}: assembly at t={t:g} did not converge in {max_iterations} Newton iterations "
+        f"(largest residual {abs(terms.phi[worst]):.3g} in constraint {model.constraint_names[worst]!r}); "
+        "check the initial positions, the segment lengths and the drivers' values")
+
+
+def velocities(model: Model, q: np.ndarray, t: float = 0.0, *, qd: np.ndarray | None = None,
+               fixed: Sequence[str | int] = ()) -> np.ndarray:
+    """Solve A q̇ = -Φ_t with the ``fixed`` coordinates' velocities held at their values in ``qd``.
+
+    The free velocities get the minimum-norm correction of ``qd`` (default ``model.qd0``).
+    """
+    qd = np.array(model.qd0 if qd is None else qd, dtype=float)
+    terms = model.evaluate(np.asarray(q, float), qd, t)
+    return _correct(terms.A, -terms.phi_t - terms.A @ qd, qd, _free_mask(model, fixed))
+
+
+def accelerations(model: Model, q: np.ndarray, qd: np.ndarray, t: float = 0.0, *, qdd: np.ndarray | None = None,
+                  fixed: Sequence[str | int] = ()) -> np.ndarray:
+    """Solve A q̈ = γ with the ``fixed`` coordinates' accelerations held at their values in ``qdd``."""
+    qdd = np.zeros(model.n) if qdd is None else np.array(qdd, dtype=float)
+    terms = model.evaluate(np.asarray(q, float), np.asarray(qd, float), t)
+    return _correct(terms.A, terms.gamma - terms.A @ qdd, qdd, _free_mask(model, fixed))
+
+
+def _correct(A: np.ndarray, rhs: np.ndarray, base: np.ndarray, free: np.ndarray) -> np.ndarray:
+    if A.shape[0] == 0:
+        return base
+    step, *_ = np.linalg.lstsq(A[:, free], rhs, rcond=None)
+    result = base.copy()
+    result[free] += step
+    return result
+
+
+def kinematic_analysis(model: Model, times: np.ndarray, *, q0: np.ndarray | None = None,
+                       tolerance: float = 1e-10, max_iterations: int = 50) -> Trajectory:
+    """Positions, velocities and accelerations of a fully driven model over ``times``.
+
+    This is the kinematics of the thesis's inverse dynamic analysis (§4): drivers fix every
+    degree of freedom, so at each t, Φ = 0, A q̇ = -Φ_t and A q̈ = γ have unique solutions.
+    Each position analysis starts from the previous solution plus a velocity predictor.
+
+    Raises
+    ------
+    ModelError
+        When the model is not fully driven (DOF > 0 at the start).
+    """
+    times = np.asarray(times, dtype=float)
+    q = assemble(model, q0, float(times[0]), tolerance=tolerance, max_iterations=max_iterations)
+    report = constraint_report(model, q, float(times[0]))
+    if report.dof > 0:
+        raise ModelError(f"model {model.name!r} has {report.dof} degree(s) of freedom at t={times[0]:g}: "
+                         f"kinematic analysis needs drivers on every DOF (add {report.dof} driver(s))")
+    k, n = len(times), model.n
+    Q, QD, QDD = np.zeros((k, n)), np.zeros((k, n)), np.zeros((k, n))
+    for step, t in enumerate(times):
+        if step > 0:
+            h = t - times[step - 1]
+            guess = Q[step - 1] + h * QD[step - 1] + 0.5 * h * h * QDD[step - 1]
+            q = assemble(model, guess, float(t), tolerance=tolerance, max_iterations=max_iterations)
+        qd = velocities(model, q, float(t), qd=np.zeros(n))
+        Q[step], QD[step], QDD[step] = q, qd, accelerations(model, q, qd, float(t))
+    return Trajectory(times, Q, QD, QDD, model.coordinate_names,
+                      info={"model": model.name, "analysis": "kinematics", "tolerance": tolerance})
+
+
+@dataclass(frozen=True)
+class SingularConfiguration:
+    """A configuration along a motion where rank A drops: time, rank there, and σ_min/σ_max."""
+
+    t: float
+    rank: int
+    nominal_rank: int
+    relative_sigma: float
+
+
+def singular_configurations(model: Model, trajectory: Trajectory, *, threshold: float = 1e-6,
+                            tolerance: float = 1e-9) -> list[SingularConfiguration]:
+    """Find where A loses rank along a motion (e.g. the equal-link slider-crank at 90°).
+
+    The nominal rank r is the largest rank seen over the samples; at each local minimum of
+    ρ(t) = σ_r(A)/σ_1(A) over the samples, ρ is minimised between the neighbouring samples on a
+    cubic Hermite interpolation of q (from q and q̇), and a singular configuration is reported
+    where the minimum falls below ``threshold``.
+    """
+    times, qs, qds = trajectory.t, trajectory.q, trajectory.qd
+    nominal = max(constraint_report(model, q, t, tolerance=tolerance).rank for t, q in zip(times, qs))
+    if nominal == 0:
+        return []
+
+    def rho_at(q: np.ndarray, t: float) -> float:
+        sigma = np.linalg.svd(model.jacobian(q, t), compute_uv=False)
+        return float(sigma[nominal - 1] / max(sigma[0], 1e-300))
+
+    def q_at(t: float, k: int) -> np.ndarray:
+        h = times[k + 1] - times[k]
+        s = (t - times[k]) / h
+        h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+        return h00 * qs[k] + h10 * h * qds[k] + h01 * qs[k + 1] + h11 * h * qds[k + 1]
+
+    rho = np.array([rho_at(q, t) for t, q in zip(times, qs)])
+    found: list[SingularConfiguration] = []
+    for k in range(len(times)):
+        left = rho[k - 1] if k > 0 else np.inf
+        right = rho[k + 1] if k + 1 < len(times) else np.inf
+        if not (rho[k] <= left and rho[k] < right):
+            continue
+        lo, hi = times[max(k - 1, 0)], times[min(k + 1, len(times) - 1)]
+        segment = lambda t: max(int(np.searchsorted(times, t, side="right")) - 1, 0)
+
+        def objective(t: float) -> float:
+            j = min(segment(t), len(times) - 2)
+            return rho_at(q_at(t, j), t)
+
+        best = minimize_scalar(objective, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12}) \
+            if hi > lo else None
+        t_min, value = (best.x, best.fun) if best is not None and best.fun < rho[k] else (times[k], rho[k])
+        if value < threshold:
+            j = min(segment(t_min), len(times) - 2)
+            rank = constraint_report(model, q_at(t_min, j), t_min, tolerance=max(tolerance, threshold)).rank
+            found.append(SingularConfiguration(float(t_min), rank, nominal, float(value)))
+    return found

@@ -1,0 +1,91 @@
+"""The named models of cmbs: ``cmbs.load("four-bar")``, ``cmbs models`` lists them.
+
+Each entry is a TOML file in this folder or a small builder function, and cites its source and
+parameter values.  Builders take keyword parameters (``cmbs.load("chain", links=14)``).
+"""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass
+from importlib import import_module, resources
+from pathlib import Path
+from typing import Callable
+
+from cmbs.errors import ModelError
+from cmbs.model.model import Model
+
+
+@dataclass(frozen=True)
+class LibraryEntry:
+    """A named model: one-line summary and a loader taking keyword parameters."""
+
+    name: str
+    summary: str
+    loader: Callable[..., Model]
+
+    def parameters(self) -> dict[str, object]:
+        """The loader's keyword parameters and their defaults."""
+        return {name: p.default for name, p in inspect.signature(self.loader).parameters.items()
+                if p.default is not inspect.Parameter.empty}
+
+
+def _file_loader(filename: str) -> Callable[[], Model]:
+    def load() -> Model:
+        from cmbs.model.files import load_model_file
+
+        with resources.as_file(resources.files(__name__) / filename) as path:
+            return load_model_file(Path(path))
+
+    return load
+
+
+def _entries() -> dict[str, LibraryEntry]:
+    entries: list[LibraryEntry] = []
+    for filename, summary in _FILES:
+        entries.append(LibraryEntry(filename.removesuffix(".toml"), summary, _file_loader(filename)))
+    for name, module, function, summary in _BUILDERS:
+        target = getattr(import_module(f"{__name__}.{module}"), function)
+        entries.append(LibraryEntry(name, summary, target))
+    return {entry.name: entry for entry in entries}
+
+
+_FILES = [
+    ("particle-circle.toml", "particle on a circle (Aghili 2005 §V-D), 1 DOF"),
+    ("pendulum.toml", "simple pendulum, uniform rod 1 m 1 kg, 1 DOF"),
+    ("double-pendulum.toml", "double pendulum of two uniform rods with angle coordinates, 2 DOF"),
+    ("four-bar.toml", "thesis four-bar linkage, crank angle driven (fully driven, 0 DOF; 1 DOF undriven)"),
+]
+_BUILDERS = [
+    ("chain", "chain", "chain", "N-link pendulum chain (links=N, closed=true pins the tip), N or N-2 DOF"),
+    ("slider-crank", "mechanisms", "slider_crank", "Aghili's slider-crank, equal crank and rod, natural coordinates, 1 DOF"),
+    ("passive-manipulator", "mechanisms", "passive_manipulator",
+     "3-link arm with passive third joint (Quasem et al.), natural coordinates, 3 DOF"),
+    ("human", "human", "human", "12-segment 14-DOF planar human body (thesis Table 3.2), 38 coordinates"),
+]
+
+
+def names() -> list[str]:
+    """Names of the library models, in listing order."""
+    return list(_entries())
+
+
+def entry(name: str) -> LibraryEntry:
+    """The library entry ``name`` (ModelError listing the names otherwise)."""
+    entries = _entries()
+    if name not in entries:
+        raise ModelError(f"no library model {name!r}; available: {', '.join(entries)}")
+    return entries[name]
+
+
+def load_library_model(name: str, **parameters: object) -> Model:
+    """Build library model ``name`` with keyword ``parameters`` (checked against its loader)."""
+    library_entry = entry(name)
+    allowed = library_entry.parameters()
+    unknown = sorted(set(parameters) - set(allowed))
+    if unknown:
+        accepted = ", ".join(f"{k}={v!r}" for k, v in allowed.items()) or "none"
+        raise ModelError(f"model {name!r} has no parameter(s) {', '.join(unknown)} (parameters: {accepted})")
+    from cmbs.model.files import assembled
+
+    return assembled(library_entry.loader(**parameters), f"library model {name!r}")

@@ -1,0 +1,234 @@
+"""Functions of time for rheonomic drivers and time-varying loads.
+
+Three kinds, each giving the value and its first two derivatives ``(f, f', f'')`` at ``t``:
+
+- :class:`Expression` — a closed form of ``t`` through the restricted parser
+  (:mod:`cmbs.model.expressions`); derivatives exact by Taylor arithmetic.
+- :class:`Table` — samples ``(t_k, f_k)`` interpolated linearly or by a C² cubic spline
+  (scipy ``CubicSpline``, not-a-knot); derivatives of the interpolant.  Outside the sampled
+  range the first/last piece is extended (scipy's convention).
+- :class:`PythonFunction` — any Python callable; derivatives from user callables or, if not
+  given, central differences (step ``h``, error O(h²)).  It is evaluated in Python, outside the
+  compiled kernels (slower path).
+
+Models collect their time functions into a :class:`TimeFunctionPack` whose arrays the compiled
+kernels read; :func:`evaluate_time_functions` fills an ``(k, 3)`` array of values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numba
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from cmbs.errors import ModelError
+from cmbs.model.expressions import Program, evaluate_program, parse_expression
+
+KIND_EXPRESSION, KIND_PIECEWISE, KIND_PYTHON = 0, 1, 2
+
+
+class TimeFunction:
+    """Interface: ``f(t) -> (value, first derivative, second derivative)``."""
+
+    def __call__(self, t: float) -> tuple[float, float, float]:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class Constant(TimeFunction):
+    """A constant value (derivatives zero)."""
+
+    value: float
+
+    def __call__(self, t: float) -> tuple[float, float, float]:
+        return float(self.value), 0.0, 0.0
+
+    def program(self) -> Program:
+        return parse_expression(repr(float(self.value))) if self.value >= 0 else \
+            parse_expression(f"-{-float(self.value)!r}")
+
+
+@dataclass(frozen=True)
+class Expression(TimeFunction):
+    """Closed-form expression of ``t``, e.g. ``"pi/4*sin(pi*t - pi/2)"``."""
+
+    text: str
+    compiled: Program = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "compiled", parse_expression(self.text))
+
+    def __call__(self, t: float) -> tuple[float, float, float]:
+        return self.compiled(t)
+
+
+@dataclass(frozen=True)
+class Table(TimeFunction):
+    """Tabulated samples, ``interpolation`` is ``"linear"`` or ``"spline"`` (cubic, C²)."""
+
+    times: np.ndarray
+    values: np.ndarray
+    interpolation: str = "spline"
+    breaks: np.ndarray = field(init=False, repr=False, compare=False)
+    coefficients: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        times = np.asarray(self.times, dtype=float).ravel()
+        values = np.asarray(self.values, dtype=float).ravel()
+        if times.size != values.size:
+            raise ModelError(f"table has {times.size} times but {values.size} values")
+        if times.size < 2:
+            raise ModelError(f"table needs at least 2 samples, got {times.size}")
+        if not np.all(np.isfinite(times)) or not np.all(np.isfinite(values)):
+            raise ModelError("table contains a non-finite time or value")
+        if np.any(np.diff(times) <= 0.0):
+            raise ModelError("table times must be strictly increasing")
+        if self.interpolation == "linear":
+            slopes = np.diff(values) / np.diff(times)
+            coefficients = np.zeros((times.size - 1, 4))
+            coefficients[:, 2] = slopes
+            coefficients[:, 3] = values[:-1]
+        elif self.interpolation == "spline":
+            if times.size < 4:
+                raise ModelError(f"spline interpolation needs at least 4 samples, got {times.size}")
+            coefficients = CubicSpline(times, values).c.T.copy()
+        else:
+            raise ModelError(f"interpolation must be 'linear' or 'spline', got {self.interpolation!r}")
+        object.__setattr__(self, "times", times)
+        object.__setattr__(self, "values", values)
+        object.__setattr__(self, "breaks", times)
+        object.__setattr__(self, "coefficients", coefficients)
+
+    def __call__(self, t: float) -> tuple[float, float, float]:
+        out = evaluate_piecewise(self.breaks, self.coefficients.ravel(), float(t))
+        return float(out[0]), float(out[1]), float(out[2])
+
+
+@dataclass(frozen=True)
+class PythonFunction(TimeFunction):
+    """A Python callable ``f(t)``; ``first`` and ``second`` derivatives optional.
+
+    Without derivative callables they come from central differences with step ``h``
+    (truncation error O(h²), about 1e-8 relative for smooth f and the default h).
+    """
+
+    function: Callable[[float], float]
+    first: Callable[[float], float] | None = None
+    second: Callable[[float], float] | None = None
+    h: float = 1e-4
+
+    def __call__(self, t: float) -> tuple[float, float, float]:
+        f, h = self.function, self.h
+        value = float(f(t))
+        first = float(self.first(t)) if self.first else (float(f(t + h)) - float(f(t - h))) / (2 * h)
+        if self.second:
+            second = float(self.second(t))
+        elif self.first:
+            second = (float(self.first(t + h)) - float(self.first(t - h))) / (2 * h)
+        else:
+            second = (float(f(t + h)) - 2 * value + float(f(t - h))) / (h * h)
+        return value, first, second
+
+
+def as_time_function(value: object) -> TimeFunction:
+    """Accept a number, an expression string, a :class:`TimeFunction` or a callable."""
+    if isinstance(value, TimeFunction):
+        return value
+    if isinstance(value, bool):
+        raise ModelError(f"expected a number, expression or function of t, got {value!r}")
+    if isinstance(value, (int, float, np.floating, np.integer)):
+        return Constant(float(value))
+    if isinstance(value, str):
+        return Expression(value)
+    if callable(value):
+        return PythonFunction(value)
+    raise ModelError(f"expected a number, expression or function of t, got {value!r}")
+
+
+@numba.njit(cache=True)
+def evaluate_piecewise(breaks, coefficients, t):
+    """Piecewise cubic ``sum_k c_k (t - t_i)^(3-k)`` (scipy PPoly layout, flattened rows)."""
+    pieces = breaks.shape[0] - 1
+    i = np.searchsorted(breaks, t, side="right") - 1
+    i = min(max(i, 0), pieces - 1)
+    s = t - breaks[i]
+    c3, c2, c1, c0 = coefficients[4 * i], coefficients[4 * i + 1], coefficients[4 * i + 2], coefficients[4 * i + 3]
+    out = np.empty(3)
+    out[0] = ((c3 * s + c2) * s + c1) * s + c0
+    out[1] = (3.0 * c3 * s + 2.0 * c2) * s + c1
+    out[2] = 6.0 * c3 * s + 2.0 * c2
+    return out
+
+
+@dataclass(frozen=True)
+class TimeFunctionPack:
+    """Time functions packed for the compiled kernels.
+
+    ``table`` is (k, 4) ints: kind, start of its ops (expressions) or -1, number of op rows or
+    pieces, start of its reals.  ``ops`` stacks every expression's (opcode, arg) rows; ``reals``
+    holds expression constants and piecewise breaks+coefficients.  ``python`` lists the
+    (index, function) pairs evaluated in Python.
+    """
+
+    table: np.ndarray
+    ops: np.ndarray
+    reals: np.ndarray
+    depth: int
+    python: tuple[tuple[int, TimeFunction], ...]
+    functions: tuple[TimeFunction, ...]
+
+    @property
+    def count(self) -> int:
+        return len(self.functions)
+
+    @classmethod
+    def build(cls, functions: Sequence[TimeFunction]) -> "TimeFunctionPack":
+        table = np.zeros((len(functions), 4), dtype=np.int64)
+        ops: list[np.ndarray] = []
+        reals: list[float] = []
+        python: list[tuple[int, TimeFunction]] = []
+        n_ops = 0
+        depth = 1
+        for k, function in enumerate(functions):
+            if isinstance(function, Constant):
+                function_program = function.program()
+            elif isinstance(function, Expression):
+                function_program = function.compiled
+            else:
+                function_program = None
+            if function_program is not None:
+                table[k] = (KIND_EXPRESSION, n_ops, function_program.ops.shape[0], len(reals))
+                ops.append(function_program.ops)
+                n_ops += function_program.ops.shape[0]
+                reals.extend(function_program.constants)
+                depth = max(depth, function_program.depth)
+            elif isinstance(function, Table):
+                table[k] = (KIND_PIECEWISE, -1, function.coefficients.shape[0], len(reals))
+                reals.extend(function.breaks)
+                reals.extend(function.coefficients.ravel())
+            else:
+                table[k] = (KIND_PYTHON, -1, 0, len(reals))
+                python.append((k, function))
+        all_ops = np.concatenate(ops) if ops else np.zeros((0, 2), dtype=np.int64)
+        return cls(table, np.ascontiguousarray(all_ops, dtype=np.int64), np.array(reals, dtype=float),
+                   depth, tuple(python), tuple(functions))
+
+
+@numba.njit(cache=True)
+def evaluate_time_functions(table, ops, reals, t, stack, out):
+    """Fill ``out[k] = (f_k, f_k', f_k'')`` for the compiled kinds (Python ones are skipped)."""
+    for k in range(table.shape[0]):
+        kind = table[k, 0]
+        if kind == KIND_EXPRESSION:
+            start, rows, r0 = table[k, 1], table[k, 2], table[k, 3]
+            value = evaluate_program(ops[start:start + rows], reals[r0:], t, stack)
+            out[k, 0], out[k, 1], out[k, 2] = value[0], value[1], value[2]
+        elif kind == KIND_PIECEWISE:
+            pieces, r0 = table[k, 2], table[k, 3]
+            breaks = reals[r0:r0 + pieces + 1]
+            coefficients = reals[r0 + pieces + 1:r0 + pieces + 1 + 4 * pieces]
+            value = evaluate_piecewise(breaks, coefficients, t)
+            out[k, 0], out[k, 1], out[k, 2] = value[0], value[1], value[2]

@@ -1,0 +1,283 @@
+"""TOML model files for planar natural-coordinate models (format: docs/model-format.md).
+
+A file is data: it is parsed with :mod:`tomllib`, every table and key is checked against the
+format (unknown keys are errors, so typos do not pass silently), driver and force expressions go
+through the restricted parser, and the model is assembled once to prove that it closes.  Every
+mistake raises :class:`~cmbs.errors.ModelError` naming the file, the entry and the problem.
+"""
+
+from __future__ import annotations
+
+import csv
+import tomllib
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from cmbs.errors import ConvergenceError, ModelError
+from cmbs.model.drivers import Table, TimeFunction, as_time_function
+from cmbs.model.model import Model
+from cmbs.model.natural import NaturalModelBuilder
+
+_SECTIONS = ("model", "points", "segments", "angles", "distances", "sliders", "drivers", "forces", "torques",
+             "springs", "actuators")
+
+
+class _Entry:
+    """One table of the file (e.g. ``segments.crank``) with typed accessors naming it in errors."""
+
+    def __init__(self, label: str, table: object, allowed: tuple[str, ...], required: tuple[str, ...] = ()):
+        self.label = label
+        if not isinstance(table, dict):
+            raise ModelError(f"expected a table of keys, got {table!r}", entry=label)
+        unknown = sorted(set(table) - set(allowed))
+        if unknown:
+            raise ModelError(f"unknown key(s) {', '.join(map(repr, unknown))} (allowed: {', '.join(allowed)})",
+                             entry=label)
+        missing = [key for key in required if key not in table]
+        if missing:
+            raise ModelError(f"missing key(s) {', '.join(map(repr, missing))}", entry=label)
+        self.table = table
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return self.table.get(key, default)
+
+    def number(self, key: str, default: float | None = None) -> float | None:
+        value = self.table.get(key, default)
+        if value is None:
+            return None
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ModelError(f"{key} must be a number, got {value!r}", entry=self.label)
+        return float(value)
+
+    def string(self, key: str) -> str | None:
+        value = self.table.get(key)
+        if value is not None and not isinstance(value, str):
+            raise ModelError(f"{key} must be a string (a name), got {value!r}", entry=self.label)
+        return value
+
+    def pair(self, key: str, kind: type = float) -> tuple | None:
+        value = self.table.get(key)
+        if value is None:
+            return None
+        ok = isinstance(value, list) and len(value) == 2 and all(
+            isinstance(v, str) if kind is str else (isinstance(v, (int, float)) and not isinstance(v, bool))
+            for v in value)
+        if not ok:
+            what = "two names" if kind is str else "two numbers"
+            raise ModelError(f"{key} must be a list of {what}, got {value!r}", entry=self.label)
+        return tuple(value) if kind is str else (float(value[0]), float(value[1]))
+
+    def time_function(self, key: str, base: Path) -> TimeFunction:
+        value = self.table.get(key, 0.0)
+        if isinstance(value, dict):
+            return _table(_Entry(f"{self.label}.{key}", value, ("t", "value", "interpolation")), base)
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            raise ModelError(f"{key} must be a number, an expression of t or a table, got {value!r}",
+                             entry=self.label)
+        try:
+            return as_time_function(value)
+        except ModelError as error:
+            raise ModelError(error.problem, entry=f"{self.label}.{key}") from None
+
+
+def _table(entry: _Entry, base: Path) -> Table:
+    interpolation = entry.get("interpolation", "spline")
+    try:
+        return Table(np.asarray(entry.get("t"), dtype=float), np.asarray(entry.get("value"), dtype=float),
+                     interpolation)
+    except (ValueError, TypeError):
+        raise ModelError("t and value must be lists of numbers", entry=entry.label) from None
+    except ModelError as error:
+        raise ModelError(error.problem, entry=entry.label) from None
+
+
+def _file_table(entry: _Entry, path_text: str, base: Path, interpolation: str) -> Table:
+    """A driver table read from a two-column CSV file (t, value) relative to the model file."""
+    path = (base / path_text) if not Path(path_text).is_absolute() else Path(path_text)
+    if not path.is_file():
+        raise ModelError(f"file {str(path)!r} not found", entry=f"{entry.label}.file")
+    try:
+        with path.open(newline="") as stream:
+            rows = [row for row in csv.reader(stream) if row and not row[0].lstrip().startswith("#")]
+        if rows and not _is_number(rows[0][0]):
+            rows = rows[1:]
+        data = np.array([[float(v) for v in row[:2]] for row in rows])
+    except (ValueError, IndexError):
+        raise ModelError(f"{str(path)!r} must have two numeric columns t, value", entry=f"{entry.label}.file") \
+            from None
+    if data.ndim != 2 or data.shape[1] != 2:
+        raise ModelError(f"{str(path)!r} must have two numeric columns t, value", entry=f"{entry.label}.file")
+    try:
+        return Table(data[:, 0], data[:, 1], interpolation)
+    except ModelError as error:
+        raise ModelError(error.problem, entry=f"{entry.label}.file") from None
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+def _entries(document: dict, section: str) -> list[tuple[str, object]]:
+    tables = document.get(section, {})
+    if not isinstance(tables, dict):
+        raise ModelError(f"[{section}] must be a table of named entries", entry=section)
+    return list(tables.items())
+
+
+def _driver(builder: NaturalModelBuilder, name: str, table: object, base: Path) -> None:
+    entry = _Entry(f"drivers.{name}", table, ("coordinate", "expression", "table", "file", "interpolation"),
+                   ("coordinate",))
+    given = [key for key in ("expression", "table", "file") if key in entry.table]
+    if len(given) != 1:
+        raise ModelError("give exactly one of 'expression', 'table' or 'file'", entry=entry.label)
+    interpolation = entry.get("interpolation", "spline")
+    if given[0] == "file":
+        function: TimeFunction = _file_table(entry, entry.string("file"), base, interpolation)
+    elif given[0] == "table":
+        function = entry.time_function("table", base)
+    else:
+        if not isinstance(entry.get("expression"), (str, int, float)) or isinstance(entry.get("expression"), bool):
+            raise ModelError(f"expression must be a string, got {entry.get('expression')!r}", entry=entry.label)
+        function = entry.time_function("expression", base)
+    builder.add_driver(entry.string("coordinate"), function, name=name)
+
+
+def _read_builder(document: dict, base: Path, default_name: str) -> NaturalModelBuilder:
+    unknown = sorted(set(document) - set(_SECTIONS))
+    if unknown:
+        raise ModelError(f"unknown section(s) {', '.join(map(repr, unknown))} (allowed: {', '.join(_SECTIONS)})")
+    header = _Entry("model", document.get("model", {}), ("name", "description", "source", "gravity"))
+    builder = NaturalModelBuilder(header.string("name") or default_name, gravity=header.pair("gravity") or (0.0, -9.81),
+                                  description=header.string("description") or "", source=header.string("source") or "")
+    handlers: dict[str, Callable[[str, object], None]] = {
+        "points": lambda name, t: _point(builder, name, t),
+        "segments": lambda name, t: _segment(builder, name, t),
+        "distances": lambda name, t: _distance(builder, name, t),
+        "angles": lambda name, t: _angle(builder, name, t),
+        "sliders": lambda name, t: _slider(builder, name, t),
+        "drivers": lambda name, t: _driver(builder, name, t, base),
+        "forces": lambda name, t: _force(builder, name, t, base),
+        "torques": lambda name, t: _torque(builder, name, t, base),
+        "springs": lambda name, t: _spring(builder, name, t),
+        "actuators": lambda name, t: _actuator(builder, name, t),
+    }
+    for section, handler in handlers.items():
+        for name, table in _entries(document, section):
+            try:
+                handler(name, table)
+            except ModelError as error:
+                raise error.located(entry=f"{section}.{name}") from None
+    return builder
+
+
+def _point(builder: NaturalModelBuilder, name: str, table: object) -> None:
+    entry = _Entry(f"points.{name}", table, ("x", "z", "fixed", "mass"), ("x", "z"))
+    fixed = entry.get("fixed", False)
+    if not isinstance(fixed, bool):
+        raise ModelError(f"fixed must be true or false, got {fixed!r}", entry=entry.label)
+    builder.add_point(name, entry.number("x"), entry.number("z"), fixed=fixed, mass=entry.number("mass", 0.0))
+
+
+def _segment(builder: NaturalModelBuilder, name: str, table: object) -> None:
+    entry = _Entry(f"segments.{name}", table, ("points", "mass", "com", "inertia", "length"), ("points", "mass"))
+    i, j = entry.pair("points", str)
+    builder.add_segment(name, i, j, mass=entry.number("mass"), com=entry.pair("com"),
+                        inertia=entry.number("inertia"), length=entry.number("length"))
+
+
+def _distance(builder: NaturalModelBuilder, name: str, table: object) -> None:
+    entry = _Entry(f"distances.{name}", table, ("points", "initial"), ("points",))
+    i, j = entry.pair("points", str)
+    builder.add_distance(name, i, j, initial=entry.number("initial"))
+
+
+def _angle(builder: NaturalModelBuilder, name: str, table: object) -> None:
+    entry = _Entry(f"angles.{name}", table, ("segment", "from", "to", "initial"))
+    builder.add_angle(name, segment=entry.get("segment"), from_segment=entry.get("from"),
+                      to_segment=entry.get("to"), initial=entry.number("initial"))
+
+
+def _slider(builder: NaturalModelBuilder, name: str, table: object) -> None:
+    entry = _Entry(f"sliders.{name}", table, ("point", "line", "segment", "through", "direction", "lock"),
+                   ("point",))
+    builder.add_slider(name, point=entry.string("point"), line=entry.pair("line", str),
+                       segment=entry.string("segment"), through=entry.pair("through"),
+                       direction=entry.pair("direction"), lock=entry.string("lock"))
+
+
+def _force(builder: NaturalModelBuilder, name: str, table: object, base: Path) -> None:
+    entry = _Entry(f"forces.{name}", table, ("point", "fx", "fz"), ("point",))
+    builder.add_force(name, point=entry.string("point"), fx=entry.time_function("fx", base),
+                      fz=entry.time_function("fz", base))
+
+
+def _torque(builder: NaturalModelBuilder, name: str, table: object, base: Path) -> None:
+    entry = _Entry(f"torques.{name}", table, ("angle", "torque"), ("angle", "torque"))
+    builder.add_torque(name, angle=entry.string("angle"), torque=entry.time_function("torque", base))
+
+
+def _spring(builder: NaturalModelBuilder, name: str, table: object) -> None:
+    entry = _Entry(f"springs.{name}", table, ("points", "stiffness", "damping", "rest_length"),
+                   ("points", "stiffness"))
+    i, j = entry.pair("points", str)
+    builder.add_spring(name, i, j, stiffness=entry.number("stiffness"), damping=entry.number("damping", 0.0),
+                       rest_length=entry.number("rest_length"))
+
+
+def _actuator(builder: NaturalModelBuilder, name: str, table: object) -> None:
+    entry = _Entry(f"actuators.{name}", table, ("coordinate", "gain"), ("coordinate",))
+    builder.add_actuator(name, coordinate=entry.string("coordinate"), gain=entry.number("gain", 1.0))
+
+
+def _entry_of_constraint(constraint: str) -> str:
+    """'rigid crank' -> 'segments.crank' (the file entry behind a constraint name)."""
+    kind, _, name = constraint.partition(" ")
+    section = {"rigid": "segments", "distance": "distances", "angle": "angles", "slider": "sliders"}.get(kind)
+    if section is None:
+        return f"drivers.{constraint}"
+    return f"{section}.{name.removesuffix(' lock')}"
+
+
+def assembled(model: Model, source: str) -> Model:
+    """Return ``model`` with q0 assembled and q̇0 consistent, or a :class:`ModelError` naming the
+    constraint that could not be closed (e.g. a segment whose points cannot be at its length)."""
+    from cmbs.kinematics import assemble, velocities
+
+    try:
+        q0 = assemble(model, model.q0, 0.0)
+    except ConvergenceError as error:
+        worst = str(error).split("in constraint '")[-1].split("'")[0]
+        raise ModelError(f"cannot be assembled: {error}", source=source, entry=_entry_of_constraint(worst)) from None
+    qd0 = velocities(model, q0, 0.0, qd=model.qd0)
+    return model.replace(q0=q0, qd0=qd0)
+
+
+def load_model_file(path: str | Path) -> Model:
+    """Read, validate and assemble a TOML model file.
+
+    Raises
+    ------
+    ModelError
+        ``<file>: <entry>: <problem>`` for every mistake in the file.
+    """
+    path = Path(path)
+    source = str(path)
+    if not path.is_file():
+        raise ModelError("no such model file", source=source)
+    try:
+        document = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as error:
+        raise ModelError(f"not valid TOML: {error}", source=source) from None
+    except UnicodeDecodeError:
+        raise ModelError("not a text file", source=source) from None
+    try:
+        model = _read_builder(document, path.parent, path.stem).build()
+    except ModelError as error:
+        raise error.located(source=source) from None
+    return assembled(model, source)

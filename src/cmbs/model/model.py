@@ -1,0 +1,238 @@
+"""The one mathematical model interface every formulation, integrator and controller sees.
+
+For coordinates ``q`` (size n), constraints (size m) and actuator inputs ``u`` (size n_u), a
+:class:`Model` evaluates (THEORY §1, García de Jalón & Bayo's convention)::
+
+    M(q) q̈ + Aᵀ λ = Q(q, q̇, t, u),     Φ(q, t) = 0,     A = Φ_q,
+    A q̇ = -Φ_t,                        A q̈ = γ = -(Ȧ q̇) - 2 Φ_qt q̇ - Φ_tt.
+
+Pinocchio's split between a constant model and per-evaluation data is kept: the frozen
+:class:`Model` holds names, sizes and the compiled evaluator; :class:`Terms` is a caller-owned
+workspace that :meth:`Model.evaluate` fills in place (the fast path, no allocation).  The
+convenience methods (:meth:`Model.mass_matrix`, :meth:`Model.jacobian`, ...) return fresh
+arrays.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Protocol, Sequence
+
+import numpy as np
+
+from cmbs.errors import ModelError
+
+
+class Terms:
+    """Workspace with the terms of the equations of motion at one state.
+
+    Attributes (views into one buffer, overwritten by every :meth:`Model.evaluate`):
+    ``M`` (n, n), ``Q`` (n,), ``phi`` (m,), ``A`` (m, n), ``gamma`` (m,), ``phi_t`` (m,).
+    For models with a constant mass matrix ``M`` is the model's read-only matrix itself.
+    """
+
+    __slots__ = ("buffer", "M", "Q", "phi", "A", "gamma", "phi_t", "scratch")
+
+    def __init__(self, n: int, m: int, *, constant_mass: np.ndarray | None = None, scratch: int = 0):
+        size = n + m * (n + 3) + (0 if constant_mass is not None else n * n) + scratch
+        self.buffer = np.zeros(size)
+        offset = 0
+
+        def take(count: int) -> np.ndarray:
+            nonlocal offset
+            view = self.buffer[offset:offset + count]
+            offset += count
+            return view
+
+        self.Q = take(n)
+        self.phi = take(m)
+        self.A = take(m * n).reshape(m, n)
+        self.gamma = take(m)
+        self.phi_t = take(m)
+        self.M = constant_mass if constant_mass is not None else take(n * n).reshape(n, n)
+        self.scratch = take(scratch)
+
+
+class ModelEquations(Protocol):
+    """What a model builder provides (natural coordinates, joint coordinates, user equations)."""
+
+    def new_terms(self) -> Terms:
+        """A workspace sized for this model."""
+
+    def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
+        """Fill ``terms`` with M, Q, Φ, A, γ, Φ_t at the state."""
+
+    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        """T = ½ q̇ᵀ M(q) q̇."""
+
+    def potential_energy(self, q: np.ndarray) -> float:
+        """V(q) of gravity and springs (the conservative part of Q)."""
+
+    def point_positions(self, q: np.ndarray) -> np.ndarray:
+        """(n_points, 2) positions (x, z) of the model's named points."""
+
+
+@dataclass(frozen=True)
+class Model:
+    """A constrained multibody model: names, sizes and the evaluators of its equations.
+
+    Parameters
+    ----------
+    name, description, source
+        Identification; ``source`` cites where the mechanism and its parameters come from.
+    coordinate_names
+        Names of the n coordinates, e.g. ``("B.x", "B.z", "C.x", "C.z", "alpha")``.
+    coordinate_kinds
+        One of ``"x"``, ``"z"``, ``"angle"``, ``"distance"``, ``"joint"``, ``"generic"`` each.
+    constraint_names
+        Names of the m constraints (rows of Φ).
+    drivers
+        Boolean mask (m,) of rheonomic driver constraints.
+    actuator_names
+        Names of the n_u actuator inputs ``u``.
+    q0
+        Initial (approximate) coordinates, to be assembled by :func:`cmbs.kinematics.assemble`.
+    qd0
+        Initial velocities (approximate; velocity analysis makes them consistent).
+    point_names, lines
+        Names of drawable points and (i, j) index pairs of segments between them.
+    equations
+        The evaluator, see :class:`ModelEquations`.
+    parameters
+        Builder parameters (for provenance and ``replace``).
+    constant_mass
+        True when M does not depend on q (natural coordinates).
+    """
+
+    name: str
+    coordinate_names: tuple[str, ...]
+    coordinate_kinds: tuple[str, ...]
+    constraint_names: tuple[str, ...]
+    drivers: np.ndarray
+    actuator_names: tuple[str, ...]
+    q0: np.ndarray
+    qd0: np.ndarray
+    point_names: tuple[str, ...]
+    lines: tuple[tuple[int, int], ...]
+    equations: ModelEquations = field(repr=False)
+    description: str = ""
+    source: str = ""
+    parameters: dict = field(default_factory=dict, repr=False)
+    constant_mass: bool = False
+    segment_masses: tuple[tuple[str, float], ...] = ()
+    _no_input: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        n = len(self.coordinate_names)
+        if len(set(self.coordinate_names)) != n:
+            raise ModelError(f"model {self.name!r}: duplicate coordinate names")
+        for label, array in (("q0", self.q0), ("qd0", self.qd0)):
+            if np.shape(array) != (n,):
+                raise ModelError(f"model {self.name!r}: {label} has shape {np.shape(array)}, expected ({n},)")
+        if np.shape(self.drivers) != (len(self.constraint_names),):
+            raise ModelError(f"model {self.name!r}: driver mask does not match the constraints")
+        for label in ("q0", "qd0", "drivers"):
+            frozen = np.array(getattr(self, label), dtype=bool if label == "drivers" else float)
+            frozen.setflags(write=False)
+            object.__setattr__(self, label, frozen)
+        object.__setattr__(self, "_no_input", np.zeros(len(self.actuator_names)))
+
+    # ---------------------------------------------------------------- sizes and names
+    @property
+    def n(self) -> int:
+        """Number of coordinates."""
+        return len(self.coordinate_names)
+
+    @property
+    def m(self) -> int:
+        """Number of constraints (including drivers)."""
+        return len(self.constraint_names)
+
+    @property
+    def n_u(self) -> int:
+        """Number of actuator inputs."""
+        return len(self.actuator_names)
+
+    @property
+    def driver_names(self) -> tuple[str, ...]:
+        return tuple(name for name, is_driver in zip(self.constraint_names, self.drivers) if is_driver)
+
+    @property
+    def total_mass(self) -> float:
+        return float(sum(mass for _, mass in self.segment_masses))
+
+    def coordinate_index(self, name: str) -> int:
+        """Index of coordinate ``name`` (raises :class:`ModelError` naming the choices)."""
+        try:
+            return self.coordinate_names.index(name)
+        except ValueError:
+            raise ModelError(f"model {self.name!r} has no coordinate {name!r}; "
+                             f"coordinates: {', '.join(self.coordinate_names)}") from None
+
+    def coordinate_indices(self, names: Sequence[str | int]) -> np.ndarray:
+        return np.array([name if isinstance(name, (int, np.integer)) else self.coordinate_index(name)
+                         for name in names], dtype=np.int64)
+
+    def replace(self, **changes: object) -> "Model":
+        """A copy with some fields changed (the model itself is never mutated)."""
+        return dataclasses.replace(self, **changes)
+
+    # ---------------------------------------------------------------- evaluation
+    def new_terms(self) -> Terms:
+        """A workspace for :meth:`evaluate`."""
+        return self.equations.new_terms()
+
+    def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float = 0.0, u: np.ndarray | None = None,
+                 out: Terms | None = None) -> Terms:
+        """M, Q, Φ, A, γ, Φ_t at (q, q̇, t, u), written into ``out`` (or a new :class:`Terms`).
+
+        ``q`` and ``qd`` must be float64 arrays of size n; ``u`` of size n_u (zeros if None).
+        """
+        terms = out if out is not None else self.equations.new_terms()
+        self.equations.evaluate(q, qd, t, self._no_input if u is None else u, terms)
+        return terms
+
+    def _at(self, q: np.ndarray, qd: np.ndarray | None, t: float, u: np.ndarray | None) -> Terms:
+        q = np.asarray(q, dtype=float)
+        qd = np.zeros(self.n) if qd is None else np.asarray(qd, dtype=float)
+        u = None if u is None else np.asarray(u, dtype=float)
+        return self.evaluate(q, qd, float(t), u)
+
+    def mass_matrix(self, q: np.ndarray) -> np.ndarray:
+        """M(q), (n, n)."""
+        return np.array(self._at(q, None, 0.0, None).M)
+
+    def forces(self, q: np.ndarray, qd: np.ndarray, t: float = 0.0, u: np.ndarray | None = None) -> np.ndarray:
+        """Q(q, q̇, t, u), (n,): applied forces, gravity, springs, inputs, minus velocity terms."""
+        return self._at(q, qd, t, u).Q.copy()
+
+    def constraints(self, q: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """Φ(q, t), (m,)."""
+        return self._at(q, None, t, None).phi.copy()
+
+    def jacobian(self, q: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """A = Φ_q, (m, n)."""
+        return self._at(q, None, t, None).A.copy()
+
+    def gamma(self, q: np.ndarray, qd: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """γ with A q̈ = γ, (m,)."""
+        return self._at(q, qd, t, None).gamma.copy()
+
+    def constraints_t(self, q: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """Φ_t, (m,)."""
+        return self._at(q, None, t, None).phi_t.copy()
+
+    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        return float(self.equations.kinetic_energy(np.asarray(q, float), np.asarray(qd, float)))
+
+    def potential_energy(self, q: np.ndarray) -> float:
+        return float(self.equations.potential_energy(np.asarray(q, float)))
+
+    def energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        """Total mechanical energy T + V."""
+        return self.kinetic_energy(q, qd) + self.potential_energy(q)
+
+    def point_positions(self, q: np.ndarray) -> np.ndarray:
+        """(n_points, 2) positions (x, z) of :attr:`point_names`."""
+        return self.equations.point_positions(np.asarray(q, dtype=float))

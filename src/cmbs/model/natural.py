@@ -1,0 +1,780 @@
+"""Planar models in natural coordinates (thesis §3.3-3.4; García de Jalón & Bayo 1994).
+
+Coordinates are the Cartesian positions (x, z) of the moving basic points, plus optional angle
+and distance coordinates.  Fixed points are constants, not coordinates.  Every constraint is one
+of five kinds, each evaluated for all its rows at once by one compiled kernel:
+
+============  ==============================================  =================================
+kind          Φ                                               γ = -(Ȧq̇) - Φ_tt
+============  ==============================================  =================================
+rigid         d·d - L²,  d = r_j - r_i                        -2 ḋ·ḋ
+distance      d·d - s²                                        -2 ḋ·ḋ + 2 ṡ²
+angle         cos φ (u×v) - sin φ (u·v)                       see :func:`_angle_rows`
+parallel      u×v  (point on a line, rotation lock)           -2 u̇×v̇
+driver        q_c - f(t)                                      f''(t)   (Φ_t = -f'(t))
+============  ==============================================  =================================
+
+The angle constraint combines the sine (cross-product) and cosine (dot-product) forms of the
+thesis: on rigid vectors it equals |u||v| sin(θ - φ), θ the actual angle from u to v, so its
+derivative with respect to φ is -|u||v| cos(θ - φ) = -|u||v| at the solution — well conditioned
+at every angle, where the pure sine form fails at ±90° and the cosine form at 0° and 180°.
+
+Element mass matrix of a segment from point i to j (velocities ẋ_i, ż_i, ẋ_j, ż_j), local COM
+(x̄_G, z̄_G) with x̄ from i towards j, mass m, inertia I_i about i, a = m x̄_G/L, b = m z̄_G/L,
+c = I_i/L² (thesis eq. 3.30)::
+
+    [ m-2a+c    0       a-c     -b  ]
+    [ 0         m-2a+c  b        a-c]
+    [ a-c       b       c        0  ]
+    [ -b        a-c     0        c  ]
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numba
+import numpy as np
+
+from cmbs.errors import ModelError
+from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions
+from cmbs.model.model import Model, Terms
+from cmbs.model.packing import int_section, pack, real_section
+
+# int sections of the packed kernel data, in this order
+(_RIGID, _DISTANCE, _ANGLE, _PARALLEL, _DRIVER, _POINT_FORCE, _TORQUE, _SPRING, _ACTUATOR,
+ _TF_TABLE, _TF_OPS) = range(11)
+# real sections
+_CONSTANTS, _LENGTH2, _Q_CONSTANT, _SPRING_PARAMETERS, _ACTUATOR_GAIN, _TF_REALS = range(6)
+
+
+def element_mass_matrix(mass: float, length: float, com: tuple[float, float], inertia_com: float) -> np.ndarray:
+    """4×4 mass matrix of a planar rigid segment in the velocities of its two points.
+
+    ``com`` = (along, across) in the segment frame (origin at i, x̄ towards j); ``inertia_com``
+    about the centre of mass; I_i = I_G + m(x̄_G² + z̄_G²) (parallel axes).
+    """
+    along, across = com
+    inertia_i = inertia_com + mass * (along**2 + across**2)
+    a = mass * along / length
+    b = mass * across / length
+    c = inertia_i / length**2
+    return np.array([
+        [mass - 2 * a + c, 0.0, a - c, -b],
+        [0.0, mass - 2 * a + c, b, a - c],
+        [a - c, b, c, 0.0],
+        [-b, a - c, 0.0, c],
+    ])
+
+
+def point_map(length: float, local: tuple[float, float]) -> np.ndarray:
+    """2×4 matrix C with r_P = C (x_i, z_i, x_j, z_j) for the point at ``local`` (along, across).
+
+    r_P = r_i + (ξ/L)(r_j - r_i) + (η/L) R90 (r_j - r_i), R90 the +90° rotation (thesis eq. 3.32).
+    """
+    xi, eta = local[0] / length, local[1] / length
+    return np.array([
+        [1.0 - xi, eta, xi, -eta],
+        [-eta, 1.0 - xi, eta, xi],
+    ])
+
+
+@dataclass
+class _Point:
+    name: str
+    x: float
+    z: float
+    fixed: bool
+    mass: float
+
+
+@dataclass
+class _Segment:
+    name: str
+    i: str
+    j: str
+    mass: float
+    length: float | None
+    com: tuple[float, float]
+    inertia: float
+
+
+@dataclass
+class NaturalModelBuilder:
+    """Build a planar natural-coordinate :class:`~cmbs.model.model.Model` entry by entry.
+
+    Every ``add_*`` method validates its entry and raises :class:`~cmbs.errors.ModelError`
+    naming it; :meth:`build` checks the whole (unknown names, massless points) and packs the
+    index arrays for the compiled kernel.
+
+    Examples
+    --------
+    >>> b = NaturalModelBuilder("pendulum")
+    >>> b.add_point("O", 0.0, 0.0, fixed=True)
+    >>> b.add_point("P", 1.0, 0.0)
+    >>> b.add_segment("rod", "O", "P", mass=1.0, com=(0.5, 0.0), inertia=1 / 12)
+    >>> model = b.build()
+    """
+
+    name: str
+    gravity: tuple[float, float] = (0.0, -9.81)
+    description: str = ""
+    source: str = ""
+    _points: dict[str, _Point] = field(default_factory=dict)
+    _segments: dict[str, _Segment] = field(default_factory=dict)
+    _angles: dict[str, tuple] = field(default_factory=dict)
+    _distances: dict[str, tuple] = field(default_factory=dict)
+    _sliders: dict[str, tuple] = field(default_factory=dict)
+    _drivers: dict[str, tuple[str, TimeFunction]] = field(default_factory=dict)
+    _point_forces: dict[str, tuple] = field(default_factory=dict)
+    _torques: dict[str, tuple[str, TimeFunction]] = field(default_factory=dict)
+    _springs: dict[str, tuple] = field(default_factory=dict)
+    _actuators: dict[str, tuple[str, float]] = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ entries
+    def _new_name(self, table: dict, section: str, name: str) -> str:
+        if not isinstance(name, str) or not name:
+            raise ModelError(f"name must be a non-empty string, got {name!r}", entry=section)
+        if name in table:
+            raise ModelError(f"duplicate name {name!r}", entry=f"{section}.{name}")
+        return name
+
+    def add_point(self, name: str, x: float, z: float, *, fixed: bool = False, mass: float = 0.0) -> None:
+        """A basic point at (x, z): a ground point if ``fixed``, else its coordinates join q.
+
+        For moving points (x, z) is only the initial guess; assembly makes it consistent.
+        ``mass`` adds a point mass (e.g. a slider block).
+        """
+        self._new_name(self._points, "points", name)
+        entry = f"points.{name}"
+        x, z = _finite(x, entry, "x"), _finite(z, entry, "z")
+        if _finite(mass, entry, "mass") < 0:
+            raise ModelError(f"mass must be >= 0, got {mass}", entry=entry)
+        if fixed and mass:
+            raise ModelError("a fixed point cannot carry mass", entry=entry)
+        self._points[name] = _Point(name, x, z, bool(fixed), float(mass))
+
+    def add_segment(self, name: str, i: str, j: str, *, mass: float, com: tuple[float, float] | None = None,
+                    inertia: float | None = None, length: float | None = None) -> None:
+        """A rigid segment from point ``i`` to point ``j`` (adds Φ = |r_j - r_i|² - L² = 0).
+
+        ``com`` (along, across) in the segment frame and ``inertia`` about the COM are required
+        when ``mass > 0``.  ``length`` defaults to the distance between the initial points.
+        """
+        self._new_name(self._segments, "segments", name)
+        entry = f"segments.{name}"
+        mass = _finite(mass, entry, "mass")
+        if mass < 0:
+            raise ModelError(f"mass must be >= 0, got {mass}", entry=entry)
+        if i == j:
+            raise ModelError(f"both ends are point {i!r}", entry=entry)
+        if mass > 0 and (com is None or inertia is None):
+            raise ModelError("a segment with mass needs 'com' (along, across) and 'inertia' (about the COM)",
+                             entry=entry)
+        com = (0.0, 0.0) if com is None else _pair(com, entry, "com")
+        inertia = 0.0 if inertia is None else _finite(inertia, entry, "inertia")
+        if inertia < 0:
+            raise ModelError(f"inertia must be >= 0, got {inertia}", entry=entry)
+        if length is not None and _finite(length, entry, "length") <= 0:
+            raise ModelError(f"length must be > 0, got {length}", entry=entry)
+        self._segments[name] = _Segment(name, i, j, mass, None if length is None else float(length), com, inertia)
+
+    def add_angle(self, name: str, *, segment: str | tuple[str, str] | None = None,
+                  from_segment: str | tuple[str, str] | None = None,
+                  to_segment: str | tuple[str, str] | None = None, initial: float | None = None) -> None:
+        """An angle coordinate, counter-clockwise positive.
+
+        Absolute: ``segment`` measured from the x axis.  Relative: from the direction of
+        ``from_segment`` to that of ``to_segment``.  Each direction is a segment name (from its
+        first point to its second) or a pair of point names ``(a, b)`` meaning r_b - r_a, so that
+        e.g. a hip angle can be measured from the trunk's downward direction to the thigh.
+        ``initial`` defaults to the angle of the initial point positions.
+        """
+        self._new_name(self._angles, "angles", name)
+        entry = f"angles.{name}"
+        if (segment is None) == (from_segment is None and to_segment is None):
+            raise ModelError("give either 'segment' (absolute) or 'from' and 'to' (relative)", entry=entry)
+        if segment is None and (from_segment is None or to_segment is None):
+            raise ModelError("a relative angle needs both 'from' and 'to'", entry=entry)
+        for label, spec in (("segment", segment), ("from", from_segment), ("to", to_segment)):
+            if spec is not None and not isinstance(spec, str) and not (
+                    isinstance(spec, (tuple, list)) and len(spec) == 2 and all(isinstance(p, str) for p in spec)):
+                raise ModelError(f"{label} must be a segment name or a pair of point names, got {spec!r}",
+                                 entry=entry)
+        if initial is not None:
+            initial = _finite(initial, entry, "initial")
+        as_spec = lambda spec: tuple(spec) if isinstance(spec, list) else spec
+        u, v = (None, as_spec(segment)) if segment is not None else (as_spec(from_segment), as_spec(to_segment))
+        self._angles[name] = (u, v, initial)
+
+    def add_distance(self, name: str, i: str, j: str, *, initial: float | None = None) -> None:
+        """A distance coordinate s between points i and j (Φ = |r_j - r_i|² - s² = 0)."""
+        self._new_name(self._distances, "distances", name)
+        if initial is not None:
+            initial = _finite(initial, f"distances.{name}", "initial")
+        self._distances[name] = (i, j, initial)
+
+    def add_slider(self, name: str, *, point: str, line: tuple[str, str] | None = None,
+                   segment: str | None = None, through: tuple[float, float] | None = None,
+                   direction: tuple[float, float] | None = None, lock: str | None = None) -> None:
+        """Prismatic joint: ``point`` stays on a line, given by two points (``line``), a segment
+        (``segment``, the line through its ends) or a ground line (``through`` and
+        ``direction``).  With ``lock`` the named segment also stays parallel to the line
+        (no rotation of the slider block)."""
+        self._new_name(self._sliders, "sliders", name)
+        entry = f"sliders.{name}"
+        given = [line is not None, segment is not None, through is not None or direction is not None]
+        if sum(given) != 1:
+            raise ModelError("give exactly one of 'line' (two points), 'segment', or 'through' and 'direction'",
+                             entry=entry)
+        if through is not None or direction is not None:
+            if through is None or direction is None:
+                raise ModelError("a ground line needs both 'through' and 'direction'", entry=entry)
+            through, direction = _pair(through, entry, "through"), _pair(direction, entry, "direction")
+            if math.hypot(*direction) == 0:
+                raise ModelError("direction must not be the zero vector", entry=entry)
+        if line is not None:
+            line = tuple(line)
+            if len(line) != 2:
+                raise ModelError(f"line must name two points, got {line!r}", entry=entry)
+        self._sliders[name] = (point, line, segment, through, direction, lock)
+
+    def add_driver(self, coordinate: str, function: object, *, name: str | None = None) -> None:
+        """Rheonomic driver Φ = q_c - f(t) on coordinate ``coordinate`` (``"B.x"``, an angle or
+        distance name); ``function``: number, expression string, table or callable of t."""
+        name = name or f"drive {coordinate}"
+        self._new_name(self._drivers, "drivers", name)
+        try:
+            self._drivers[name] = (coordinate, as_time_function(function))
+        except ModelError as error:
+            raise error.located(entry=f"drivers.{name}") from None
+
+    def add_force(self, name: str, *, point: str, fx: object = 0.0, fz: object = 0.0) -> None:
+        """A force (fx, fz) in the ground frame at a basic point; components may vary with t."""
+        self._new_name(self._point_forces, "forces", name)
+        try:
+            self._point_forces[name] = (point, as_time_function(fx), as_time_function(fz))
+        except ModelError as error:
+            raise error.located(entry=f"forces.{name}") from None
+
+    def add_torque(self, name: str, *, angle: str, torque: object) -> None:
+        """A torque acting on angle coordinate ``angle`` (generalized force +T on it): between the
+        two segments of a relative angle, or between ground and the segment of an absolute one."""
+        self._new_name(self._torques, "torques", name)
+        try:
+            self._torques[name] = (angle, as_time_function(torque))
+        except ModelError as error:
+            raise error.located(entry=f"torques.{name}") from None
+
+    def add_spring(self, name: str, i: str, j: str, *, stiffness: float, damping: float = 0.0,
+                   rest_length: float | None = None) -> None:
+        """Linear spring-damper between points: tension f = k(ℓ - ℓ0) + c ℓ̇ pulls them together.
+
+        ``rest_length`` defaults to the initial distance."""
+        self._new_name(self._springs, "springs", name)
+        entry = f"springs.{name}"
+        values = [_finite(v, entry, label) for v, label in ((stiffness, "stiffness"), (damping, "damping"))]
+        if values[0] < 0 or values[1] < 0:
+            raise ModelError("stiffness and damping must be >= 0", entry=entry)
+        if rest_length is not None and _finite(rest_length, entry, "rest_length") < 0:
+            raise ModelError(f"rest_length must be >= 0, got {rest_length}", entry=entry)
+        self._springs[name] = (i, j, values[0], values[1], rest_length)
+
+    def add_actuator(self, name: str, *, coordinate: str, gain: float = 1.0) -> None:
+        """Actuator input u_k entering as a generalized force gain·u_k on ``coordinate`` (a torque
+        on an angle, a force along a distance or a point coordinate)."""
+        self._new_name(self._actuators, "actuators", name)
+        self._actuators[name] = (coordinate, _finite(gain, f"actuators.{name}", "gain"))
+
+    # ------------------------------------------------------------------ build
+    def build(self) -> Model:
+        """Validate the whole model and return it (coordinates at the approximate initial guess)."""
+        return _Assembler(self).model()
+
+
+def _finite(value: object, entry: str, label: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        raise ModelError(f"{label} must be a number, got {value!r}", entry=entry)
+    if not math.isfinite(float(value)):
+        raise ModelError(f"{label} must be finite, got {value!r}", entry=entry)
+    return float(value)
+
+
+def _pair(value: object, entry: str, label: str) -> tuple[float, float]:
+    if not isinstance(value, (tuple, list, np.ndarray)) or len(value) != 2:
+        raise ModelError(f"{label} must be a pair of numbers, got {value!r}", entry=entry)
+    return _finite(value[0], entry, label), _finite(value[1], entry, label)
+
+
+class _Assembler:
+    """Turns a builder into index arrays (extended coordinates: q followed by constants)."""
+
+    def __init__(self, builder: NaturalModelBuilder):
+        self.b = builder
+        self.names: list[str] = []
+        self.kinds: list[str] = []
+        self.q0: list[float] = []
+        self.constants: list[float] = []
+        self.constant_slot: dict[float, int] = {}
+        self.point_index: dict[str, tuple[int, int]] = {}
+        self.coordinate_of: dict[str, int] = {}
+        self._coordinates()
+
+    # extended index of a constant value (fixed point coordinate, reference vector)
+    def _constant(self, value: float) -> int:
+        if value not in self.constant_slot:
+            self.constant_slot[value] = len(self.constants)
+            self.constants.append(value)
+        return -1 - self.constant_slot[value]  # resolved to n + slot once n is known
+
+    def _coordinates(self) -> None:
+        for point in self.b._points.values():
+            if point.fixed:
+                self.point_index[point.name] = (self._constant(point.x), self._constant(point.z))
+            else:
+                for axis, value in (("x", point.x), ("z", point.z)):
+                    self.coordinate_of[f"{point.name}.{axis}"] = len(self.names)
+                    self.names.append(f"{point.name}.{axis}")
+                    self.kinds.append(axis)
+                    self.q0.append(value)
+                self.point_index[point.name] = (len(self.names) - 2, len(self.names) - 1)
+        for name, (i, j, initial) in self.b._distances.items():
+            entry = f"distances.{name}"
+            self._check_coordinate_name(name, entry)
+            start, end = self._position(i, entry), self._position(j, entry)
+            self.coordinate_of[name] = len(self.names)
+            self.names.append(name)
+            self.kinds.append("distance")
+            self.q0.append(initial if initial is not None else float(np.hypot(*(end - start))))
+        for name, (u_spec, v_spec, initial) in self.b._angles.items():
+            entry = f"angles.{name}"
+            self._check_coordinate_name(name, entry)
+            u = self._direction(u_spec, entry)[1]
+            v = self._direction(v_spec, entry)[1]
+            actual = math.atan2(u[0] * v[1] - u[1] * v[0], u @ v)
+            self.coordinate_of[name] = len(self.names)
+            self.names.append(name)
+            self.kinds.append("angle")
+            self.q0.append(initial if initial is not None else actual)
+
+    def _direction(self, spec: str | tuple[str, str] | None, entry: str) -> tuple[list[int], np.ndarray]:
+        """Extended indices (x_a, z_a, x_b, z_b) and initial value of a direction r_b - r_a:
+        a segment name, a pair of points, or None for the x axis."""
+        if spec is None:
+            return [self._constant(0.0), self._constant(0.0), self._constant(1.0), self._constant(0.0)], \
+                np.array([1.0, 0.0])
+        first, second = (self._segment(spec, entry).i, self._segment(spec, entry).j) if isinstance(spec, str) \
+            else spec
+        vector = self._position(second, entry) - self._position(first, entry)
+        return self._xz(first, entry) + self._xz(second, entry), vector
+
+    def _check_coordinate_name(self, name: str, entry: str) -> None:
+        if name in self.coordinate_of:
+            raise ModelError(f"name {name!r} is already a coordinate", entry=entry)
+
+    def _point(self, name: str, entry: str) -> _Point:
+        if name not in self.b._points:
+            known = ", ".join(self.b._points) or "none"
+            raise ModelError(f"unknown point {name!r} (points: {known})", entry=entry)
+        return self.b._points[name]
+
+    def _position(self, name: str, entry: str) -> np.ndarray:
+        point = self._point(name, entry)
+        return np.array([point.x, point.z])
+
+    def _segment(self, name: str, entry: str) -> _Segment:
+        if name not in self.b._segments:
+            known = ", ".join(self.b._segments) or "none"
+            raise ModelError(f"unknown segment {name!r} (segments: {known})", entry=entry)
+        return self.b._segments[name]
+
+    def _coordinate(self, name: str, entry: str) -> int:
+        if name not in self.coordinate_of:
+            known = ", ".join(self.names)
+            raise ModelError(f"unknown coordinate {name!r} (coordinates: {known})", entry=entry)
+        return self.coordinate_of[name]
+
+    def _xz(self, point: str, entry: str) -> list[int]:
+        self._point(point, entry)
+        return list(self.point_index[point])
+
+    def _resolve(self, indices: np.ndarray, n: int) -> np.ndarray:
+        """Map negative placeholders of constants to n + slot."""
+        indices = np.asarray(indices, dtype=np.int64)
+        return np.where(indices < 0, n - 1 - indices, indices)
+
+    def model(self) -> Model:
+        b = self.b
+        n = len(self.names)
+        constraint_names: list[str] = []
+
+        rigid, lengths2, lines = [], [], []
+        point_order = list(b._points)
+        for segment in b._segments.values():
+            entry = f"segments.{segment.name}"
+            start, end = self._position(segment.i, entry), self._position(segment.j, entry)
+            length = segment.length if segment.length is not None else float(np.hypot(*(end - start)))
+            if length <= 0:
+                raise ModelError(f"its points {segment.i!r} and {segment.j!r} coincide: length is 0", entry=entry)
+            segment.length = length
+            rigid.append(self._xz(segment.i, entry) + self._xz(segment.j, entry))
+            lengths2.append(length**2)
+            constraint_names.append(f"rigid {segment.name}")
+            lines.append((point_order.index(segment.i), point_order.index(segment.j)))
+
+        distance_rows = []
+        for name, (i, j, _) in b._distances.items():
+            entry = f"distances.{name}"
+            distance_rows.append(self._xz(i, entry) + self._xz(j, entry) + [self.coordinate_of[name]])
+            constraint_names.append(f"distance {name}")
+
+        angle_rows = []
+        for name, (u_spec, v_spec, _) in b._angles.items():
+            entry = f"angles.{name}"
+            angle_rows.append(self._direction(u_spec, entry)[0] + self._direction(v_spec, entry)[0]
+                              + [self.coordinate_of[name]])
+            constraint_names.append(f"angle {name}")
+
+        parallel_rows = []
+        for name, (point, line, segment, through, direction, lock) in b._sliders.items():
+            entry = f"sliders.{name}"
+            if line is not None:
+                line_points = self._xz(line[0], entry) + self._xz(line[1], entry)
+                base = self._xz(line[0], entry)
+            elif segment is not None:
+                s = self._segment(segment, entry)
+                line_points = self._xz(s.i, entry) + self._xz(s.j, entry)
+                base = self._xz(s.i, entry)
+            else:
+                base = [self._constant(through[0]), self._constant(through[1])]
+                tip = [self._constant(through[0] + direction[0]), self._constant(through[1] + direction[1])]
+                line_points = base + tip
+            parallel_rows.append(line_points + base + self._xz(point, entry))
+            constraint_names.append(f"slider {name}")
+            if lock is not None:
+                s = self._segment(lock, entry)
+                parallel_rows.append(line_points + self._xz(s.i, entry) + self._xz(s.j, entry))
+                constraint_names.append(f"slider {name} lock")
+
+        driver_rows, functions = [], []
+        for name, (coordinate, function) in b._drivers.items():
+            driver_rows.append([self._coordinate(coordinate, f"drivers.{name}"), len(functions)])
+            functions.append(function)
+            constraint_names.append(name)
+
+        force_rows = []
+        for name, (point, fx, fz) in b._point_forces.items():
+            xz = self._xz(point, f"forces.{name}")
+            force_rows.append(xz + [len(functions), len(functions) + 1])
+            functions.extend([fx, fz])
+
+        torque_rows = []
+        for name, (angle, torque) in b._torques.items():
+            entry = f"torques.{name}"
+            if angle not in b._angles:
+                raise ModelError(f"unknown angle {angle!r} (angles: {', '.join(b._angles) or 'none'})", entry=entry)
+            torque_rows.append([self.coordinate_of[angle], len(functions)])
+            functions.append(torque)
+
+        spring_rows, spring_parameters = [], []
+        for name, (i, j, stiffness, damping, rest) in b._springs.items():
+            entry = f"springs.{name}"
+            spring_rows.append(self._xz(i, entry) + self._xz(j, entry))
+            rest = rest if rest is not None else float(np.hypot(*(self._position(j, entry) - self._position(i, entry))))
+            spring_parameters.append([stiffness, damping, rest])
+
+        actuator_rows, gains = [], []
+        for name, (coordinate, gain) in b._actuators.items():
+            actuator_rows.append([self._coordinate(coordinate, f"actuators.{name}")])
+            gains.append(gain)
+
+        n_ext = n + len(self.constants)
+        mass_ext = np.zeros((n_ext, n_ext))
+        gravity_ext = np.zeros(n_ext)
+        g = np.array(b.gravity, dtype=float)
+        segment_masses = []
+        for k, segment in enumerate(b._segments.values()):
+            idx = self._resolve(rigid[k], n)
+            element = element_mass_matrix(segment.mass, segment.length, segment.com, segment.inertia)
+            mass_ext[np.ix_(idx, idx)] += element
+            gravity_ext[idx] += point_map(segment.length, segment.com).T @ (segment.mass * g)
+            segment_masses.append((segment.name, segment.mass))
+        for point in b._points.values():
+            if point.mass:
+                idx = self._resolve(self.point_index[point.name], n)
+                mass_ext[idx, idx] += point.mass
+                gravity_ext[idx] += point.mass * g
+                segment_masses.append((point.name, point.mass))
+        mass = mass_ext[:n, :n].copy()
+        self._check_mass(mass)
+        mass.setflags(write=False)
+
+        tf = TimeFunctionPack.build(functions)
+        resolve = lambda rows, width: self._resolve(np.array(rows, dtype=np.int64).reshape(-1, width), n)
+        ints, reals = pack(
+            [resolve(rigid, 4), resolve(distance_rows, 5), resolve(angle_rows, 9), resolve(parallel_rows, 8),
+             np.array(driver_rows, dtype=np.int64).reshape(-1, 2), _force_rows(force_rows, n, self),
+             np.array(torque_rows, dtype=np.int64).reshape(-1, 2),
+             resolve(spring_rows, 4), np.array(actuator_rows, dtype=np.int64).reshape(-1),
+             tf.table, tf.ops],
+            [np.array(self.constants), np.array(lengths2), gravity_ext[:n].copy(),
+             np.array(spring_parameters).reshape(-1, 3), np.array(gains), tf.reals])
+
+        m = len(constraint_names)
+        drivers = np.zeros(m, dtype=bool)
+        drivers[m - len(driver_rows):] = True
+        point_xz = np.array([self._resolve(self.point_index[p], n) for p in point_order], dtype=np.int64).reshape(-1, 2)
+        equations = NaturalEquations(
+            n=n, m=m, ints=ints, reals=reals, mass=mass, time_functions=tf,
+            constants=np.array(self.constants), gravity_ext=gravity_ext,
+            springs=(resolve(spring_rows, 4), np.array(spring_parameters).reshape(-1, 3)),
+            point_xz=point_xz)
+        return Model(
+            name=b.name, coordinate_names=tuple(self.names), coordinate_kinds=tuple(self.kinds),
+            constraint_names=tuple(constraint_names), drivers=drivers, actuator_names=tuple(b._actuators),
+            q0=np.array(self.q0), qd0=np.zeros(n), point_names=tuple(point_order), lines=tuple(lines),
+            equations=equations, description=b.description, source=b.source,
+            parameters={"gravity": tuple(b.gravity)}, constant_mass=True,
+            segment_masses=tuple(segment_masses))
+
+    def _check_mass(self, mass: np.ndarray) -> None:
+        """M restricted to point coordinates must be positive definite (every point carries mass)."""
+        point_coordinates = [k for k, kind in enumerate(self.kinds) if kind in ("x", "z")]
+        block = mass[np.ix_(point_coordinates, point_coordinates)]
+        if block.size == 0:
+            return
+        eigenvalues, vectors = np.linalg.eigh(block)
+        scale = max(np.max(np.abs(eigenvalues)), 1.0)
+        if eigenvalues[0] <= 1e-12 * scale:
+            null = vectors[:, 0]
+            involved = sorted({self.names[point_coordinates[k]].rsplit(".", 1)[0]
+                               for k in np.flatnonzero(np.abs(null) > 1e-6)})
+            raise ModelError(
+                f"mass matrix is not positive definite (smallest eigenvalue {eigenvalues[0]:.3g}): "
+                f"no mass moves with point(s) {', '.join(involved)}; give a segment there mass and inertia, "
+                "or a point mass", entry="mass matrix")
+
+
+def _force_rows(rows: list, n: int, assembler: _Assembler) -> np.ndarray:
+    """(k, 4): x index, z index (extended), time-function index of fx, of fz."""
+    array = np.array(rows, dtype=np.int64).reshape(-1, 4)
+    array[:, :2] = assembler._resolve(array[:, :2], n)
+    return array
+
+
+@dataclass(frozen=True)
+class NaturalEquations:
+    """Compiled evaluator of a natural-coordinate model (see the module docstring)."""
+
+    n: int
+    m: int
+    ints: np.ndarray
+    reals: np.ndarray
+    mass: np.ndarray
+    time_functions: TimeFunctionPack
+    constants: np.ndarray
+    gravity_ext: np.ndarray
+    springs: tuple[np.ndarray, np.ndarray]
+    point_xz: np.ndarray
+
+    @property
+    def _scratch_size(self) -> int:
+        return 3 * (self.time_functions.count + self.time_functions.depth)
+
+    def new_terms(self) -> Terms:
+        return Terms(self.n, self.m, constant_mass=self.mass, scratch=self._scratch_size)
+
+    def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
+        for k, function in self.time_functions.python:
+            terms.scratch[3 * k:3 * k + 3] = function(t)
+        _evaluate(q, qd, t, u, self.ints, self.reals, terms.buffer)
+
+    def _extended(self, q: np.ndarray) -> np.ndarray:
+        return np.concatenate([q, self.constants])
+
+    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        return 0.5 * float(qd @ self.mass @ qd)
+
+    def potential_energy(self, q: np.ndarray) -> float:
+        """V = -Σ m g·r_G (linear in q: -Q_gravityᵀ q_ext) + Σ ½ k (ℓ - ℓ0)²."""
+        q_ext = self._extended(q)
+        energy = -float(self.gravity_ext @ q_ext)
+        rows, parameters = self.springs
+        if rows.size:
+            d = q_ext[rows[:, 2:4]] - q_ext[rows[:, 0:2]]
+            stretch = np.hypot(d[:, 0], d[:, 1]) - parameters[:, 2]
+            energy += float(0.5 * np.sum(parameters[:, 0] * stretch**2))
+        return energy
+
+    def point_positions(self, q: np.ndarray) -> np.ndarray:
+        return self._extended(q)[self.point_xz]
+
+
+@numba.njit(cache=True, inline="always")
+def _add(A, row, column, value, n):
+    if column < n:
+        A[row, column] += value
+
+
+@numba.njit(cache=True)
+def _evaluate(q, qd, t, u, ints, reals, buffer):
+    """Q, Φ, A, γ, Φ_t of a natural-coordinate model into ``buffer`` (layout of :class:`Terms`)."""
+    n = q.shape[0]
+    constants = real_section(ints, reals, _CONSTANTS)
+    n_ext = n + constants.shape[0]
+    x = np.empty(n_ext)
+    v = np.zeros(n_ext)
+    x[:n] = q
+    x[n:] = constants
+    v[:n] = qd
+
+    rigid = int_section(ints, _RIGID)
+    distance = int_section(ints, _DISTANCE)
+    angle = int_section(ints, _ANGLE)
+    parallel = int_section(ints, _PARALLEL)
+    driver = int_section(ints, _DRIVER)
+    m = rigid.shape[0] // 4 + distance.shape[0] // 5 + angle.shape[0] // 9 + parallel.shape[0] // 8 \
+        + driver.shape[0] // 2
+
+    Q = buffer[:n]
+    phi = buffer[n:n + m]
+    A = buffer[n + m:n + m + m * n].reshape((m, n))
+    gamma = buffer[n + m + m * n:n + 2 * m + m * n]
+    phi_t = buffer[n + 2 * m + m * n:n + 3 * m + m * n]
+    scratch = buffer[n + 3 * m + m * n:]
+
+    # time functions: (f, f', f'') rows, then the expression stack
+    tf_table = int_section(ints, _TF_TABLE).reshape((-1, 4))
+    n_tf = tf_table.shape[0]
+    tf_values = scratch[:3 * n_tf].reshape((n_tf, 3))
+    stack = scratch[3 * n_tf:].reshape((-1, 3))
+    evaluate_time_functions(tf_table, int_section(ints, _TF_OPS).reshape((-1, 2)),
+                            real_section(ints, reals, _TF_REALS), t, stack, tf_values)
+
+    A[:, :] = 0.0
+    phi_t[:] = 0.0
+    row = 0
+    lengths2 = real_section(ints, reals, _LENGTH2)
+    for k in range(rigid.shape[0] // 4):
+        xi, zi, xj, zj = rigid[4 * k], rigid[4 * k + 1], rigid[4 * k + 2], rigid[4 * k + 3]
+        dx, dz = x[xj] - x[xi], x[zj] - x[zi]
+        dvx, dvz = v[xj] - v[xi], v[zj] - v[zi]
+        phi[row] = dx * dx + dz * dz - lengths2[k]
+        _add(A, row, xi, -2.0 * dx, n)
+        _add(A, row, zi, -2.0 * dz, n)
+        _add(A, row, xj, 2.0 * dx, n)
+        _add(A, row, zj, 2.0 * dz, n)
+        gamma[row] = -2.0 * (dvx * dvx + dvz * dvz)
+        row += 1
+
+    for k in range(distance.shape[0] // 5):
+        xi, zi, xj, zj, s = distance[5 * k], distance[5 * k + 1], distance[5 * k + 2], distance[5 * k + 3], \
+            distance[5 * k + 4]
+        dx, dz = x[xj] - x[xi], x[zj] - x[zi]
+        dvx, dvz = v[xj] - v[xi], v[zj] - v[zi]
+        phi[row] = dx * dx + dz * dz - x[s] * x[s]
+        _add(A, row, xi, -2.0 * dx, n)
+        _add(A, row, zi, -2.0 * dz, n)
+        _add(A, row, xj, 2.0 * dx, n)
+        _add(A, row, zj, 2.0 * dz, n)
+        A[row, s] += -2.0 * x[s]
+        gamma[row] = -2.0 * (dvx * dvx + dvz * dvz) + 2.0 * v[s] * v[s]
+        row += 1
+
+    for k in range(angle.shape[0] // 9):
+        r = angle[9 * k:9 * k + 9]
+        ux, uz = x[r[2]] - x[r[0]], x[r[3]] - x[r[1]]
+        wx, wz = x[r[6]] - x[r[4]], x[r[7]] - x[r[5]]
+        dux, duz = v[r[2]] - v[r[0]], v[r[3]] - v[r[1]]
+        dwx, dwz = v[r[6]] - v[r[4]], v[r[7]] - v[r[5]]
+        f, df = x[r[8]], v[r[8]]
+        c, s = math.cos(f), math.sin(f)
+        cross = ux * wz - uz * wx
+        dot = ux * wx + uz * wz
+        dcross = dux * wz + ux * dwz - duz * wx - uz * dwx
+        ddot = dux * wx + ux * dwx + duz * wz + uz * dwz
+        phi[row] = c * cross - s * dot
+        # ∂Φ/∂u = c (w_z, -w_x) - s (w_x, w_z);  ∂Φ/∂w = c (-u_z, u_x) - s (u_x, u_z)
+        gux, guz = c * wz - s * wx, -c * wx - s * wz
+        gwx, gwz = -c * uz - s * ux, c * ux - s * uz
+        _add(A, row, r[0], -gux, n)
+        _add(A, row, r[1], -guz, n)
+        _add(A, row, r[2], gux, n)
+        _add(A, row, r[3], guz, n)
+        _add(A, row, r[4], -gwx, n)
+        _add(A, row, r[5], -gwz, n)
+        _add(A, row, r[6], gwx, n)
+        _add(A, row, r[7], gwz, n)
+        A[row, r[8]] += -s * cross - c * dot
+        # velocity-quadratic part of Φ̈ (terms without second derivatives)
+        cross_vv = dux * dwz - duz * dwx
+        dot_vv = dux * dwx + duz * dwz
+        quadratic = (-c * df * df * cross - 2.0 * s * df * dcross + 2.0 * c * cross_vv
+                     + s * df * df * dot - 2.0 * c * df * ddot - 2.0 * s * dot_vv)
+        gamma[row] = -quadratic
+        row += 1
+
+    for k in range(parallel.shape[0] // 8):
+        r = parallel[8 * k:8 * k + 8]
+        ux, uz = x[r[2]] - x[r[0]], x[r[3]] - x[r[1]]
+        wx, wz = x[r[6]] - x[r[4]], x[r[7]] - x[r[5]]
+        dux, duz = v[r[2]] - v[r[0]], v[r[3]] - v[r[1]]
+        dwx, dwz = v[r[6]] - v[r[4]], v[r[7]] - v[r[5]]
+        phi[row] = ux * wz - uz * wx
+        _add(A, row, r[0], -wz, n)
+        _add(A, row, r[1], wx, n)
+        _add(A, row, r[2], wz, n)
+        _add(A, row, r[3], -wx, n)
+        _add(A, row, r[4], uz, n)
+        _add(A, row, r[5], -ux, n)
+        _add(A, row, r[6], -uz, n)
+        _add(A, row, r[7], ux, n)
+        gamma[row] = -2.0 * (dux * dwz - duz * dwx)
+        row += 1
+
+    for k in range(driver.shape[0] // 2):
+        c, f = driver[2 * k], driver[2 * k + 1]
+        phi[row] = x[c] - tf_values[f, 0]
+        A[row, c] = 1.0
+        phi_t[row] = -tf_values[f, 1]
+        gamma[row] = tf_values[f, 2]
+        row += 1
+
+    # generalized forces
+    Q[:] = real_section(ints, reals, _Q_CONSTANT)
+    forces = int_section(ints, _POINT_FORCE)
+    for k in range(forces.shape[0] // 4):
+        xi, zi, fx, fz = forces[4 * k], forces[4 * k + 1], forces[4 * k + 2], forces[4 * k + 3]
+        if xi < n:
+            Q[xi] += tf_values[fx, 0]
+        if zi < n:
+            Q[zi] += tf_values[fz, 0]
+    torques = int_section(ints, _TORQUE)
+    for k in range(torques.shape[0] // 2):
+        Q[torques[2 * k]] += tf_values[torques[2 * k + 1], 0]
+    springs = int_section(ints, _SPRING)
+    spring_parameters = real_section(ints, reals, _SPRING_PARAMETERS)
+    for k in range(springs.shape[0] // 4):
+        xi, zi, xj, zj = springs[4 * k], springs[4 * k + 1], springs[4 * k + 2], springs[4 * k + 3]
+        dx, dz = x[xj] - x[xi], x[zj] - x[zi]
+        length = math.sqrt(dx * dx + dz * dz)
+        ex, ez = dx / length, dz / length
+        rate = ex * (v[xj] - v[xi]) + ez * (v[zj] - v[zi])
+        tension = spring_parameters[3 * k] * (length - spring_parameters[3 * k + 2]) \
+            + spring_parameters[3 * k + 1] * rate
+        _add_force(Q, xi, tension * ex, n)
+        _add_force(Q, zi, tension * ez, n)
+        _add_force(Q, xj, -tension * ex, n)
+        _add_force(Q, zj, -tension * ez, n)
+    actuators = int_section(ints, _ACTUATOR)
+    gains = real_section(ints, reals, _ACTUATOR_GAIN)
+    for k in range(actuators.shape[0]):
+        Q[actuators[k]] += gains[k] * u[k]
+
+
+@numba.njit(cache=True, inline="always")
+def _add_force(Q, index, value, n):
+    if index < n:
+        Q[index] += value

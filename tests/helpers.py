@@ -1,0 +1,115 @@
+"""Independent numerical checks shared by the tests: finite differences of the model's own
+position-level functions, against which the analytic A, γ, Φ_t and Q are compared."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def jacobian_fd(model, q: np.ndarray, t: float = 0.0, h: float = 1e-6) -> np.ndarray:
+    """Central-difference Φ_q (error O(h²))."""
+    columns = []
+    for k in range(model.n):
+        step = np.zeros(model.n)
+        step[k] = h
+        columns.append((model.constraints(q + step, t) - model.constraints(q - step, t)) / (2 * h))
+    return np.array(columns).T
+
+
+class SmoothPath:
+    """q(t) = c + a sin(w t + p) per coordinate, with exact q̇ and q̈ (a random smooth motion)."""
+
+    def __init__(self, center: np.ndarray, rng: np.random.Generator, amplitude: float = 0.3):
+        n = center.size
+        self.c = center
+        self.a = amplitude * rng.uniform(0.2, 1.0, n)
+        self.w = rng.uniform(0.5, 2.0, n)
+        self.p = rng.uniform(0, 2 * np.pi, n)
+
+    def q(self, t: float) -> np.ndarray:
+        return self.c + self.a * np.sin(self.w * t + self.p)
+
+    def qd(self, t: float) -> np.ndarray:
+        return self.a * self.w * np.cos(self.w * t + self.p)
+
+    def qdd(self, t: float) -> np.ndarray:
+        return -self.a * self.w**2 * np.sin(self.w * t + self.p)
+
+
+def second_derivative_fd(function, t: float, h: float = 1e-3) -> np.ndarray:
+    """Five-point central second derivative (error O(h⁴))."""
+    f = [np.asarray(function(t + k * h)) for k in (-2, -1, 0, 1, 2)]
+    return (-f[0] + 16 * f[1] - 30 * f[2] + 16 * f[3] - f[4]) / (12 * h * h)
+
+
+def first_derivative_fd(function, t: float, h: float = 1e-4) -> np.ndarray:
+    """Four-point central first derivative (error O(h⁴))."""
+    f = [np.asarray(function(t + k * h)) for k in (-2, -1, 1, 2)]
+    return (f[0] - 8 * f[1] + 8 * f[2] - f[3]) / (12 * h)
+
+
+def check_constraint_derivatives(model, rng: np.random.Generator, *, samples: int = 3, amplitude: float = 0.3,
+                                 rtol: float = 1e-6) -> None:
+    """Assert A = FD(Φ), Φ_t = FD_t(Φ) and γ = A q̈ - d²Φ/dt² along random smooth motions."""
+    for _ in range(samples):
+        path = SmoothPath(np.asarray(model.q0, float), rng, amplitude)
+        t = float(rng.uniform(0.0, 2.0))
+        q, qd, qdd = path.q(t), path.qd(t), path.qdd(t)
+        A = model.jacobian(q, t)
+        A_fd = jacobian_fd(model, q, t)
+        scale_A = max(1.0, np.abs(A).max())
+        np.testing.assert_allclose(A, A_fd, atol=1e-7 * scale_A, rtol=0)
+
+        phi_t_fd = first_derivative_fd(lambda s: model.constraints(q, s), t)
+        np.testing.assert_allclose(model.constraints_t(q, t), phi_t_fd, atol=1e-7 * scale_A, rtol=0)
+
+        phi_dd = second_derivative_fd(lambda s: model.constraints(path.q(s), s), t)
+        gamma_expected = A @ qdd - phi_dd
+        gamma = model.gamma(q, qd, t)
+        scale = max(1.0, np.abs(gamma_expected).max(), np.abs(A @ qdd).max())
+        np.testing.assert_allclose(gamma, gamma_expected, atol=rtol * scale, rtol=0)
+
+
+def kitchen_sink(*, drivers: bool = True, loads: bool = True):
+    """A natural-coordinate model using every entry kind (the same model as
+    tests/data/kitchen-sink.toml): crank-rod-block on a ground slider with rotation lock, a
+    distance coordinate, absolute/relative/point-pair angles, a pendulum sliding on the rod,
+    a point sliding on the crank line, a spring-damper, a time-varying point force, a torque,
+    an actuator and drivers from an expression, a table and a Python callable."""
+    import math
+
+    from cmbs.model.drivers import PythonFunction, Table
+    from cmbs.model.natural import NaturalModelBuilder
+
+    b = NaturalModelBuilder("kitchen-sink", gravity=(0.0, -9.81))
+    b.add_point("O", 0.0, 0.0, fixed=True)
+    b.add_point("A", 0.8, 0.6)
+    b.add_point("B", 2.0, 0.5)
+    b.add_point("Bb", 2.3, 0.5)
+    b.add_point("D", 1.4, 0.55)
+    b.add_point("E", 1.45, -0.3)
+    b.add_point("F", 0.4, 0.3, mass=0.5)
+    b.add_segment("crank", "O", "A", mass=1.0, com=(0.5, 0.05), inertia=0.1)
+    b.add_segment("rod", "A", "B", mass=2.0, com=(0.6, -0.02), inertia=0.2)
+    b.add_segment("block", "B", "Bb", mass=0.7, com=(0.15, 0.0), inertia=0.01)
+    b.add_segment("hanger", "D", "E", mass=0.4, com=(0.3, 0.1), inertia=0.02)
+    b.add_slider("ground", point="B", through=(0.0, 0.5), direction=(1.0, 0.0), lock="block")
+    b.add_slider("on-rod", point="D", segment="rod")
+    b.add_slider("on-crank", point="F", line=("O", "A"))
+    b.add_distance("s", "O", "B")
+    b.add_angle("phi", segment="crank")
+    b.add_angle("psi", from_segment="crank", to_segment="rod")
+    b.add_angle("chi", from_segment=("O", "B"), to_segment=("D", "E"))
+    if loads:
+        b.add_spring("spring", "A", "E", stiffness=50.0, damping=2.0, rest_length=0.9)
+        b.add_force("push", point="E", fx="0.5*cos(t)", fz=-1.0)
+        b.add_torque("motor", angle="psi", torque="2*sin(3*t)")
+    b.add_actuator("tau", coordinate="phi", gain=1.5)
+    b.add_actuator("f", coordinate="s")
+    if drivers:
+        b.add_driver("phi", "0.6435 + 0.2*sin(t)", name="crank-drive")
+        b.add_driver("D.x", Table(np.linspace(0, 3, 16), 1.4 + 0.1 * np.sin(np.linspace(0, 3, 16))),
+                     name="table-drive")
+        b.add_driver("F.x", PythonFunction(lambda t: 0.4 + 0.05 * math.sin(t), lambda t: 0.05 * math.cos(t),
+                                           lambda t: -0.05 * math.sin(t)), name="python-drive")
+    return b.build()
