@@ -8,11 +8,11 @@ angles.  x points forward, z up.
 Anthropometry: Table 3.2 of the thesis for a male subject of 80 kg and 1.75 m.  Its PDF
 extraction lost every '0' digit; the values below are the decoding with the fewest zeros
 restored, with the inertia column in 10⁻² kg m² (the only reading that gives radii of gyration of
-0.17-0.41 L).  Sum of masses: 80.64 kg.  The centre of mass is measured from the segment's first
+0.17-0.41 L).  Sum of masses: 80.639 kg.  The centre of mass is measured from the segment's first
 point, along (x̄) and across (z̄, +90° from x̄).  De Leva (1996, J. Biomech. 29:1223) is the
 published table the values were checked against; where the thesis's reading is ambiguous (head
 and trunk COM), the thesis's printed value is kept.  ``body_mass`` and ``height`` scale the
-table linearly (masses by M/80.64, lengths by H/1.75, inertias by both).
+table linearly (masses by M/80.639, lengths by H/1.75, inertias by both).
 
 Angles (counter-clockwise positive, all 0 when standing straight except the ankles):
 ``trunk`` absolute from the x axis (π/2 upright); ``neck`` from trunk (hip→neck) to head;
@@ -27,7 +27,6 @@ from __future__ import annotations
 from cmbs.model.model import Model
 from cmbs.model.natural import NaturalModelBuilder
 
-REFERENCE_MASS = 80.64  # kg, sum of Table 3.2
 REFERENCE_HEIGHT = 1.75  # m
 
 # segment: (length m, COM along m, COM across m, mass kg, I_G kg m²) — thesis Table 3.2 decoded
@@ -40,6 +39,10 @@ SEGMENTS = {
     "shank": (0.422, 0.170, 0.0, 4.08, 0.05153),
     "foot": (0.143, 0.037, -0.023, 1.27, 0.00441),
 }
+
+BILATERAL = ("arm", "forearm", "thigh", "shank", "foot")
+REFERENCE_MASS = sum(values[3] * (2 if name in BILATERAL else 1) for name, values in SEGMENTS.items())
+REFERENCE_MASS = round(REFERENCE_MASS, 9)  # 80.639 kg
 
 # standing posture (heights add up to 1.75 m with the ankle 0.07 m above the ground)
 ANKLE_HEIGHT = 0.07

@@ -1,0 +1,62 @@
+"""The model library: every model loads assembled with the DOF its source gives."""
+
+import numpy as np
+import pytest
+
+import cmbs
+from cmbs.errors import ModelError
+from cmbs.library import names
+
+
+@pytest.mark.parametrize("name, parameters, n, dof", [
+    ("particle-circle", {}, 2, 1),
+    ("pendulum", {}, 2, 1),
+    ("double-pendulum", {}, 6, 2),
+    ("four-bar", {}, 5, 0),
+    ("chain", {"links": 7}, 14, 7),
+    ("chain", {"links": 14, "closed": True}, 26, 12),
+    ("slider-crank", {}, 6, 1),
+    ("passive-manipulator", {}, 9, 3),
+    ("human", {}, 38, 14),
+])
+def test_library_models_assemble_with_their_dof(name, parameters, n, dof):
+    model = cmbs.load(name, **parameters)
+    assert model.n == n
+    assert np.abs(model.constraints(model.q0, 0.0)).max() < 1e-9
+    assert np.abs(model.jacobian(model.q0) @ model.qd0 + model.constraints_t(model.q0)).max() < 1e-9
+    assert cmbs.constraint_report(model, model.q0).dof == dof
+    assert model.source and model.description
+
+
+def test_every_listed_model_loads():
+    for name in names():
+        assert cmbs.load(name).name
+
+
+def test_four_bar_has_one_dof_without_its_driver():
+    model = cmbs.load("four-bar")
+    A = model.jacobian(model.q0)[~model.drivers]
+    assert model.n - np.linalg.matrix_rank(A) == 1
+    assert model.driver_names == ("crank",)
+
+
+def test_human_model_structure():
+    model = cmbs.load("human")
+    assert (model.n, model.m) == (38, 24)
+    assert sum(kind == "angle" for kind in model.coordinate_kinds) == 12
+    assert len(model.point_names) == 13 and len(model.lines) == 12
+    assert model.total_mass == pytest.approx(37.81 + 5.119 + 2 * (1.922 + 2.299 + 9.284 + 4.08 + 1.27), abs=1e-9)
+    heights = dict(zip(model.point_names, model.point_positions(model.q0)[:, 1]))
+    assert heights["head"] == pytest.approx(1.75, abs=1e-9)
+    scaled = cmbs.load("human", body_mass=55.3, height=1.72)
+    assert scaled.total_mass == pytest.approx(55.3, rel=1e-12)
+    assert dict(zip(scaled.point_names, scaled.point_positions(scaled.q0)[:, 1]))["head"] == pytest.approx(1.72)
+
+
+def test_library_parameter_errors():
+    with pytest.raises(ModelError, match="has no parameter"):
+        cmbs.load("chain", length=3)
+    with pytest.raises(ModelError, match="positive integer"):
+        cmbs.load("chain", links=0)
+    with pytest.raises(ModelError, match="no library model or file 'nonesuch'"):
+        cmbs.load("nonesuch")
