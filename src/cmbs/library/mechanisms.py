@@ -10,7 +10,7 @@ from cmbs.model.model import Model
 from cmbs.model.natural import NaturalModelBuilder
 
 
-def slider_crank(gravity: float = 0.0, crank_angle: float = 45.0) -> Model:
+def slider_crank(gravity: float = 0.0, crank_angle: float = 45.0, crank_speed: float = 2.0) -> Model:
     """Aghili's slider-crank with equal crank and rod (§VIII) in natural coordinates.
 
     Crank O-A and rod A-C: 1 m, 1 kg uniform rods (I_G = m l²/12), slider C massless on the
@@ -18,8 +18,9 @@ def slider_crank(gravity: float = 0.0, crank_angle: float = 45.0) -> Model:
     relative to crank), the joint coordinates of the joint-coordinate version; actuators on both.
     The constraint Jacobian loses rank at θ1 = ±90° where C passes through O.  Aghili gives no
     numbers that survived extraction: l = 1 m, m = 1 kg are chosen; ``gravity`` (m/s², along -z)
-    defaults to 0 (a horizontal mechanism).  Start: crank at ``crank_angle`` degrees, rod on the
-    branch θ2 = -2θ1, at rest.
+    defaults to 0 (a horizontal mechanism).  Start: crank at ``crank_angle`` degrees turning at
+    ``crank_speed`` rad/s (the benchmark state of shared/anchors: 45°, 2 rad/s), rod on the branch
+    θ2 = -2θ1; without gravity the crank then turns fully, crossing the singular positions.
     """
     theta = math.radians(crank_angle)
     builder = NaturalModelBuilder(
@@ -37,7 +38,12 @@ def slider_crank(gravity: float = 0.0, crank_angle: float = 45.0) -> Model:
     builder.add_actuator("tau1", coordinate="theta1")
     builder.add_actuator("tau2", coordinate="theta2")
     model = builder.build()
-    return model.replace(parameters={"gravity": gravity, "crank_angle": crank_angle})
+    omega, s, c = crank_speed, math.sin(theta), math.cos(theta)
+    velocities = {"A.x": -omega * s, "A.z": omega * c, "C.x": -2.0 * omega * s, "C.z": 0.0,
+                  "theta1": omega, "theta2": -2.0 * omega}
+    qd0 = [velocities[name] for name in model.coordinate_names]
+    return model.replace(qd0=qd0, parameters={"gravity": gravity, "crank_angle": crank_angle,
+                                              "crank_speed": crank_speed})
 
 
 def passive_manipulator(gravity: float = 0.0) -> Model:
