@@ -18,12 +18,15 @@ from cmbs.library import names
     ("slider-crank", {}, 6, 1),
     ("passive-manipulator", {}, 9, 3),
     ("human", {}, 38, 14),
+    ("slider-crank-joint", {}, 2, 1),
+    ("arm-on-slider", {}, 3, 2),
+    ("passive-manipulator-joint", {}, 3, 3),
 ])
 def test_library_models_assemble_with_their_dof(name, parameters, n, dof):
     model = cmbs.load(name, **parameters)
     assert model.n == n
-    assert np.abs(model.constraints(model.q0, 0.0)).max() < 1e-9
-    assert np.abs(model.jacobian(model.q0) @ model.qd0 + model.constraints_t(model.q0)).max() < 1e-9
+    assert np.abs(model.constraints(model.q0, 0.0)).max(initial=0.0) < 1e-9
+    assert np.abs(model.jacobian(model.q0) @ model.qd0 + model.constraints_t(model.q0)).max(initial=0.0) < 1e-9
     assert cmbs.constraint_report(model, model.q0).dof == dof
     assert model.source and model.description
 

@@ -49,7 +49,8 @@ def test_element_mass_matrix_equals_rigid_body_kinetic_energy():
 @pytest.mark.parametrize("name, parameters", [
     ("particle-circle", {}), ("pendulum", {}), ("double-pendulum", {}), ("four-bar", {}),
     ("chain", {"links": 5}), ("chain", {"links": 6, "closed": True}), ("slider-crank", {}),
-    ("passive-manipulator", {}), ("human", {}),
+    ("passive-manipulator", {}), ("human", {}), ("slider-crank-joint", {}), ("arm-on-slider", {}),
+    ("passive-manipulator-joint", {}),
 ])
 def test_library_model_derivatives(name, parameters):
     model = cmbs.load(name, **parameters)

@@ -59,8 +59,13 @@ _FILES = [
 _BUILDERS = [
     ("chain", "chain", "chain", "N-link pendulum chain (links=N, closed=true pins the tip), N or N-2 DOF"),
     ("slider-crank", "mechanisms", "slider_crank", "Aghili's slider-crank, equal crank and rod, natural coordinates, 1 DOF"),
+    ("slider-crank-joint", "mechanisms", "slider_crank_joint",
+     "Aghili's slider-crank in joint angles (theta1, theta2), 1 DOF"),
+    ("arm-on-slider", "mechanisms", "arm_on_slider", "Aghili's 3-link arm with its endpoint on a slider, joint angles, 2 DOF"),
     ("passive-manipulator", "mechanisms", "passive_manipulator",
      "3-link arm with passive third joint (Quasem et al.), natural coordinates, 3 DOF"),
+    ("passive-manipulator-joint", "mechanisms", "passive_manipulator_joint",
+     "3-link arm with passive third joint (Quasem et al.), joint angles, 3 DOF"),
     ("human", "human", "human", "12-segment 14-DOF planar human body (thesis Table 3.2), 38 coordinates"),
 ]
 

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from cmbs.model.model import Model
 from cmbs.model.natural import NaturalModelBuilder
 
@@ -67,6 +69,83 @@ def passive_manipulator(gravity: float = 0.0) -> Model:
     builder.add_angle("theta1", segment="link1")
     builder.add_angle("theta2", from_segment="link1", to_segment="link2")
     builder.add_angle("theta3", from_segment="link2", to_segment="link3")
+    builder.add_actuator("tau1", coordinate="theta1")
+    builder.add_actuator("tau2", coordinate="theta2")
+    model = builder.build()
+    return model.replace(parameters={"gravity": gravity})
+
+
+def slider_crank_joint(gravity: float = 0.0, crank_angle: float = 45.0, crank_speed: float = 2.0) -> Model:
+    """Aghili's slider-crank (§VIII) in his joint coordinates (θ1, θ2), the same mechanism and
+    start as :func:`slider_crank`.  Loop closed at the rod end C: z_C = l sin θ1 + l sin(θ1+θ2) = 0."""
+    from cmbs.model.joints import JointModelBuilder
+
+    theta = math.radians(crank_angle)
+    builder = JointModelBuilder(
+        "slider-crank-joint", gravity=(0.0, -gravity),
+        description="slider-crank with equal crank and rod (1 m, 1 kg) in joint angles theta1, theta2",
+        source="F. Aghili, IEEE T-RO 21(5) 2005, §VIII, eq. (64) (l = 1 m, m = 1 kg chosen: digits lost)")
+    builder.add_link("crank", parent=None, coordinate="theta1", length=1.0, mass=1.0, com=(0.5, 0.0),
+                     inertia=1.0 / 12.0, q0=theta, qd0=crank_speed)
+    builder.add_link("rod", parent="crank", coordinate="theta2", origin=(1.0, 0.0), length=1.0, mass=1.0,
+                     com=(0.5, 0.0), inertia=1.0 / 12.0, q0=-2.0 * theta, qd0=-2.0 * crank_speed)
+    builder.add_closure("slider", point="rod.end", to=(0.0, 0.0), directions="z")
+    builder.add_actuator("tau1", coordinate="theta1")
+    builder.add_actuator("tau2", coordinate="theta2")
+    model = builder.build()
+    return model.replace(parameters={"gravity": gravity, "crank_angle": crank_angle, "crank_speed": crank_speed})
+
+
+def arm_on_slider(gravity: float = 0.0) -> Model:
+    """Aghili's experiment (§IX): a 3-link planar arm whose endpoint is pinned by a hinge to a
+    slider running along a horizontal line z = 0.5 m, in joint angles θ1, θ2, θ3; three
+    actuated joints, 2 DOF (redundantly actuated).
+
+    The Canadian Space Agency arm's dimensions did not survive extraction; chosen: links 0.5,
+    0.5, 0.25 m of 3.0, 2.0, 0.8 kg (uniform rods, I_G = m l²/12), a horizontal table
+    (``gravity`` 0).  Start: endpoint at (0.45, 0.5) with link 3 pointing down (φ = -90°), elbow
+    down, at rest.
+    """
+    from cmbs.model.joints import JointModelBuilder
+
+    lengths, masses = (0.5, 0.5, 0.25), (3.0, 2.0, 0.8)
+    wrist = np.array([0.45, 0.5 + lengths[2]])
+    distance = float(np.hypot(*wrist))
+    elbow = math.acos((distance**2 - lengths[0] ** 2 - lengths[1] ** 2) / (2 * lengths[0] * lengths[1]))
+    shoulder = math.atan2(wrist[1], wrist[0]) + math.atan2(lengths[1] * math.sin(elbow),
+                                                            lengths[0] + lengths[1] * math.cos(elbow))
+    angles = (shoulder, -elbow, -math.pi / 2 - shoulder + elbow)
+    builder = JointModelBuilder(
+        "arm-on-slider", gravity=(0.0, -gravity),
+        description="3-link arm (0.5, 0.5, 0.25 m) with its endpoint on a horizontal slider z = 0.5 m; 2 DOF, 3 motors",
+        source="F. Aghili, IEEE T-RO 21(5) 2005, §IX experiment (dimensions chosen: digits lost)")
+    parent = None
+    for k, (length, mass, angle) in enumerate(zip(lengths, masses, angles), start=1):
+        builder.add_link(f"link{k}", parent=parent, coordinate=f"theta{k}",
+                         origin=(0.0, 0.0) if parent is None else (lengths[k - 2], 0.0), length=length, mass=mass,
+                         com=(length / 2, 0.0), inertia=mass * length**2 / 12.0, q0=angle)
+        builder.add_actuator(f"tau{k}", coordinate=f"theta{k}")
+        parent = f"link{k}"
+    builder.add_closure("slider", point="link3.end", to=(0.0, 0.5), directions="z")
+    model = builder.build()
+    return model.replace(parameters={"gravity": gravity})
+
+
+def passive_manipulator_joint(gravity: float = 0.0) -> Model:
+    """The 3-link manipulator with passive third joint of :func:`passive_manipulator` in joint
+    angles θ1, θ2, θ3 (same links, start and actuators τ1, τ2)."""
+    from cmbs.model.joints import JointModelBuilder
+
+    builder = JointModelBuilder(
+        "passive-manipulator-joint", gravity=(0.0, -gravity),
+        description="3-link planar arm (5 m, 10 kg links) in joint angles, joint 3 passive; actuators tau1, tau2",
+        source="Quasem, Uhlar & Betsch, PAMM 9 (2009); De Luca & Oriolo, IJRR 21 (2002) (values chosen)")
+    parent = None
+    for k, angle in enumerate((math.pi / 2, -math.pi / 2, 0.0), start=1):
+        builder.add_link(f"link{k}", parent=parent, coordinate=f"theta{k}",
+                         origin=(0.0, 0.0) if parent is None else (5.0, 0.0), length=5.0, mass=10.0,
+                         com=(2.5, 0.0), inertia=10.0 * 25.0 / 12.0, q0=angle)
+        parent = f"link{k}"
     builder.add_actuator("tau1", coordinate="theta1")
     builder.add_actuator("tau2", coordinate="theta2")
     model = builder.build()

@@ -1,0 +1,32 @@
+"""Forward-dynamics formulations, one module each behind the protocol of :mod:`cmbs.dynamics.base`.
+
+``formulation("baumgarte", omega=20)`` builds one by its name; the names are those of the
+command line: lagrange, baumgarte, penalty, matrix-r, projection, udwadia-kalaba.
+"""
+
+from __future__ import annotations
+
+from cmbs.dynamics.base import Accelerations, Formulation, Solver
+from cmbs.dynamics.lagrange import Baumgarte, Lagrange
+from cmbs.dynamics.matrix_r import MatrixR
+from cmbs.dynamics.penalty import Penalty
+from cmbs.dynamics.projection import Projection
+from cmbs.dynamics.udwadia_kalaba import UdwadiaKalaba
+from cmbs.errors import CmbsError
+
+FORMULATIONS: dict[str, type] = {cls.name: cls for cls in (Lagrange, Baumgarte, Penalty, MatrixR, Projection,
+                                                           UdwadiaKalaba)}
+
+
+def formulation(name: str, **options: object) -> Formulation:
+    """The formulation called ``name`` with its ``options`` (CmbsError naming the valid ones)."""
+    if name not in FORMULATIONS:
+        raise CmbsError(f"unknown formulation {name!r}; choose one of {', '.join(FORMULATIONS)}")
+    try:
+        return FORMULATIONS[name](**options)
+    except TypeError as error:
+        raise CmbsError(f"formulation {name!r}: {error}") from None
+
+
+__all__ = ["Accelerations", "Formulation", "Solver", "Lagrange", "Baumgarte", "Penalty", "MatrixR", "Projection",
+           "UdwadiaKalaba", "FORMULATIONS", "formulation"]

@@ -1,0 +1,63 @@
+"""The protocol every forward-dynamics formulation follows.
+
+A formulation is a frozen set of parameters (Baumgarte's ξ, ω; the penalty α; an SVD
+threshold).  :meth:`Formulation.bind` gives the per-run :class:`Solver` that owns whatever must
+persist between evaluations (matrix-R's choice of independent coordinates, the augmented
+Lagrangian's multipliers) and turns the terms of the equations of motion at one state into
+accelerations, multipliers and constraint forces, in the library's convention (THEORY §1)::
+
+    M q̈ + Aᵀ λ = Q,        generalized constraint force  f_c = -Aᵀ λ.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar, Protocol
+
+import numpy as np
+
+from cmbs.model.model import Model, Terms
+
+
+@dataclass(frozen=True)
+class Accelerations:
+    """What a formulation returns at one state: ``qdd`` (n,), ``lam`` (m,) and the generalized
+    constraint force ``constraint_force = -Aᵀλ`` (n,)."""
+
+    qdd: np.ndarray
+    lam: np.ndarray
+    constraint_force: np.ndarray
+
+
+class Solver(Protocol):
+    """A formulation bound to one model for one run."""
+
+    def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
+        """Accelerations at the state whose terms (M, Q, Φ, A, γ, Φ_t) are ``terms``."""
+
+    def after_step(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Adjust the state after an accepted integration step (identity for most formulations)."""
+
+
+class Formulation(Protocol):
+    """Parameters of a formulation; ``name`` is its registry name (``"lagrange"``, ...)."""
+
+    name: ClassVar[str]
+
+    def bind(self, model: Model) -> Solver:
+        """A solver for ``model``."""
+
+
+class StatelessSolver:
+    """Base for solvers that need no state between evaluations and leave steps untouched."""
+
+    def __init__(self, model: Model):
+        self.model = model
+
+    def after_step(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        return q, qd
+
+
+def constraint_velocity(terms: Terms, qd: np.ndarray) -> np.ndarray:
+    """Φ̇ = A q̇ + Φ_t."""
+    return terms.A @ qd + terms.phi_t

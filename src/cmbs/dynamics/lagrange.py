@@ -1,0 +1,109 @@
+"""Lagrange multipliers (index-1) and Baumgarte stabilisation (thesis §3.5.1-3.5.2).
+
+Index-1 augmented system (García de Jalón & Bayo 1994, eq. 5.4)::
+
+    [ M  Aᵀ ] [ q̈ ]   [ Q  ]
+    [ A  0  ] [ λ  ] = [ γ* ],      γ* = γ                       (Lagrange)
+                                    γ* = γ - 2ξω Φ̇ - ω² Φ        (Baumgarte 1972)
+
+A rank-deficient A (redundant constraints or a singular configuration) makes the matrix
+singular: the solver raises :class:`~cmbs.errors.SingularSystemError` naming the dependent
+constraints, unless ``least_squares`` asks for the minimum-norm least-squares solution.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import scipy.linalg
+
+from cmbs.dynamics.base import Accelerations, StatelessSolver, constraint_velocity
+from cmbs.errors import SingularSystemError
+from cmbs.model.model import Model, Terms
+
+
+@dataclass(frozen=True)
+class Lagrange:
+    """Index-1 Lagrange multipliers.
+
+    Parameters
+    ----------
+    least_squares
+        Solve a singular system in the least-squares sense instead of raising.
+    singular_tolerance
+        The system counts as singular when the smallest normalised singular value of A
+        (rows scaled to unit norm) falls below this value.
+    """
+
+    name: ClassVar[str] = "lagrange"
+    least_squares: bool = False
+    singular_tolerance: float = 1e-8
+
+    def bind(self, model: Model) -> "KKTSolver":
+        return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=0.0, omega=0.0)
+
+
+@dataclass(frozen=True)
+class Baumgarte:
+    """Lagrange multipliers with Baumgarte's stabilisation Φ̈ + 2ξωΦ̇ + ω²Φ = 0.
+
+    Defaults ξ = 1 (critical damping) and ω = 10 s⁻¹, the thesis's values.
+    """
+
+    name: ClassVar[str] = "baumgarte"
+    xi: float = 1.0
+    omega: float = 10.0
+    least_squares: bool = False
+    singular_tolerance: float = 1e-8
+
+    def bind(self, model: Model) -> "KKTSolver":
+        return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=self.xi, omega=self.omega)
+
+
+class KKTSolver(StatelessSolver):
+    """Solves the augmented (KKT) system with an optional Baumgarte right-hand side."""
+
+    def __init__(self, model: Model, least_squares: bool, singular_tolerance: float, *, xi: float, omega: float):
+        super().__init__(model)
+        self.least_squares = least_squares
+        self.singular_tolerance = singular_tolerance
+        self.xi, self.omega = xi, omega
+        n, m = model.n, model.m
+        self.matrix = np.zeros((n + m, n + m))
+        self.rhs = np.zeros(n + m)
+
+    def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
+        n, m = self.model.n, self.model.m
+        gamma = terms.gamma
+        if self.omega:
+            gamma = gamma - 2.0 * self.xi * self.omega * constraint_velocity(terms, qd) - self.omega**2 * terms.phi
+        K, rhs = self.matrix, self.rhs
+        K[:n, :n] = terms.M
+        K[:n, n:] = terms.A.T
+        K[n:, :n] = terms.A
+        rhs[:n] = terms.Q
+        rhs[n:] = gamma
+        if m and not self.least_squares:
+            self._check_rank(terms, t)
+        if self.least_squares:
+            solution = np.linalg.lstsq(K, rhs, rcond=None)[0]
+        else:
+            solution = scipy.linalg.solve(K, rhs, assume_a="sym", check_finite=False)
+        lam = solution[n:]
+        return Accelerations(solution[:n], lam, -terms.A.T @ lam)
+
+    def _check_rank(self, terms: Terms, t: float) -> None:
+        A = terms.A
+        norms = np.linalg.norm(A, axis=1)
+        scaled = A / np.where(norms > 0, norms, 1.0)[:, None]
+        sigma = np.linalg.svd(scaled, compute_uv=False)
+        if sigma.size < A.shape[0] or sigma[-1] < self.singular_tolerance * max(sigma[0], 1.0):
+            _, _, pivots = scipy.linalg.qr(scaled.T, pivoting=True, mode="economic")
+            rank = int(np.sum(sigma > self.singular_tolerance * max(sigma[0], 1.0)))
+            dependent = [self.model.constraint_names[k] for k in sorted(pivots[rank:])]
+            raise SingularSystemError(
+                f"model {self.model.name!r} at t={t:.6g}: the constraint Jacobian has rank {rank} < {A.shape[0]} "
+                f"(redundant constraints or a singular configuration); dependent: {', '.join(dependent)}. "
+                "Use formulation 'projection', 'udwadia-kalaba' or 'penalty', or least_squares=True")

@@ -1,0 +1,170 @@
+"""Velocity transformation (matrix R, coordinate partitioning; thesis §3.5.4, García de Jalón &
+Bayo 1994 ch. 5).
+
+The coordinates split into n - r independent z and r dependent d (r = rank A); with the
+r independent constraint rows, A_d (r × r) regular::
+
+    q̇ = R ż,   R = [-A_d⁻¹ A_z ; I]   (rows permuted back),   q̈ = R z̈ + S,   S = [A_d⁻¹ γ ; 0]
+    Rᵀ M R z̈ = Rᵀ (Q - M S)
+
+After every accepted step the dependent coordinates are recovered from z by a position
+analysis (Newton on Φ = 0 with z held) and their velocities from A_d ḋ = -A_z ż - Φ_t: the
+motion is that of the ODE in z.  The partition is given by the user (names of the independent
+coordinates) or chosen automatically by LU factorisation with partial pivoting of Aᵀ (pivot
+columns of A are dependent), and chosen again when the dependent block's condition number
+exceeds ``condition_limit``, so that the method follows the mechanism through configurations
+where its first choice of independent coordinates stops determining the others.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import scipy.linalg
+
+from cmbs.dynamics.base import Accelerations
+from cmbs.errors import CmbsError, ConvergenceError, SingularSystemError
+from cmbs.model.model import Model, Terms
+
+
+@dataclass(frozen=True)
+class MatrixR:
+    """Matrix-R velocity transformation.
+
+    Parameters
+    ----------
+    independent
+        Names of the independent coordinates (default: chosen automatically).
+    condition_limit
+        Re-partition when cond(A_d) exceeds this (automatic partition only).
+    rank_tolerance
+        Relative singular-value tolerance for the rank of A.
+    position_tolerance, max_iterations
+        Newton recovery of the dependent coordinates.
+    """
+
+    name: ClassVar[str] = "matrix-r"
+    independent: tuple[str, ...] | None = None
+    condition_limit: float = 1e4
+    rank_tolerance: float = 1e-9
+    position_tolerance: float = 1e-12
+    max_iterations: int = 20
+
+    def bind(self, model: Model) -> "MatrixRSolver":
+        return MatrixRSolver(model, self)
+
+
+@dataclass(frozen=True)
+class Partition:
+    """Independent coordinates z, dependent coordinates d, and the constraint rows used."""
+
+    independent: np.ndarray
+    dependent: np.ndarray
+    rows: np.ndarray
+
+
+def choose_partition(A: np.ndarray, rank_tolerance: float, independent: np.ndarray | None = None) -> Partition:
+    """Choose r = rank A independent constraint rows (pivoted QR of Aᵀ, rows scaled to unit norm)
+    and r dependent coordinates: the pivot rows of an LU factorisation with partial pivoting of
+    those rows' transpose (or the complement of the user's ``independent`` coordinates)."""
+    m, n = A.shape
+    if m == 0:
+        return Partition(np.arange(n), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    norms = np.linalg.norm(A, axis=1)
+    scaled = A / np.where(norms > 0, norms, 1.0)[:, None]
+    sigma = np.linalg.svd(scaled, compute_uv=False)
+    rank = int(np.sum(sigma > rank_tolerance * max(sigma[0], 1.0)))
+    _, _, row_pivots = scipy.linalg.qr(scaled.T, pivoting=True, mode="economic")
+    rows = np.sort(row_pivots[:rank]).astype(np.int64)
+    if independent is None:
+        permutation, _, _ = scipy.linalg.lu(A[rows].T)
+        dependent = np.sort(np.argmax(permutation, axis=0)[:rank]).astype(np.int64)
+    else:
+        dependent = np.setdiff1d(np.arange(n), independent)
+    return Partition(np.setdiff1d(np.arange(n), dependent), dependent, rows)
+
+
+class MatrixRSolver:
+    def __init__(self, model: Model, parameters: MatrixR):
+        self.model = model
+        self.p = parameters
+        self.user = None if parameters.independent is None else model.coordinate_indices(parameters.independent)
+        A0 = model.jacobian(model.q0, 0.0)
+        self.partition = choose_partition(A0, parameters.rank_tolerance, self.user)
+        if self.user is not None and len(self.partition.rows) != len(self.partition.dependent):
+            raise CmbsError(
+                f"matrix-r: {len(self.user)} independent coordinates given, but the model has "
+                f"{model.n - len(self.partition.rows)} degrees of freedom")
+        self.repartitions = 0
+        self._check_block(A0, 0.0)
+
+    def _block(self, A: np.ndarray) -> np.ndarray:
+        return A[np.ix_(self.partition.rows, self.partition.dependent)]
+
+    def _check_block(self, A: np.ndarray, t: float) -> None:
+        block = self._block(A)
+        condition = np.linalg.cond(block) if block.size else 1.0
+        if condition <= self.p.condition_limit:
+            return
+        if self.user is None:
+            self.partition = choose_partition(A, self.p.rank_tolerance)
+            self.repartitions += 1
+            block = self._block(A)
+            condition = np.linalg.cond(block) if block.size else 1.0
+            if condition < 1e14:
+                return
+        names = [self.model.coordinate_names[k] for k in self.partition.independent]
+        raise SingularSystemError(
+            f"model {self.model.name!r} at t={t:.6g}: the dependent block A_d is singular (condition "
+            f"{condition:.3g}) with independent coordinates {', '.join(names)}; choose other independent "
+            "coordinates or let matrix-r choose them automatically")
+
+    def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
+        part, n = self.partition, self.model.n
+        A = terms.A[part.rows]
+        A_d = A[:, part.dependent]
+        A_z = A[:, part.independent]
+        lu = scipy.linalg.lu_factor(A_d, check_finite=False) if A_d.size else None
+        R = np.zeros((n, part.independent.size))
+        R[part.independent, np.arange(part.independent.size)] = 1.0
+        S = np.zeros(n)
+        if lu is not None:
+            R[part.dependent] = -scipy.linalg.lu_solve(lu, A_z, check_finite=False)
+            S[part.dependent] = scipy.linalg.lu_solve(lu, terms.gamma[part.rows], check_finite=False)
+        reduced_mass = R.T @ terms.M @ R
+        zdd = np.linalg.solve(reduced_mass, R.T @ (terms.Q - terms.M @ S))
+        qdd = R @ zdd + S
+        residual = terms.M @ qdd - terms.Q  # = -Aᵀλ
+        lam = np.zeros(self.model.m)
+        if lu is not None:
+            lam[part.rows] = -scipy.linalg.lu_solve(lu, residual[part.dependent], trans=1, check_finite=False)
+        return Accelerations(qdd, lam, -terms.A.T @ lam)
+
+    def after_step(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Recover the dependent coordinates and velocities from the independent ones."""
+        model, part = self.model, self.partition
+        q = q.copy()
+        terms = model.new_terms()
+        zeros = np.zeros(model.n)
+        for _ in range(self.p.max_iterations):
+            model.evaluate(q, zeros, t, out=terms)
+            residual = terms.phi[part.rows]
+            if np.max(np.abs(residual), initial=0.0) < self.p.position_tolerance:
+                break
+            q[part.dependent] -= np.linalg.solve(terms.A[np.ix_(part.rows, part.dependent)], residual)
+        else:
+            raise ConvergenceError(
+                f"model {model.name!r} at t={t:.6g}: matrix-r position recovery did not converge in "
+                f"{self.p.max_iterations} iterations (residual {np.max(np.abs(residual)):.3g})")
+        model.evaluate(q, zeros, t, out=terms)
+        self._check_block(terms.A, t)
+        part = self.partition
+        qd = qd.copy()
+        A = terms.A[part.rows]
+        if part.dependent.size:
+            qd[part.dependent] = np.linalg.solve(A[:, part.dependent],
+                                                 -A[:, part.independent] @ qd[part.independent] - terms.phi_t[part.rows])
+        return q, qd
+

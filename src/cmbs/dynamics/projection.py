@@ -1,0 +1,106 @@
+"""Aghili's projection-operator formulation (Aghili 2005, §IV-V; THEORY §3.5).
+
+With the SVD pseudo-inverse A⁺ (singular values below ``threshold``·σ_max discarded) and the
+orthogonal projector onto null(A), P = I - A⁺A, the constrained dynamics split into
+
+    P M q̈ = P Q                 (projected inverse dynamics: λ eliminated, P Aᵀ = 0)
+    (I - P) q̈ = A⁺ γ            (the constraints at acceleration level)
+
+and are combined into one regular system with a *constraint inertia matrix*:
+
+    standard       M_c = M + P M - M P,                    M_c q̈ = P Q + M A⁺γ
+    symmetric      M̄ = P M P + (I-P) M (I-P),              M̄ q̈ = P Q + (I - 2P) M A⁺γ
+    parameterised  M_μ = P M + μ (I - P),                  M_μ q̈ = P Q + μ A⁺γ
+
+Only the pseudo-inverse sees redundant constraints and singular configurations, so all three
+pass them.  Constraint force f_c = -Aᵀλ = (I - P)(M q̈ - Q); λ = -(Aᵀ)⁺ f_c is unique when A has
+full row rank and the minimum-norm multiplier otherwise.
+
+Natural-coordinate models have massless angle/distance coordinates (M only semi-definite);
+then M is replaced by M̂ = M + s(I - P) with s = trace(M)/n.  Since P(I - P) = 0, P M̂ = P M and
+the solution is unchanged, while M_c and M̄ become regular.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from cmbs.dynamics.base import Accelerations, StatelessSolver
+from cmbs.errors import CmbsError
+from cmbs.model.model import Model, Terms
+
+INERTIAS = ("standard", "symmetric", "parameterised")
+
+
+@dataclass(frozen=True)
+class Projection:
+    """Projection-operator formulation.
+
+    Parameters
+    ----------
+    inertia
+        ``"standard"``, ``"symmetric"`` or ``"parameterised"`` constraint inertia matrix.
+    threshold
+        Relative singular-value cut-off of the pseudo-inverse.
+    mu
+        Scalar of the parameterised variant (mass units); default trace(M)/n.
+    """
+
+    name: ClassVar[str] = "projection"
+    inertia: str = "standard"
+    threshold: float = 1e-9
+    mu: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.inertia not in INERTIAS:
+            raise CmbsError(f"projection inertia must be one of {', '.join(INERTIAS)}, got {self.inertia!r}")
+
+    def bind(self, model: Model) -> "ProjectionSolver":
+        return ProjectionSolver(model, self)
+
+
+def pseudo_inverse(A: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """A⁺ (n, m) and P = I - A⁺A (n, n) by SVD, discarding σ < threshold·σ_max."""
+    n = A.shape[1]
+    if A.shape[0] == 0:
+        return np.zeros((n, 0)), np.eye(n)
+    U, sigma, Vt = np.linalg.svd(A, full_matrices=False)
+    rank = int(np.sum(sigma > threshold * max(sigma[0], 1e-300)))
+    V = Vt[:rank].T
+    pinv = (V / sigma[:rank]) @ U[:, :rank].T
+    return pinv, np.eye(n) - V @ V.T
+
+
+class ProjectionSolver(StatelessSolver):
+    def __init__(self, model: Model, parameters: Projection):
+        super().__init__(model)
+        self.p = parameters
+        M0 = model.mass_matrix(model.q0)
+        self.semi_definite = bool(np.linalg.eigvalsh(M0)[0] <= 1e-12 * max(np.abs(M0).max(), 1.0))
+        self.scale = float(np.trace(M0)) / model.n
+        self.identity = np.eye(model.n)
+
+    def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
+        M, Q = terms.M, terms.Q
+        pinv, P = pseudo_inverse(terms.A, self.p.threshold)
+        I_P = self.identity - P
+        constrained = pinv @ terms.gamma
+        M_hat = M + self.scale * I_P if self.semi_definite else M
+        PM = P @ M
+        if self.p.inertia == "standard":
+            matrix = M_hat + PM - M_hat @ P
+            rhs = P @ Q + M_hat @ constrained
+        elif self.p.inertia == "symmetric":
+            matrix = P @ M_hat @ P + I_P @ M_hat @ I_P
+            rhs = P @ Q + (self.identity - 2.0 * P) @ (M_hat @ constrained)
+        else:
+            mu = self.p.mu if self.p.mu is not None else self.scale
+            matrix = PM + mu * I_P
+            rhs = P @ Q + mu * constrained
+        qdd = np.linalg.solve(matrix, rhs)
+        force = I_P @ (M @ qdd - Q)
+        lam = -pinv.T @ force
+        return Accelerations(qdd, lam, force)

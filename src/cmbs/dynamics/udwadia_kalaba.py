@@ -1,0 +1,80 @@
+"""Udwadia-Kalaba explicit equations of motion (Udwadia & Kalaba 1992; Nicoara 2016, eq. 7-12).
+
+From Gauss's principle, with the unconstrained acceleration a = M⁻¹Q and B = A M^{-1/2}::
+
+    q̈ = a + M^{-1/2} B⁺ (γ - A a) + M^{-1/2} (I - B⁺B) M^{-1/2} c
+    Q_c = M^{1/2} B⁺ (γ - A a) + M^{1/2} (I - B⁺B) M^{-1/2} c
+
+The second term is the ideal constraint force, the third the non-ideal one, with c a
+user-given vector (function of t, q, q̇) describing the work done by the constraint forces on
+virtual displacements.  Redundant (consistent) constraints are handled by the Moore-Penrose
+inverse.  M^{1/2} is the symmetric square root (eigen-decomposition).
+
+When M is only semi-definite (natural coordinates with massless angle coordinates) the
+augmented mass M̂ = M + s AᵀA, Q̂ = Q + s Aᵀγ (s = trace(M)/n) is used (Udwadia & Phohomsiri
+2006): since s AᵀA q̈ = s Aᵀγ on the constraint manifold, the motion is unchanged and M̂ is
+positive definite when M is definite on null(A).  λ is recovered from Q_c = -Aᵀλ (minimum norm).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, ClassVar
+
+import numpy as np
+
+from cmbs.dynamics.base import Accelerations, StatelessSolver
+from cmbs.dynamics.projection import pseudo_inverse
+from cmbs.model.model import Model, Terms
+
+
+@dataclass(frozen=True)
+class UdwadiaKalaba:
+    """Udwadia-Kalaba formulation; ``nonideal(t, q, q̇) -> c`` adds non-ideal constraint work."""
+
+    name: ClassVar[str] = "udwadia-kalaba"
+    threshold: float = 1e-9
+    nonideal: Callable[[float, np.ndarray, np.ndarray], np.ndarray] | None = None
+
+    def bind(self, model: Model) -> "UdwadiaKalabaSolver":
+        return UdwadiaKalabaSolver(model, self)
+
+
+def _symmetric_roots(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(M^{1/2}, M^{-1/2}) of a symmetric positive-definite matrix."""
+    values, vectors = np.linalg.eigh(M)
+    root = np.sqrt(values)
+    return (vectors * root) @ vectors.T, (vectors / root) @ vectors.T
+
+
+class UdwadiaKalabaSolver(StatelessSolver):
+    def __init__(self, model: Model, parameters: UdwadiaKalaba):
+        super().__init__(model)
+        self.p = parameters
+        M0 = model.mass_matrix(model.q0)
+        self.scale = float(np.trace(M0)) / model.n
+        self.semi_definite = bool(np.linalg.eigvalsh(M0)[0] <= 1e-12 * max(np.abs(M0).max(), 1.0))
+        self._constant_roots = _symmetric_roots(M0) if model.constant_mass and not self.semi_definite else None
+
+    def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
+        A, gamma = terms.A, terms.gamma
+        if self.semi_definite:
+            M = terms.M + self.scale * (A.T @ A)
+            Q = terms.Q + self.scale * (A.T @ gamma)
+            root, inverse_root = _symmetric_roots(M)
+        else:
+            M, Q = terms.M, terms.Q
+            root, inverse_root = self._constant_roots or _symmetric_roots(M)
+        a = inverse_root @ (inverse_root @ Q)
+        B = A @ inverse_root
+        B_pinv, null_projector = pseudo_inverse(B, self.p.threshold)
+        ideal = B_pinv @ (gamma - A @ a)
+        scaled_force = ideal
+        if self.p.nonideal is not None:
+            c = np.asarray(self.p.nonideal(t, q, qd), dtype=float)
+            scaled_force = ideal + null_projector @ (inverse_root @ c)
+        qdd = a + inverse_root @ scaled_force
+        force = terms.M @ qdd - terms.Q  # = Q_c of the original system (ideal + non-ideal)
+        A_pinv, _ = pseudo_inverse(A, self.p.threshold)
+        lam = -A_pinv.T @ force
+        return Accelerations(qdd, lam, force)
