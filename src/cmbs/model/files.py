@@ -9,6 +9,7 @@ mistake raises :class:`~cmbs.errors.ModelError` naming the file, the entry and t
 from __future__ import annotations
 
 import csv
+import math
 import tomllib
 from pathlib import Path
 from typing import Any, Callable
@@ -62,28 +63,48 @@ class _Entry:
         if value is None:
             return None
         ok = isinstance(value, list) and len(value) == 2 and all(
-            isinstance(v, str) if kind is str else (isinstance(v, (int, float)) and not isinstance(v, bool))
+            isinstance(v, str) if kind is str else (isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                    and math.isfinite(v))
             for v in value)
         if not ok:
-            what = "two names" if kind is str else "two numbers"
+            what = "two names" if kind is str else "two finite numbers"
             raise ModelError(f"{key} must be a list of {what}, got {value!r}", entry=self.label)
         return tuple(value) if kind is str else (float(value[0]), float(value[1]))
 
-    def time_function(self, key: str, base: Path) -> TimeFunction:
+    def time_function(self, key: str, base: Path, interpolation: str | None = None) -> TimeFunction:
         value = self.table.get(key, 0.0)
         if isinstance(value, dict):
-            return _table(_Entry(f"{self.label}.{key}", value, ("t", "value", "interpolation")), base)
-        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            function: TimeFunction = _table(_Entry(f"{self.label}.{key}", value, ("t", "value", "interpolation")),
+                                            base, interpolation)
+        elif isinstance(value, bool) or not isinstance(value, (int, float, str)):
             raise ModelError(f"{key} must be a number, an expression of t or a table, got {value!r}",
                              entry=self.label)
-        try:
-            return as_time_function(value)
-        except ModelError as error:
-            raise ModelError(error.problem, entry=f"{self.label}.{key}") from None
+        else:
+            try:
+                function = as_time_function(value)
+            except ModelError as error:
+                raise ModelError(error.problem, entry=f"{self.label}.{key}") from None
+        return _checked_at_start(function, f"{self.label}.{key}")
 
 
-def _table(entry: _Entry, base: Path) -> Table:
-    interpolation = entry.get("interpolation", "spline")
+def _checked_at_start(function: TimeFunction, label: str) -> TimeFunction:
+    """Evaluate ``function`` at t = 0 so that e.g. ``1/t`` or ``sqrt(0-1)`` is reported here, naming
+    its entry, rather than as a division by zero or a NaN deep inside assembly."""
+    try:
+        values = function(0.0)
+    except (ArithmeticError, ValueError) as error:
+        raise ModelError(f"cannot be evaluated at t = 0 ({error})", entry=label) from None
+    if not np.all(np.isfinite(values)):
+        raise ModelError(f"value or time derivatives not finite at t = 0: (f, f', f'') = {tuple(values)}",
+                         entry=label)
+    return function
+
+
+def _table(entry: _Entry, base: Path, default_interpolation: str | None = None) -> Table:
+    if default_interpolation is not None and "interpolation" in entry.table:
+        raise ModelError("'interpolation' is given both in the driver and in its table; give it once",
+                         entry=entry.label)
+    interpolation = entry.get("interpolation", default_interpolation or "spline")
     try:
         return Table(np.asarray(entry.get("t"), dtype=float), np.asarray(entry.get("value"), dtype=float),
                      interpolation)
@@ -136,12 +157,18 @@ def _driver(builder: NaturalModelBuilder, name: str, table: object, base: Path) 
     given = [key for key in ("expression", "table", "file") if key in entry.table]
     if len(given) != 1:
         raise ModelError("give exactly one of 'expression', 'table' or 'file'", entry=entry.label)
-    interpolation = entry.get("interpolation", "spline")
+    interpolation = entry.string("interpolation")
     if given[0] == "file":
-        function: TimeFunction = _file_table(entry, entry.string("file"), base, interpolation)
+        function: TimeFunction = _file_table(entry, entry.string("file"), base, interpolation or "spline")
     elif given[0] == "table":
-        function = entry.time_function("table", base)
+        if not isinstance(entry.get("table"), dict):
+            raise ModelError(f"table must be an inline table {{ t = [...], value = [...] }}, got "
+                             f"{entry.get('table')!r}", entry=entry.label)
+        function = entry.time_function("table", base, interpolation)
     else:
+        if interpolation is not None:
+            raise ModelError("'interpolation' applies to a 'table' or 'file' driver, not to an expression",
+                             entry=entry.label)
         if not isinstance(entry.get("expression"), (str, int, float)) or isinstance(entry.get("expression"), bool):
             raise ModelError(f"expression must be a string, got {entry.get('expression')!r}", entry=entry.label)
         function = entry.time_function("expression", base)
@@ -254,8 +281,31 @@ def assembled(model: Model, source: str) -> Model:
     except ConvergenceError as error:
         worst = str(error).split("in constraint '")[-1].split("'")[0]
         raise ModelError(f"cannot be assembled: {error}", source=source, entry=_entry_of_constraint(worst)) from None
+    _check_angle_branches(model, q0, source)
     qd0 = velocities(model, q0, 0.0, qd=model.qd0)
     return model.replace(q0=q0, qd0=qd0)
+
+
+def _check_angle_branches(model: Model, q0: np.ndarray, source: str) -> None:
+    """An angle constraint |u||v| sin(θ - φ) = 0 also holds at φ = θ + π; assembly lands there when the
+    points are drawn about half a turn away from the angle's initial or driven value.  On the right
+    branch ∂Φ/∂φ = -|u||v| cos(θ - φ) < 0, on the wrong one it is > 0."""
+    from cmbs.model.natural import NaturalEquations
+
+    if not isinstance(model.equations, NaturalEquations):
+        return
+    A = model.jacobian(q0, 0.0)
+    for row, constraint in enumerate(model.constraint_names):
+        kind, _, name = constraint.partition(" ")
+        if kind != "angle" or name not in model.coordinate_names:
+            continue
+        column = model.coordinate_index(name)
+        if A[row, column] > 0:
+            raise ModelError(
+                f"assembled with the angle coordinate half a turn away from the direction it measures "
+                f"({name} = {q0[column]:.6g} rad at t = 0): draw the points near that angle, or give an "
+                "'initial' (or driver value at t = 0) within 90 degrees of the angle of the points",
+                source=source, entry=f"angles.{name}")
 
 
 def load_model_file(path: str | Path) -> Model:

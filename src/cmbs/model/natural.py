@@ -275,6 +275,8 @@ class NaturalModelBuilder:
         ``rest_length`` defaults to the initial distance."""
         self._new_name(self._springs, "springs", name)
         entry = f"springs.{name}"
+        if i == j:
+            raise ModelError(f"both ends are point {i!r}", entry=entry)
         values = [_finite(v, entry, label) for v, label in ((stiffness, "stiffness"), (damping, "damping"))]
         if values[0] < 0 or values[1] < 0:
             raise ModelError("stiffness and damping must be >= 0", entry=entry)
@@ -482,7 +484,11 @@ class _Assembler:
         for name, (i, j, stiffness, damping, rest) in b._springs.items():
             entry = f"springs.{name}"
             spring_rows.append(self._xz(i, entry) + self._xz(j, entry))
-            rest = rest if rest is not None else float(np.hypot(*(self._position(j, entry) - self._position(i, entry))))
+            initial = float(np.hypot(*(self._position(j, entry) - self._position(i, entry))))
+            if initial == 0:
+                raise ModelError(f"its points {i!r} and {j!r} coincide at their initial positions: the direction "
+                                 "of the spring force is undefined", entry=entry)
+            rest = rest if rest is not None else initial
             spring_parameters.append([stiffness, damping, rest])
 
         actuator_rows, gains = [], []
@@ -554,7 +560,7 @@ class _Assembler:
             raise ModelError(
                 f"mass matrix is not positive definite (smallest eigenvalue {eigenvalues[0]:.3g}): "
                 f"no mass moves with point(s) {', '.join(involved)}; give a segment there mass and inertia, "
-                "or a point mass", entry="mass matrix")
+                "or a point mass", entry=", ".join(f"points.{point}" for point in involved))
 
 
 def _force_rows(rows: list, n: int, assembler: _Assembler) -> np.ndarray:
