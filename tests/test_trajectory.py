@@ -74,3 +74,14 @@ def test_access_by_name():
     np.testing.assert_array_equal(trajectory.velocity("a.x"), trajectory.qd[:, 0])
     with pytest.raises(KeyError, match="no coordinate or array 'nope'"):
         trajectory["nope"]
+
+
+def test_written_files_get_the_usual_permissions(tmp_path):
+    import os
+
+    umask = os.umask(0o022)
+    try:
+        path = sample().save(tmp_path / "run.npz")
+    finally:
+        os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o644

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 import cmbs
 from cmbs.errors import CmbsError
+from cmbs.files_io import checked_output
 
 
 class _UsageError(CmbsError):
@@ -108,11 +108,7 @@ def _kinematics(args: argparse.Namespace) -> int:
 def _check_output(path: str, suffixes: tuple[str, ...], option: str) -> None:
     """Check an output path before any work is done, so that a bad --plot cannot fail after the
     result file has already been written."""
-    if not path.lower().endswith(suffixes):
-        raise _UsageError(f"{option} {path!r}: expected a file ending in {' or '.join(suffixes)}")
-    directory = Path(path).parent
-    if not directory.is_dir():
-        raise _UsageError(f"{option} {path!r}: directory {str(directory)!r} does not exist")
+    checked_output(path, suffixes, option)
 
 
 def build_parser() -> argparse.ArgumentParser:

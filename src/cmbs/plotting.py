@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Sequence
 
@@ -14,6 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from cmbs.errors import CmbsError  # noqa: E402
+from cmbs.files_io import atomic_path, checked_output  # noqa: E402
 from cmbs.model.model import Model  # noqa: E402
 from cmbs.trajectory import Trajectory  # noqa: E402
 
@@ -57,20 +57,10 @@ def draw_snapshots(axis: plt.Axes, model: Model, trajectory: Trajectory, count: 
 
 def save_figure(figure: plt.Figure, path: str | os.PathLike) -> Path:
     """Write a figure atomically (temp file in the same folder, then rename)."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".png", ".pdf", ".svg"):
-        raise CmbsError(f"{path}: figure must end in .png, .pdf or .svg")
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise CmbsError(f"{path}: directory {str(directory)!r} does not exist")
-    handle, temporary = tempfile.mkstemp(dir=directory, prefix=f".{path.name}.", suffix=suffix)
-    os.close(handle)
+    path = checked_output(path, (".png", ".pdf", ".svg"), "figure")
     try:
-        figure.savefig(temporary, dpi=120)
-        os.replace(temporary, path)
+        with atomic_path(path) as temporary:
+            figure.savefig(temporary, dpi=120, format=path.suffix.lower()[1:])
     finally:
         plt.close(figure)
-        if os.path.exists(temporary):
-            os.unlink(temporary)
     return path

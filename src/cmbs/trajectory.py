@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from cmbs.errors import CmbsError
+from cmbs.files_io import atomic_path, checked_output
 
 _CORE = ("t", "q", "qd", "qdd", "names", "info")
 
@@ -66,28 +66,15 @@ class Trajectory:
     # ------------------------------------------------------------------ files
     def save(self, path: str | os.PathLike) -> Path:
         """Write ``.npz`` or ``.csv`` (by extension) atomically: temp file, then rename."""
-        path = Path(path)
-        suffix = path.suffix.lower()
-        if suffix not in (".npz", ".csv"):
-            raise CmbsError(f"{path}: output must end in .npz or .csv, got {suffix or 'no extension'!r}")
+        path = checked_output(path, (".npz", ".csv"), "output")
         for label, array in [("q", self.q), ("qd", self.qd), ("qdd", self.qdd), *self.extras.items()]:
             if not np.all(np.isfinite(np.asarray(array, dtype=float))):
                 raise CmbsError(f"{path}: refusing to write non-finite values in {label!r}")
-        directory = path.parent if str(path.parent) else Path(".")
-        if not directory.is_dir():
-            raise CmbsError(f"{path}: directory {str(directory)!r} does not exist")
-        handle, temporary = tempfile.mkstemp(dir=directory, prefix=f".{path.name}.", suffix=suffix)
-        try:
-            with os.fdopen(handle, "wb") as stream:
-                if suffix == ".npz":
-                    self._write_npz(stream)
-                else:
-                    stream.write(self._csv_text().encode())
-            os.replace(temporary, path)
-        except BaseException:
-            if os.path.exists(temporary):
-                os.unlink(temporary)
-            raise
+        with atomic_path(path) as temporary, open(temporary, "wb") as stream:
+            if path.suffix.lower() == ".npz":
+                self._write_npz(stream)
+            else:
+                stream.write(self._csv_text().encode())
         return path
 
     def _write_npz(self, stream) -> None:
