@@ -30,7 +30,10 @@ class Accelerations:
 
 
 class Solver(Protocol):
-    """A formulation bound to one model for one run."""
+    """A formulation bound to one model for one run; ``adjusts_state`` tells whether
+    :meth:`after_step` changes the state (the integrator then re-evaluates the derivative)."""
+
+    adjusts_state: bool
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
         """Accelerations at the state whose terms (M, Q, Φ, A, γ, Φ_t) are ``terms``."""
@@ -50,6 +53,8 @@ class Formulation(Protocol):
 
 class StatelessSolver:
     """Base for solvers that need no state between evaluations and leave steps untouched."""
+
+    adjusts_state = False
 
     def __init__(self, model: Model):
         self.model = model

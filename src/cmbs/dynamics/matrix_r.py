@@ -12,7 +12,7 @@ analysis (Newton on Φ = 0 with z held) and their velocities from A_d ḋ = -A_z
 motion is that of the ODE in z.  The partition is given by the user (names of the independent
 coordinates) or chosen automatically by LU factorisation with partial pivoting of Aᵀ (pivot
 columns of A are dependent), and chosen again when the dependent block's condition number
-exceeds ``condition_limit``, so that the method follows the mechanism through configurations
+grows by ``condition_growth``, so that the method follows the mechanism through configurations
 where its first choice of independent coordinates stops determining the others.
 """
 
@@ -37,8 +37,9 @@ class MatrixR:
     ----------
     independent
         Names of the independent coordinates (default: chosen automatically).
-    condition_limit
-        Re-partition when cond(A_d) exceeds this (automatic partition only).
+    condition_growth
+        Re-partition when cond(A_d) grows beyond this factor times its value when the partition
+        was chosen (automatic partition only).
     rank_tolerance
         Relative singular-value tolerance for the rank of A.
     position_tolerance, max_iterations
@@ -47,7 +48,7 @@ class MatrixR:
 
     name: ClassVar[str] = "matrix-r"
     independent: tuple[str, ...] | None = None
-    condition_limit: float = 1e4
+    condition_growth: float = 3.0
     rank_tolerance: float = 1e-9
     position_tolerance: float = 1e-12
     max_iterations: int = 20
@@ -87,6 +88,8 @@ def choose_partition(A: np.ndarray, rank_tolerance: float, independent: np.ndarr
 
 
 class MatrixRSolver:
+    adjusts_state = True
+
     def __init__(self, model: Model, parameters: MatrixR):
         self.model = model
         self.p = parameters
@@ -98,52 +101,71 @@ class MatrixRSolver:
                 f"matrix-r: {len(self.user)} independent coordinates given, but the model has "
                 f"{model.n - len(self.partition.rows)} degrees of freedom")
         self.repartitions = 0
-        self._check_block(A0, 0.0)
+        self.reference_condition: float | None = None
+        self.update_partition(A0, 0.0)
 
     def _block(self, A: np.ndarray) -> np.ndarray:
         return A[np.ix_(self.partition.rows, self.partition.dependent)]
 
-    def _check_block(self, A: np.ndarray, t: float) -> None:
-        block = self._block(A)
-        condition = np.linalg.cond(block) if block.size else 1.0
-        if condition <= self.p.condition_limit:
-            return
-        if self.user is None:
-            self.partition = choose_partition(A, self.p.rank_tolerance)
-            self.repartitions += 1
-            block = self._block(A)
-            condition = np.linalg.cond(block) if block.size else 1.0
-            if condition < 1e14:
-                return
-        names = [self.model.coordinate_names[k] for k in self.partition.independent]
-        raise SingularSystemError(
-            f"model {self.model.name!r} at t={t:.6g}: the dependent block A_d is singular (condition "
-            f"{condition:.3g}) with independent coordinates {', '.join(names)}; choose other independent "
-            "coordinates or let matrix-r choose them automatically")
+    def update_partition(self, A: np.ndarray, t: float) -> None:
+        """Choose the partition again when cond(A_d) has grown by ``condition_growth`` since it was
+        chosen (automatic partition), or raise when A_d is singular (user partition)."""
+        condition = self._condition(A)
+        if self.reference_condition is None:
+            self.reference_condition = condition
+        if self.user is None and condition > self.p.condition_growth * self.reference_condition:
+            condition = self.repartition(A)
+        if condition > 1e12:
+            names = [self.model.coordinate_names[k] for k in self.partition.independent]
+            raise SingularSystemError(
+                f"model {self.model.name!r} at t={t:.6g}: the dependent block A_d is singular (condition "
+                f"{condition:.3g}) with independent coordinates {', '.join(names)}; choose other independent "
+                "coordinates or let matrix-r choose them automatically")
+
+    def repartition(self, A: np.ndarray) -> float:
+        """Choose the partition again at the configuration of ``A``; returns the new cond(A_d)."""
+        self.partition = choose_partition(A, self.p.rank_tolerance, self.user)
+        self.repartitions += 1
+        self.reference_condition = self._condition(A)
+        return self.reference_condition
+
+    def _condition(self, A: np.ndarray) -> float:
+        block = A[np.ix_(self.partition.rows, self.partition.dependent)]
+        return float(np.linalg.cond(block)) if block.size else 1.0
+
+    def velocity_matrix(self, terms: Terms) -> np.ndarray:
+        """R (n, n - r) with q̇ = R ż for the current partition."""
+        part = self.partition
+        A = terms.A[part.rows]
+        R = np.zeros((self.model.n, part.independent.size))
+        R[part.independent, np.arange(part.independent.size)] = 1.0
+        if part.dependent.size:
+            R[part.dependent] = -np.linalg.solve(A[:, part.dependent], A[:, part.independent])
+        return R
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
-        part, n = self.partition, self.model.n
-        A = terms.A[part.rows]
-        A_d = A[:, part.dependent]
-        A_z = A[:, part.independent]
-        lu = scipy.linalg.lu_factor(A_d, check_finite=False) if A_d.size else None
-        R = np.zeros((n, part.independent.size))
-        R[part.independent, np.arange(part.independent.size)] = 1.0
-        S = np.zeros(n)
-        if lu is not None:
-            R[part.dependent] = -scipy.linalg.lu_solve(lu, A_z, check_finite=False)
-            S[part.dependent] = scipy.linalg.lu_solve(lu, terms.gamma[part.rows], check_finite=False)
-        reduced_mass = R.T @ terms.M @ R
-        zdd = np.linalg.solve(reduced_mass, R.T @ (terms.Q - terms.M @ S))
+        part = self.partition
+        R = self.velocity_matrix(terms)
+        S = np.zeros(self.model.n)
+        A_d = terms.A[np.ix_(part.rows, part.dependent)]
+        if part.dependent.size:
+            S[part.dependent] = np.linalg.solve(A_d, terms.gamma[part.rows])
+        zdd = np.linalg.solve(R.T @ terms.M @ R, R.T @ (terms.Q - terms.M @ S))
         qdd = R @ zdd + S
-        residual = terms.M @ qdd - terms.Q  # = -Aᵀλ
         lam = np.zeros(self.model.m)
-        if lu is not None:
-            lam[part.rows] = -scipy.linalg.lu_solve(lu, residual[part.dependent], trans=1, check_finite=False)
+        if part.dependent.size:  # (M q̈ - Q)_d = -A_dᵀ λ
+            lam[part.rows] = -np.linalg.solve(A_d.T, (terms.M @ qdd - terms.Q)[part.dependent])
         return Accelerations(qdd, lam, -terms.A.T @ lam)
 
     def after_step(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Recover the dependent coordinates and velocities from the independent ones."""
+        """Recover the dependent coordinates and velocities, then re-partition if needed."""
+        q, qd = self.recover(q, qd, t)
+        self.update_partition(self.model.jacobian(q, t), t)
+        return q, qd
+
+    def recover(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Dependent coordinates by Newton on Φ = 0 and their velocities from A_d ḋ = -A_z ż - Φ_t,
+        with the independent coordinates and velocities held."""
         model, part = self.model, self.partition
         q = q.copy()
         terms = model.new_terms()
@@ -159,8 +181,6 @@ class MatrixRSolver:
                 f"model {model.name!r} at t={t:.6g}: matrix-r position recovery did not converge in "
                 f"{self.p.max_iterations} iterations (residual {np.max(np.abs(residual)):.3g})")
         model.evaluate(q, zeros, t, out=terms)
-        self._check_block(terms.A, t)
-        part = self.partition
         qd = qd.copy()
         A = terms.A[part.rows]
         if part.dependent.size:

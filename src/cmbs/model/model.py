@@ -174,6 +174,13 @@ class Model:
         return np.array([name if isinstance(name, (int, np.integer)) else self.coordinate_index(name)
                          for name in names], dtype=np.int64)
 
+    def without_drivers(self) -> "Model":
+        """The same mechanism with its driver constraints removed (e.g. to simulate a driven
+        model's free motion, or to drive it by forces instead); q0, q̇0 are kept."""
+        keep = np.flatnonzero(~self.drivers)
+        return self.replace(name=f"{self.name}-undriven", constraint_names=tuple(self.constraint_names[k] for k in keep),
+                            drivers=np.zeros(keep.size, dtype=bool), equations=_RowSubset(self.equations, keep))
+
     def replace(self, **changes: object) -> "Model":
         """A copy with some fields changed (the model itself is never mutated)."""
         return dataclasses.replace(self, **changes)
@@ -236,3 +243,38 @@ class Model:
     def point_positions(self, q: np.ndarray) -> np.ndarray:
         """(n_points, 2) positions (x, z) of :attr:`point_names`."""
         return self.equations.point_positions(np.asarray(q, dtype=float))
+
+
+class _RowSubset:
+    """Equations of a model restricted to some constraint rows (see :meth:`Model.without_drivers`)."""
+
+    def __init__(self, equations: ModelEquations, rows: np.ndarray):
+        self.inner = equations
+        self.rows = rows
+        self.inner_terms = equations.new_terms()
+        self.n = self.inner_terms.Q.size
+
+    def new_terms(self) -> Terms:
+        inner = self.inner_terms
+        constant = inner.M if not inner.M.flags.writeable else None
+        return Terms(self.n, self.rows.size, constant_mass=constant)
+
+    def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
+        inner = self.inner_terms
+        self.inner.evaluate(q, qd, t, u, inner)
+        terms.Q[:] = inner.Q
+        terms.phi[:] = inner.phi[self.rows]
+        terms.A[:] = inner.A[self.rows]
+        terms.gamma[:] = inner.gamma[self.rows]
+        terms.phi_t[:] = inner.phi_t[self.rows]
+        if terms.M is not inner.M:
+            terms.M[:] = inner.M
+
+    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        return self.inner.kinetic_energy(q, qd)
+
+    def potential_energy(self, q: np.ndarray) -> float:
+        return self.inner.potential_energy(q)
+
+    def point_positions(self, q: np.ndarray) -> np.ndarray:
+        return self.inner.point_positions(q)

@@ -1,0 +1,1 @@
+"""Integrators on generic vector fields and residuals (no mechanics imported here)."""

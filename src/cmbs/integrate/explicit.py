@@ -1,0 +1,175 @@
+"""Explicit Runge-Kutta integration of y' = f(t, y): the stepping rule (a tableau) and the
+step-size policy (fixed, or the PI controller of Hairer & Wanner, Solving ODEs I §II.4 and
+Gustafsson 1991) kept apart.
+
+After every accepted step an optional ``after_step(t, y) -> y`` may change the state (drift
+projection, recovery of dependent coordinates); the derivative at the new point is then
+re-evaluated.  Output is at the times of ``t_out``, by cubic Hermite interpolation between the
+steps' end points and derivatives (dense output, O(h⁴)), or exactly at the steps for a fixed
+step equal to the output interval.  Failures come back as a status, never as a swallowed
+exception.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from cmbs.integrate.tableaus import Tableau
+
+VectorField = Callable[[float, np.ndarray], np.ndarray]
+AfterStep = Callable[[float, np.ndarray], np.ndarray]
+
+
+@dataclass
+class Integration:
+    """Result: output times ``t`` (k,), states ``y`` (k, d), derivatives ``dy`` (k, d), the
+    status (``"success"`` or ``"failed"``), a message and counters."""
+
+    t: np.ndarray
+    y: np.ndarray
+    dy: np.ndarray
+    status: str
+    message: str
+    counters: dict = field(default_factory=dict)
+
+
+def _step(f: VectorField, tableau: Tableau, t: float, y: np.ndarray, h: float, k1: np.ndarray,
+          stages: np.ndarray) -> np.ndarray:
+    """One Runge-Kutta step; fills ``stages`` (s, d) and returns y_{n+1}."""
+    stages[0] = k1
+    a, c = tableau.a, tableau.c
+    for i in range(1, len(c)):
+        stages[i] = f(t + c[i] * h, y + h * (a[i, :i] @ stages[:i]))
+    return y + h * (tableau.b @ stages)
+
+
+def _hermite(t0: float, y0: np.ndarray, f0: np.ndarray, t1: float, y1: np.ndarray, f1: np.ndarray,
+             times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cubic Hermite values and derivatives at ``times`` in [t0, t1]."""
+    h = t1 - t0
+    s = ((times - t0) / h)[:, None]
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    d00, d10, d01, d11 = (6 * s**2 - 6 * s) / h, 3 * s**2 - 4 * s + 1, (-6 * s**2 + 6 * s) / h, 3 * s**2 - 2 * s
+    values = h00 * y0 + h10 * h * f0 + h01 * y1 + h11 * h * f1
+    slopes = d00 * y0 + d10 * f0 + d01 * y1 + d11 * f1
+    return values, slopes
+
+
+def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tableau, rtol: float = 1e-6,
+              atol: float = 1e-9, step: float | None = None, after_step: AfterStep | None = None,
+              max_steps: int = 10_000_000, progress: Callable[[float], None] | None = None,
+              stop_on: tuple[type[Exception], ...] = ()) -> Integration:
+    """Integrate from ``t_out[0]`` through ``t_out[-1]``.
+
+    Parameters
+    ----------
+    tableau
+        The method; adaptive when it has an error estimate and ``step`` is None.
+    rtol, atol
+        Tolerances of the adaptive step-size controller: the scaled error
+        ``‖e_i / (atol + rtol max(|y_i|, |y_new,i|))‖_RMS`` must be ≤ 1.
+    step
+        Fixed step (required for tableaus without error estimate).  The last step of each
+        output interval is shortened to hit the output times exactly.
+    stop_on
+        Exception types raised by ``f`` or ``after_step`` that end the run with status
+        ``"failed"`` and their message (the output computed so far is kept).
+    """
+    t_out = np.asarray(t_out, dtype=float)
+    y = np.array(y0, dtype=float)
+    d = y.size
+    adaptive = step is None
+    if adaptive and tableau.b_error is None:
+        raise ValueError(f"{tableau.name} has no error estimate: give a fixed step")
+    out_y = np.zeros((t_out.size, d))
+    out_dy = np.zeros((t_out.size, d))
+    counters = {"steps": 0, "rejected": 0, "evaluations": 0}
+
+    def field(t: float, state: np.ndarray) -> np.ndarray:
+        counters["evaluations"] += 1
+        return f(t, state)
+
+    t = float(t_out[0])
+    next_out = 0
+
+    def fail(message: str) -> Integration:
+        return Integration(t_out[:next_out], out_y[:next_out], out_dy[:next_out], "failed", message, counters)
+
+    try:
+        k1 = field(t, y)
+    except stop_on as error:
+        return fail(str(error))
+    out_y[0], out_dy[0] = y, k1
+    stages = np.zeros((len(tableau.c), d))
+    next_out = 1
+    t_end = float(t_out[-1])
+    h = step if step is not None else _initial_step(field, t, y, k1, tableau, rtol, atol, t_end)
+    factor_old = 1e-4
+    exponent = 1.0 / (min(tableau.order, tableau.error_order) + 1)
+
+    while next_out < t_out.size:
+        if counters["steps"] >= max_steps:
+            return fail(f"step limit {max_steps} reached at t={t:.6g}")
+        h_try = min(h, t_end - t)
+        if not adaptive:
+            h_try = min(h_try, t_out[next_out] - t) if t_out[next_out] - t > 1e-12 * max(1.0, abs(t)) else h_try
+        try:
+            y_new = _step(field, tableau, t, y, h_try, k1, stages)
+        except stop_on as error:
+            return fail(str(error))
+        if not np.all(np.isfinite(y_new)):
+            if adaptive and h_try > 1e-14 * max(1.0, abs(t)):
+                h = h_try / 10.0
+                counters["rejected"] += 1
+                continue
+            return fail(f"the state became non-finite at t={t + h_try:.6g}")
+        if adaptive:
+            scale = atol + rtol * np.maximum(np.abs(y), np.abs(y_new))
+            error = float(np.sqrt(np.mean((h_try * (tableau.b_error @ stages) / scale) ** 2)))
+            if error > 1.0:
+                h = h_try * max(0.2, 0.9 * error**-exponent)
+                counters["rejected"] += 1
+                if h < 1e-14 * max(1.0, abs(t)):
+                    return fail(f"step size underflow at t={t:.6g} (error estimate {error:.3g})")
+                continue
+            # PI controller (Gustafsson): beta = 0.4/(order+1)
+            error = max(error, 1e-10)
+            growth = 0.9 * error**(-0.7 * exponent) * factor_old**(0.4 * exponent)
+            h = h_try * min(5.0, max(0.2, growth))
+            factor_old = error
+        t_new = t + h_try
+        try:
+            if after_step is not None:
+                y_new = after_step(t_new, y_new)
+            k_new = stages[-1].copy() if (tableau.first_same_as_last and after_step is None) \
+                else field(t_new, y_new)
+        except stop_on as error:
+            return fail(str(error))
+        counters["steps"] += 1
+        while next_out < t_out.size and t_out[next_out] <= t_new + 1e-12 * max(1.0, abs(t_new)):
+            end = next_out
+            while end < t_out.size and t_out[end] <= t_new + 1e-12 * max(1.0, abs(t_new)):
+                end += 1
+            values, slopes = _hermite(t, y, k1, t_new, y_new, k_new, t_out[next_out:end])
+            out_y[next_out:end], out_dy[next_out:end] = values, slopes
+            next_out = end
+        t, y, k1 = t_new, y_new, k_new
+        if progress is not None:
+            progress(t)
+    return Integration(t_out, out_y, out_dy, "success", "", counters)
+
+
+def _initial_step(f: VectorField, t: float, y: np.ndarray, f0: np.ndarray, tableau: Tableau, rtol: float,
+                  atol: float, t_end: float) -> float:
+    """Hairer & Wanner's starting step (Solving ODEs I, §II.4)."""
+    scale = atol + np.abs(y) * rtol
+    d0, d1 = np.sqrt(np.mean((y / scale) ** 2)), np.sqrt(np.mean((f0 / scale) ** 2))
+    h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+    h0 = min(h0, t_end - t)
+    f1 = f(t + h0, y + h0 * f0)
+    d2 = np.sqrt(np.mean(((f1 - f0) / scale) ** 2)) / h0
+    h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** (1.0 / (tableau.order + 1))
+    return float(min(100 * h0, h1, t_end - t))

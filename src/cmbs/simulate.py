@@ -1,0 +1,329 @@
+"""The one place that wires a model, a formulation, an integrator and the inputs into a run.
+
+    trajectory = cmbs.simulate(model, t_end=10, formulation="projection", integrator="rk45")
+
+The state is y = (q, q̇); the vector field is f(t, y) = (q̇, q̈(q, q̇, t, u)) with q̈ from the
+formulation.  After each accepted step the formulation may adjust the state (matrix-R recovers
+its dependent coordinates) and, with ``project``, the drift is removed (Aghili 2005 §VI):
+
+    q ← q - A⁺ Φ(q)   (minimum-norm Newton, repeated until |Φ| < projection_tolerance)
+    q̇ ← P q̇ - A⁺ Φ_t  (P = I - A⁺A)
+
+Every run records at the output times q, q̇, q̈, λ, the constraint forces -Aᵀλ, the inputs u,
+the total energy T + V, and the position and velocity constraint errors max|Φ|, max|Φ̇|.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Callable, Mapping
+
+import numpy as np
+
+from cmbs.dynamics import Formulation, formulation as make_formulation
+from cmbs.dynamics.projection import pseudo_inverse
+from cmbs.errors import CmbsError
+from cmbs.integrate.explicit import Integration, integrate as integrate_explicit
+from cmbs.integrate.implicit import BACKWARD_EULER, TRAPEZOIDAL, Scheme, generalized_alpha, integrate_index3
+from cmbs.integrate.tableaus import TABLEAUS
+from cmbs.kinematics import accelerations as acceleration_analysis
+from cmbs.model.model import Model
+from cmbs.trajectory import Trajectory
+
+Inputs = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
+EXPLICIT = ("rk23", "rk45", "rk4")
+INDEX3 = {"backward-euler": BACKWARD_EULER, "generalized-alpha": generalized_alpha(0.9)}
+INTEGRATORS = (*EXPLICIT, "trapezoidal", *INDEX3)
+
+
+def _inputs(model: Model, u: Inputs | np.ndarray | None) -> Inputs:
+    if u is None:
+        zeros = np.zeros(model.n_u)
+        return lambda t, q, qd: zeros
+    if callable(u):
+        return u
+    constant = np.asarray(u, dtype=float)
+    if constant.shape != (model.n_u,):
+        raise CmbsError(f"inputs u must have shape ({model.n_u},) for model {model.name!r}, got {constant.shape}")
+    return lambda t, q, qd: constant
+
+
+def project_state(model: Model, q: np.ndarray, qd: np.ndarray, t: float, *, tolerance: float = 1e-10,
+                  max_iterations: int = 10, threshold: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    """Coordinate and velocity projection onto Φ = 0, A q̇ = -Φ_t (Aghili 2005, eq. 45-47)."""
+    if model.m == 0:
+        return q, qd
+    q = q.copy()
+    terms = model.new_terms()
+    zeros = np.zeros(model.n)
+    for _ in range(max_iterations):
+        model.evaluate(q, zeros, t, out=terms)
+        if np.max(np.abs(terms.phi)) < tolerance:
+            break
+        pinv, _ = pseudo_inverse(terms.A, threshold)
+        q -= pinv @ terms.phi
+    model.evaluate(q, zeros, t, out=terms)
+    pinv, P = pseudo_inverse(terms.A, threshold)
+    return q, P @ qd - pinv @ terms.phi_t
+
+
+class _Progress:
+    """A one-line progress bar on a terminal (silent when stderr is not a TTY, e.g. in CI)."""
+
+    def __init__(self, t_end: float, enabled: bool):
+        self.t_end = t_end
+        self.enabled = enabled and sys.stderr.isatty()
+        self.shown = -1
+
+    def __call__(self, t: float) -> None:
+        percent = int(100 * t / self.t_end) if self.t_end > 0 else 100
+        if self.enabled and percent != self.shown:
+            self.shown = percent
+            bar = "#" * (percent // 4)
+            sys.stderr.write(f"\r  t = {t:8.4f} s [{bar:<25}] {percent:3d}%")
+            sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled and self.shown >= 0:
+            sys.stderr.write("\n")
+
+
+def simulate(model: Model, *, t_end: float, formulation: str | Formulation | None = None, integrator: str = "rk45",
+             dt: float = 0.01, rtol: float = 1e-6, atol: float = 1e-9, q0: np.ndarray | None = None,
+             qd0: np.ndarray | None = None, u: Inputs | np.ndarray | None = None, project: bool = False,
+             projection_tolerance: float = 1e-10, formulation_options: Mapping[str, object] | None = None,
+             newton_tolerance: float = 1e-10, progress: bool = False) -> Trajectory:
+    """Forward dynamics of ``model`` from t = 0 to ``t_end``.
+
+    Parameters
+    ----------
+    formulation
+        A name (lagrange, baumgarte, penalty, matrix-r, projection, udwadia-kalaba) with
+        ``formulation_options``, or a formulation object; default lagrange.  The implicit
+        integrators bring their own: ``trapezoidal`` works in independent coordinates (matrix R,
+        thesis eq. 3.51-3.57), ``backward-euler`` and ``generalized-alpha`` on the index-3 DAE.
+    integrator
+        ``rk45`` (Dormand-Prince), ``rk23`` (Bogacki-Shampine): adaptive with ``rtol``/``atol``;
+        ``rk4``, ``trapezoidal``, ``backward-euler``, ``generalized-alpha`` (ρ∞ = 0.9): fixed
+        step ``dt``.
+    dt
+        Step of fixed-step integrators and output interval of adaptive ones.
+    u
+        Inputs: a constant (n_u,) array or a function u(t, q, q̇).
+    project
+        Coordinate and velocity projection after every step (explicit integrators).
+    newton_tolerance
+        Convergence of the implicit integrators' Newton iterations.
+
+    Returns
+    -------
+    Trajectory
+        With extras ``lam``, ``constraint_force``, ``u``, ``energy``, ``constraint_error`` and
+        ``velocity_constraint_error``; ``info`` holds the options, status, message, counters
+        and wall time.  A failed run returns the part computed before the failure with
+        ``info["status"] == "failed"``.
+    """
+    if not t_end > 0:
+        raise CmbsError(f"t_end must be > 0, got {t_end}")
+    if not dt > 0:
+        raise CmbsError(f"dt must be > 0, got {dt}")
+    if integrator not in INTEGRATORS:
+        raise CmbsError(f"unknown integrator {integrator!r}; choose one of {', '.join(INTEGRATORS)}")
+    if integrator not in EXPLICIT and formulation is not None:
+        raise CmbsError(f"integrator {integrator!r} brings its own formulation (trapezoidal: matrix R in "
+                        "independent coordinates, options of matrix-r allowed; backward-euler, "
+                        "generalized-alpha: index-3 Lagrange); do not give a formulation with it")
+    if integrator == "trapezoidal":
+        chosen = make_formulation("matrix-r", **(formulation_options or {}))
+    elif hasattr(formulation, "bind"):
+        chosen = formulation
+    else:
+        chosen = make_formulation(formulation or "lagrange", **(formulation_options or {}))
+    started = time.perf_counter()
+    solver = chosen.bind(model)
+    inputs = _inputs(model, u)
+    n = model.n
+    q_start = np.array(model.q0 if q0 is None else q0, dtype=float)
+    qd_start = np.array(model.qd0 if qd0 is None else qd0, dtype=float)
+    for label, value in (("q0", q_start), ("qd0", qd_start)):
+        if value.shape != (n,):
+            raise CmbsError(f"{label} must have shape ({n},) for model {model.name!r}, got {value.shape}")
+    steps = int(round(t_end / dt))
+    times = np.linspace(0.0, steps * dt, steps + 1) if abs(steps * dt - t_end) < 1e-9 * t_end else \
+        np.append(np.arange(0.0, t_end, dt), t_end)
+    bar = _Progress(t_end, progress)
+    try:
+        if integrator in EXPLICIT:
+            result = _run_explicit(model, solver, inputs, q_start, qd_start, times, integrator, dt, rtol, atol,
+                                   project, projection_tolerance, bar)
+        elif integrator == "trapezoidal":
+            result = _run_reduced(model, solver, inputs, q_start, qd_start, times, TRAPEZOIDAL, dt,
+                                  newton_tolerance, bar)
+        else:
+            result = _run_index3(model, inputs, q_start, qd_start, times, INDEX3[integrator], dt, newton_tolerance,
+                                 bar)
+    finally:
+        bar.close()
+    wall = time.perf_counter() - started
+    return _record(model, solver, inputs, result, chosen if integrator in EXPLICIT or integrator == "trapezoidal"
+                   else None, {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol, "project": project,
+                               "wall_time": wall})
+
+
+def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, times: np.ndarray,
+                  integrator: str, dt: float, rtol: float, atol: float, project: bool, projection_tolerance: float,
+                  bar: _Progress) -> Integration:
+    n = model.n
+    terms = model.new_terms()
+
+    def field(t: float, y: np.ndarray) -> np.ndarray:
+        q, qd = y[:n], y[n:]
+        model.evaluate(q, qd, t, inputs(t, q, qd), out=terms)
+        return np.concatenate([qd, solver.accelerations(terms, q, qd, t).qdd])
+
+    def after_step(t: float, y: np.ndarray) -> np.ndarray:
+        q, qd = solver.after_step(y[:n], y[n:], t)
+        if project:
+            q, qd = project_state(model, q, qd, t, tolerance=projection_tolerance)
+        return np.concatenate([q, qd])
+
+    tableau = TABLEAUS[integrator]
+    return integrate_explicit(field, np.concatenate([q0, qd0]), times, tableau=tableau, rtol=rtol, atol=atol,
+                              step=dt if tableau.b_error is None else None,
+                              after_step=after_step if project or solver.adjusts_state else None, progress=bar,
+                              stop_on=(CmbsError,))
+
+
+def _force_derivatives(model: Model, inputs: Inputs, q: np.ndarray, qd: np.ndarray, t: float,
+                       extra: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """C_t = -∂Q/∂q̇ and K_t = -∂Q/∂q (+ ∂extra/∂q) by forward differences."""
+    n = model.n
+    terms = model.new_terms()
+
+    def residual(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
+        model.evaluate(qq, vv, t, inputs(t, qq, vv), out=terms)
+        value = -terms.Q.copy()
+        return value + extra(terms) if extra is not None else value
+
+    base = residual(q, qd)
+    K, C = np.zeros((n, n)), np.zeros((n, n))
+    for k in range(n):
+        step_q = 1e-7 * max(1.0, abs(q[k]))
+        shifted = q.copy()
+        shifted[k] += step_q
+        K[:, k] = (residual(shifted, qd) - base) / step_q
+        step_v = 1e-7 * max(1.0, abs(qd[k]))
+        shifted = qd.copy()
+        shifted[k] += step_v
+        C[:, k] = (residual(q, shifted) - base) / step_v
+    return C, K
+
+
+def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, times: np.ndarray, scheme: Scheme,
+                dt: float, tolerance: float, bar: _Progress) -> Integration:
+    """Backward Euler / generalized-α on M a + Aᵀλ = Q, Φ(q) = 0 (consistent start from Lagrange)."""
+    from cmbs.dynamics import Lagrange
+
+    terms = model.new_terms()
+    model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0), out=terms)
+    start = Lagrange(least_squares=True).bind(model).accelerations(terms, q0, qd0, 0.0)
+
+    def residual(t, q, v, a, lam):
+        model.evaluate(q, v, t, inputs(t, q, v), out=terms)
+        r = terms.M @ a + terms.A.T @ lam - terms.Q
+        M, A, phi = terms.M.copy(), terms.A.copy(), terms.phi.copy()
+        C, K = _force_derivatives(model, inputs, q, v, t, extra=lambda tt: tt.M @ a + tt.A.T @ lam)
+        return r, phi, M, A, C, K
+
+    return integrate_index3(residual, q0, qd0, start.qdd, start.lam, times, scheme=scheme, step=dt,
+                            tolerance=tolerance, progress=bar, stop_on=(CmbsError,))
+
+
+def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, times: np.ndarray,
+                 scheme: Scheme, dt: float, tolerance: float, bar: _Progress) -> Integration:
+    """Implicit trapezoidal rule in the independent coordinates z of matrix R (thesis eq. 3.51-3.57):
+    Newton on f = Rᵀ(M q̈ - Q) = M̄ z̈ - Q̄ with tangent M̄ + h/2 RᵀC̄R + h²/4 RᵀK̄R.  The dependent
+    coordinates follow by position, velocity and acceleration analysis with z held; between output
+    intervals the partition is chosen again if its dependent block became ill-conditioned."""
+    n = model.n
+    terms = model.new_terms()
+    model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0), out=terms)
+    full = {"q": q0.copy(), "qd": qd0.copy(), "qdd": solver.accelerations(terms, q0, qd0, 0.0).qdd}
+
+    def expand(t: float, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray) -> tuple:
+        independent = solver.partition.independent
+        guess, qd, qdd = full["q"].copy(), full["qd"].copy(), full["qdd"].copy()
+        guess[independent], qd[independent], qdd[independent] = z, zd, zdd
+        q, qd = solver.recover(guess, qd, t)
+        return q, qd, acceleration_analysis(model, q, qd, t, qdd=qdd, fixed=independent)
+
+    def residual(t, z, zd, zdd, lam):
+        q, qd, qdd = expand(t, z, zd, zdd)
+        full["last"] = (q, qd, qdd)
+        model.evaluate(q, qd, t, inputs(t, q, qd), out=terms)
+        R = solver.velocity_matrix(terms)
+        C, K = _force_derivatives(model, inputs, q, qd, t)
+        return (R.T @ (terms.M @ qdd - terms.Q), np.zeros(0), R.T @ terms.M @ R, np.zeros((0, R.shape[1])),
+                R.T @ C @ R, R.T @ K @ R)
+
+    def on_step(t: float) -> None:
+        full["q"], full["qd"], full["qdd"] = full["last"]
+        bar(t)
+
+    y, dy = np.zeros((times.size, 2 * n)), np.zeros((times.size, 2 * n))
+    y[0], dy[0] = np.concatenate([q0, qd0]), np.concatenate([qd0, full["qdd"]])
+    counters: dict[str, int] = {}
+    for k in range(1, times.size):
+        for attempt in range(2):  # on failure, once more with independent coordinates chosen here
+            start = (full["q"], full["qd"], full["qdd"])
+            independent = solver.partition.independent
+            part = integrate_index3(residual, start[0][independent], start[1][independent], start[2][independent],
+                                    np.zeros(0), times[k - 1:k + 1], scheme=scheme, step=dt, tolerance=tolerance,
+                                    progress=on_step, stop_on=(CmbsError,))
+            for key, value in part.counters.items():
+                counters[key] = counters.get(key, 0) + value
+            if part.status == "success" or solver.user is not None or attempt == 1:
+                break
+            full["q"], full["qd"], full["qdd"] = start
+            solver.repartition(model.jacobian(start[0], times[k - 1]))
+        if part.status != "success":
+            return Integration(times[:k], y[:k], dy[:k], part.status, part.message, counters)
+        y[k], dy[k] = np.concatenate([full["q"], full["qd"]]), np.concatenate([full["qd"], full["qdd"]])
+        try:
+            solver.update_partition(model.jacobian(full["q"], times[k]), times[k])
+        except CmbsError as error:
+            return Integration(times[:k + 1], y[:k + 1], dy[:k + 1], "failed", str(error), counters)
+    return Integration(times, y, dy, "success", "", counters)
+
+
+def _record(model: Model, solver, inputs: Inputs, result: Integration, chosen: Formulation | None,
+            options: dict) -> Trajectory:
+    """Evaluate λ, forces, energy and constraint errors at the output times."""
+    n, m = model.n, model.m
+    k = result.t.size
+    q, qd = result.y[:, :n], result.y[:, n:]
+    qdd = np.zeros((k, n))
+    lam, force, u = np.zeros((k, m)), np.zeros((k, n)), np.zeros((k, model.n_u))
+    energy, position_error, velocity_error = np.zeros(k), np.zeros(k), np.zeros(k)
+    terms = model.new_terms()
+    for i, t in enumerate(result.t):
+        u[i] = inputs(t, q[i], qd[i])
+        model.evaluate(q[i], qd[i], t, u[i], out=terms)
+        if chosen is None:  # index-3 schemes: their own accelerations and multipliers
+            qdd[i] = result.dy[i, n:]
+            lam[i] = np.linalg.lstsq(terms.A.T, terms.Q - terms.M @ qdd[i], rcond=None)[0] if m else lam[i]
+            force[i] = -terms.A.T @ lam[i]
+        else:
+            accelerations = solver.accelerations(terms, q[i], qd[i], t)
+            qdd[i], lam[i], force[i] = accelerations.qdd, accelerations.lam, accelerations.constraint_force
+        energy[i] = model.energy(q[i], qd[i])
+        position_error[i] = np.max(np.abs(terms.phi), initial=0.0)
+        velocity_error[i] = np.max(np.abs(terms.A @ qd[i] + terms.phi_t), initial=0.0)
+    parameters = {key: value for key, value in vars(chosen).items() if not callable(value)} if chosen else {}
+    info = {"model": model.name, "formulation": chosen.name if chosen else "index-3 lagrange",
+            "formulation_options": parameters, **options,
+            "status": result.status, "message": result.message, **result.counters}
+    return Trajectory(result.t, q, qd, qdd, model.coordinate_names,
+                      {"lam": lam, "constraint_force": force, "u": u, "energy": energy,
+                       "constraint_error": position_error, "velocity_constraint_error": velocity_error}, info)

@@ -1,0 +1,146 @@
+"""Forward dynamics: the six formulations agree with each other and with an independent
+minimal-coordinate ODE, closed forms on the particle on a circle, redundant constraints,
+measured orders of accuracy, energy conservation and Baumgarte's bounded drift."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import cmbs
+from cmbs.dynamics import FORMULATIONS, formulation
+from cmbs.errors import CmbsError, SingularSystemError
+from cmbs.model.natural import NaturalModelBuilder
+from cmbs.simulate import simulate
+
+ALL = list(FORMULATIONS)
+
+
+def double_pendulum_reference(t_end, theta1, theta2):
+    """Two uniform rods (1 m, 1 kg) in absolute angles φ1, φ2 from the x axis, Lagrange's
+    equations written out by hand: M(φ) φ̈ + c sin(φ1-φ2) (φ̇2², -φ̇1²) = -∂V/∂φ."""
+    g, c = 9.81, 0.5
+    def rhs(t, y):
+        p1, p2, w1, w2 = y
+        s, co = math.sin(p1 - p2), math.cos(p1 - p2)
+        M = np.array([[1 / 3 + 1, c * co], [c * co, 1 / 3]])
+        f = np.array([-c * s * w2**2 - 1.5 * g * math.cos(p1), c * s * w1**2 - 0.5 * g * math.cos(p2)])
+        return [w1, w2, *np.linalg.solve(M, f)]
+    solution = solve_ivp(rhs, (0, t_end), [theta1, theta1 + theta2, 0, 0], rtol=1e-12, atol=1e-12)
+    return solution.y[:, -1]
+
+
+@pytest.mark.parametrize("name", ["double-pendulum", "four-bar"])
+def test_all_formulations_agree(name):
+    model = cmbs.load(name)
+    if name == "four-bar":
+        model = model.without_drivers()
+    runs = {f: simulate(model, t_end=5.0, formulation=f, rtol=1e-10, atol=1e-12, dt=0.05) for f in ALL}
+    reference = runs["lagrange"]
+    for f, run in runs.items():
+        assert run.info["status"] == "success", f
+        assert np.abs(run.q - reference.q).max() <= 1e-6, f
+    if name == "double-pendulum":
+        phi1, phi2, _, _ = double_pendulum_reference(5.0, *model.q0[4:6])
+        final = reference.q[-1]
+        assert final[model.coordinate_index("theta1")] == pytest.approx(phi1, abs=1e-7)
+        assert final[model.coordinate_index("theta1")] + final[model.coordinate_index("theta2")] == \
+            pytest.approx(phi2, abs=1e-7)
+
+
+@pytest.mark.parametrize("name", ALL)
+def test_particle_on_circle_closed_form(name):
+    """q̈ = tangential gravity - |v|²/r n, and λ from the normal balance m q̈·n + 2rλ = Q·n."""
+    model = cmbs.load("particle-circle")
+    theta, speed = 0.7, 1.3
+    q = np.array([math.cos(theta), math.sin(theta)])
+    qd = speed * np.array([-math.sin(theta), math.cos(theta)])
+    solution = formulation(name).bind(model).accelerations(model.evaluate(q, qd, 0.0), q, qd, 0.0)
+    tangent = np.array([-math.sin(theta), math.cos(theta)])
+    gravity = np.array([0.0, -9.81])
+    expected = (gravity @ tangent) * tangent - speed**2 * q
+    tolerance = 1e-5 if name == "penalty" else 1e-10
+    np.testing.assert_allclose(solution.qdd, expected, atol=tolerance)
+    assert solution.lam[0] == pytest.approx((gravity @ q + speed**2) / 2.0, abs=tolerance)
+    np.testing.assert_allclose(solution.constraint_force, -2 * q * solution.lam[0], atol=tolerance)
+
+
+def redundant_four_bar():
+    """The library four-bar (undriven) with its coupler constraint given twice."""
+    b = NaturalModelBuilder("four-bar-redundant")
+    b.add_point("A", 0.0, 0.0, fixed=True)
+    b.add_point("B", 10.0, 0.0, fixed=True)
+    base = cmbs.load("four-bar")
+    p1, p2 = base.q0[0:2], base.q0[2:4]
+    b.add_point("P1", *p1)
+    b.add_point("P2", *p2)
+    b.add_segment("crank", "A", "P1", mass=1.0, com=(1.0, 0.0), inertia=1 / 3, length=2.0)
+    b.add_segment("coupler", "P1", "P2", mass=5.0, com=(5.0, 0.0), inertia=5 * 100 / 12, length=10.0)
+    b.add_segment("coupler-again", "P1", "P2", mass=0.0, length=10.0)
+    b.add_segment("rocker", "P2", "B", mass=3.0, com=(3.0, 0.0), inertia=9.0, length=6.0)
+    b.add_angle("alpha", segment="crank")
+    return b.build()
+
+
+def test_redundant_constraints():
+    plain, redundant = cmbs.load("four-bar").without_drivers(), redundant_four_bar()
+    assert cmbs.constraint_report(redundant, redundant.q0).redundant
+    reference = simulate(plain, t_end=2.0, formulation="lagrange", rtol=1e-10, atol=1e-12, dt=0.1)
+    for name in ("projection", "udwadia-kalaba", "penalty"):
+        run = simulate(redundant, t_end=2.0, formulation=name, rtol=1e-10, atol=1e-12, dt=0.1)
+        assert run.info["status"] == "success"
+        assert np.abs(run.q - reference.q).max() <= 1e-6, name
+    failed = simulate(redundant, t_end=2.0, formulation="lagrange", dt=0.1)
+    assert failed.info["status"] == "failed"
+    assert "rank 4 < 5" in failed.info["message"] and "rigid coupler" in failed.info["message"]
+    with pytest.raises(SingularSystemError, match="dependent: rigid coupler"):
+        formulation("lagrange").bind(redundant).accelerations(redundant.evaluate(redundant.q0, redundant.qd0),
+                                                               redundant.q0, redundant.qd0, 0.0)
+
+
+@pytest.mark.parametrize("integrator, order, steps", [
+    ("rk4", 4, (0.04, 0.02)), ("trapezoidal", 2, (0.02, 0.01)), ("backward-euler", 1, (0.004, 0.002)),
+    ("generalized-alpha", 2, (0.02, 0.01)),
+])
+def test_order_of_accuracy(integrator, order, steps):
+    model = cmbs.load("double-pendulum")
+    reference = simulate(model, t_end=1.0, integrator="rk45", rtol=1e-13, atol=1e-14, dt=0.5).q[-1]
+    errors = [np.abs(simulate(model, t_end=1.0, integrator=integrator, dt=h).q[-1] - reference).max() for h in steps]
+    measured = math.log2(errors[0] / errors[1])
+    assert measured == pytest.approx(order, abs=0.3)
+
+
+def test_energy_conserved_to_the_tolerance():
+    """The relative energy error of RK45 on the double pendulum follows the tolerance: below
+    100 rtol (global error over 3 s of chaotic motion) and shrinking with it."""
+    model = cmbs.load("double-pendulum")
+    errors = []
+    for tol in (1e-6, 1e-8, 1e-10):
+        energy = simulate(model, t_end=3.0, rtol=tol, atol=tol * 1e-2)["energy"]
+        errors.append(np.abs(energy - energy[0]).max() / abs(energy[0]))
+        assert errors[-1] < 100 * tol
+    assert errors[0] > 30 * errors[1] > 900 * errors[2]
+
+
+def test_baumgarte_bounds_the_drift_that_lagrange_accumulates():
+    """Thesis Figure 3.10: the rigid-bar constraint drifts with plain Lagrange multipliers at a
+    loose tolerance and stays bounded with Baumgarte (ξ = 1, ω = 10)."""
+    model = cmbs.load("four-bar").without_drivers()
+    plain = simulate(model, t_end=10.0, formulation="lagrange", rtol=1e-4, atol=1e-6)
+    stabilised = simulate(model, t_end=10.0, formulation="baumgarte", rtol=1e-4, atol=1e-6)
+    drift = plain["constraint_error"]
+    assert drift[-1] > 20 * stabilised["constraint_error"][len(drift) // 2:].max()
+    assert drift[len(drift) // 2:].max() > drift[: len(drift) // 10].max()
+
+
+def test_bad_options():
+    model = cmbs.load("pendulum")
+    with pytest.raises(CmbsError, match="unknown formulation 'lagrangian'"):
+        simulate(model, t_end=1.0, formulation="lagrangian")
+    with pytest.raises(CmbsError, match="unknown integrator"):
+        simulate(model, t_end=1.0, integrator="euler")
+    with pytest.raises(CmbsError, match="brings its own formulation"):
+        simulate(model, t_end=1.0, integrator="backward-euler", formulation="projection")
+    with pytest.raises(CmbsError, match="formulation 'baumgarte'.*unexpected keyword"):
+        simulate(model, t_end=1.0, formulation="baumgarte", formulation_options={"alpha": 3})
