@@ -307,15 +307,21 @@ def _record(model: Model, solver, inputs: Inputs, result: Integration, chosen: F
     lam, force, u = np.zeros((k, m)), np.zeros((k, n)), np.zeros((k, model.n_u))
     energy, position_error, velocity_error = np.zeros(k), np.zeros(k), np.zeros(k)
     terms = model.new_terms()
+    unsolved = 0
     for i, t in enumerate(result.t):
         u[i] = inputs(t, q[i], qd[i])
         model.evaluate(q[i], qd[i], t, u[i], out=terms)
-        if chosen is None:  # index-3 schemes: their own accelerations and multipliers
+        accelerations = None
+        if chosen is not None:
+            try:
+                accelerations = solver.accelerations(terms, q[i], qd[i], t)
+            except CmbsError:  # e.g. an output instant closer to a singular position than any step
+                unsolved += 1
+        if accelerations is None:  # the integrator's own accelerations; λ by least squares
             qdd[i] = result.dy[i, n:]
             lam[i] = np.linalg.lstsq(terms.A.T, terms.Q - terms.M @ qdd[i], rcond=None)[0] if m else lam[i]
             force[i] = -terms.A.T @ lam[i]
         else:
-            accelerations = solver.accelerations(terms, q[i], qd[i], t)
             qdd[i], lam[i], force[i] = accelerations.qdd, accelerations.lam, accelerations.constraint_force
         energy[i] = model.energy(q[i], qd[i])
         position_error[i] = np.max(np.abs(terms.phi), initial=0.0)
@@ -324,6 +330,8 @@ def _record(model: Model, solver, inputs: Inputs, result: Integration, chosen: F
     info = {"model": model.name, "formulation": chosen.name if chosen else "index-3 lagrange",
             "formulation_options": parameters, **options,
             "status": result.status, "message": result.message, **result.counters}
+    if unsolved:
+        info["outputs_from_integrator"] = unsolved
     return Trajectory(result.t, q, qd, qdd, model.coordinate_names,
                       {"lam": lam, "constraint_force": force, "u": u, "energy": energy,
                        "constraint_error": position_error, "velocity_constraint_error": velocity_error}, info)
