@@ -38,7 +38,23 @@ def _parameter(text: str) -> tuple[str, object]:
 
 
 def _load(args: argparse.Namespace) -> cmbs.Model:
-    return cmbs.load(args.model, **dict(_parameter(p) for p in args.param))
+    model = cmbs.load(args.model, **dict(_parameter(p) for p in args.param))
+    return model.without_drivers() if getattr(args, "undriven", False) else model
+
+
+def _formulation_options(args: argparse.Namespace) -> dict[str, object]:
+    """``--option key=value`` pairs; tuples of names for matrix-r's ``independent``."""
+    options = dict(_parameter(text) for text in args.option)
+    if isinstance(options.get("independent"), str):
+        options["independent"] = tuple(options["independent"].split(","))
+    return options
+
+
+def _simulation_settings(args: argparse.Namespace) -> dict[str, object]:
+    if args.t_end <= 0:
+        raise _UsageError(f"--t-end must be > 0, got {args.t_end}")
+    return {"t_end": args.t_end, "integrator": args.integrator, "dt": args.dt, "rtol": args.rtol, "atol": args.atol,
+            "project": args.project}
 
 
 def _models(args: argparse.Namespace) -> int:
@@ -105,6 +121,65 @@ def _kinematics(args: argparse.Namespace) -> int:
     return 0
 
 
+def _simulate(args: argparse.Namespace) -> int:
+    from cmbs.simulate import simulate
+
+    for path, suffixes, option in ((args.out, (".npz", ".csv"), "--out"), (args.plot, (".png", ".pdf", ".svg"),
+                                   "--plot"), (args.animate, (".gif", ".mp4"), "--animate")):
+        if path:
+            _check_output(path, suffixes, option)
+    model = _load(args)
+    formulation = None if args.formulation is None and args.integrator not in ("rk23", "rk45", "rk4") else \
+        (args.formulation or "lagrange")
+    run = simulate(model, formulation=formulation, formulation_options=_formulation_options(args),
+                   progress=True, **_simulation_settings(args))
+    info = run.info
+    energy, error = run["energy"], run["constraint_error"]
+    print(f"{model.name}: {info['formulation']} + {info['integrator']}, {info['status']} at t = {run.t[-1]:.6g} s "
+          f"({info['steps']} steps, {info['wall_time']:.3g} s wall)")
+    print(f"  max constraint error {error.max(initial=0.0):.3g}, max velocity constraint error "
+          f"{run['velocity_constraint_error'].max(initial=0.0):.3g}, max |E - E0| "
+          f"{np.abs(energy - energy[0]).max(initial=0.0):.3g} J")
+    if args.out:
+        print(f"  result -> {run.save(args.out)}")
+    if args.plot:
+        from cmbs.plotting import plot_simulation, save_figure
+
+        print(f"  figure -> {save_figure(plot_simulation(run, model=model), args.plot)}")
+    if args.animate:
+        from cmbs.animate import animate
+
+        print(f"  animation -> {animate(model, run, args.animate)}")
+    if info["status"] != "success":
+        print(f"cmbs: simulation failed: {info['message']}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from cmbs.simulate import simulate
+
+    names = [name.strip() for name in args.formulations.split(",") if name.strip()]
+    if not names:
+        raise _UsageError("--formulations needs at least one name, e.g. lagrange,projection")
+    model = _load(args)
+    runs = {name: simulate(model, formulation=name, **_simulation_settings(args)) for name in names}
+    reference = runs[names[0]]
+    print(f"{model.name}: {args.integrator}, t_end = {args.t_end:g} s; deviation against {names[0]}")
+    print(f"{'formulation':<16}{'status':<9}{'max |dq|':>11}{'max |phi|':>12}{'max |dE| J':>12}{'wall s':>9}")
+    failed = False
+    for name, run in runs.items():
+        common = min(len(run.t), len(reference.t))
+        deviation = np.abs(run.q[:common] - reference.q[:common]).max(initial=0.0)
+        energy = run["energy"]
+        print(f"{name:<16}{run.info['status']:<9}{deviation:>11.3g}{run['constraint_error'].max(initial=0.0):>12.3g}"
+              f"{np.abs(energy - energy[0]).max(initial=0.0):>12.3g}{run.info['wall_time']:>9.3g}")
+        failed |= run.info["status"] != "success"
+        if run.info["status"] != "success":
+            print(f"  {name}: {run.info['message']}")
+    return 1 if failed else 0
+
+
 def _check_output(path: str, suffixes: tuple[str, ...], option: str) -> None:
     """Check an output path before any work is done, so that a bad --plot cannot fail after the
     result file has already been written."""
@@ -135,7 +210,54 @@ def build_parser() -> argparse.ArgumentParser:
     kinematics.add_argument("--out", required=True, help="result file (.npz or .csv)")
     kinematics.add_argument("--plot", help="figure of the motion (.png, .pdf or .svg)")
     kinematics.set_defaults(run=_kinematics)
+
+    def dynamics_options(command: argparse.ArgumentParser) -> None:
+        from cmbs.simulate import INTEGRATORS
+
+        command.add_argument("--t-end", type=float, required=True, help="final time [s]")
+        command.add_argument("--integrator", default="rk45", choices=INTEGRATORS,
+                             help="rk45/rk23 adaptive; rk4, trapezoidal, backward-euler, generalized-alpha fixed step")
+        command.add_argument("--dt", type=float, default=0.01,
+                             help="step of fixed-step integrators, output interval of adaptive ones [s]")
+        command.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance (adaptive)")
+        command.add_argument("--atol", type=float, default=1e-9, help="absolute tolerance (adaptive)")
+        command.add_argument("--project", action="store_true", help="coordinate and velocity projection each step")
+        command.add_argument("--undriven", action="store_true", help="remove the model's driver constraints")
+
+    simulate = model_command("simulate", "forward dynamics of a model")
+    simulate.add_argument("--formulation", choices=_formulation_names(),
+                          help="default lagrange (implicit integrators bring their own)")
+    simulate.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                          help="formulation option, repeatable: " + _formulation_help())
+    dynamics_options(simulate)
+    simulate.add_argument("--out", help="result file (.npz or .csv)")
+    simulate.add_argument("--plot", help="figure: coordinates, energy, constraint error (.png, .pdf, .svg)")
+    simulate.add_argument("--animate", help="animation of the mechanism (.gif; .mp4 with ffmpeg)")
+    simulate.set_defaults(run=_simulate)
+
+    compare = model_command("compare", "run several formulations on the same model and tabulate them")
+    compare.add_argument("--formulations", required=True, help="comma-separated names, the first is the reference")
+    dynamics_options(compare)
+    compare.set_defaults(run=_compare)
     return parser
+
+
+def _formulation_names() -> list[str]:
+    from cmbs.dynamics import FORMULATIONS
+
+    return list(FORMULATIONS)
+
+
+def _formulation_help() -> str:
+    import dataclasses
+
+    from cmbs.dynamics import FORMULATIONS
+
+    parts = []
+    for name, cls in FORMULATIONS.items():
+        fields = [f"{field.name}={field.default}" for field in dataclasses.fields(cls) if field.name != "nonideal"]
+        parts.append(f"{name}: {', '.join(fields) or 'none'}")
+    return "; ".join(parts)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

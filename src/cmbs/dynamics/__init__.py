@@ -6,6 +6,8 @@ command line: lagrange, baumgarte, penalty, matrix-r, projection, udwadia-kalaba
 
 from __future__ import annotations
 
+import dataclasses
+
 from cmbs.dynamics.base import Accelerations, Formulation, Solver
 from cmbs.dynamics.lagrange import Baumgarte, Lagrange
 from cmbs.dynamics.matrix_r import MatrixR
@@ -22,8 +24,14 @@ def formulation(name: str, **options: object) -> Formulation:
     """The formulation called ``name`` with its ``options`` (CmbsError naming the valid ones)."""
     if name not in FORMULATIONS:
         raise CmbsError(f"unknown formulation {name!r}; choose one of {', '.join(FORMULATIONS)}")
+    cls = FORMULATIONS[name]
+    allowed = [field.name for field in dataclasses.fields(cls)]
+    unknown = sorted(set(options) - set(allowed))
+    if unknown:
+        raise CmbsError(f"formulation {name!r} has no option(s) {', '.join(unknown)} "
+                        f"(options: {', '.join(allowed) or 'none'})")
     try:
-        return FORMULATIONS[name](**options)
+        return cls(**options)
     except TypeError as error:
         raise CmbsError(f"formulation {name!r}: {error}") from None
 

@@ -1,0 +1,47 @@
+"""The simulate and compare commands."""
+
+import numpy as np
+
+from cmbs.cli import main
+from cmbs.trajectory import Trajectory
+
+
+def test_simulate_writes_a_result_with_the_options_used(tmp_path, capsys):
+    out = tmp_path / "dp.npz"
+    assert main(["simulate", "double-pendulum", "--t-end", "1", "--formulation", "baumgarte", "--option", "omega=20",
+                 "--out", str(out)]) == 0
+    run = Trajectory.load(out)
+    assert run.info["formulation"] == "baumgarte" and run.info["formulation_options"]["omega"] == 20
+    assert run.t[-1] == 1.0 and {"lam", "energy", "constraint_error"} <= set(run.extras)
+    assert "max constraint error" in capsys.readouterr().out
+
+
+def test_failed_simulation_exits_1_and_keeps_the_computed_part(tmp_path, capsys):
+    out = tmp_path / "sc.csv"
+    assert main(["simulate", "slider-crank", "--t-end", "10", "--rtol", "1e-10", "--atol", "1e-12",
+                 "--out", str(out)]) == 1
+    run = Trajectory.load(out)
+    assert run.info["status"] == "failed" and 0 < run.t[-1] < 10
+    assert "singular configuration" in capsys.readouterr().err
+
+
+def test_compare_prints_one_row_per_formulation(capsys):
+    assert main(["compare", "four-bar", "--undriven", "--formulations", "lagrange,projection,udwadia-kalaba",
+                 "--t-end", "1", "--rtol", "1e-10", "--atol", "1e-12"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    rows = {line.split()[0]: line.split() for line in lines[2:]}
+    assert set(rows) == {"lagrange", "projection", "udwadia-kalaba"}
+    assert float(rows["lagrange"][2]) == 0.0
+    assert all(float(row[2]) < 1e-8 for row in rows.values())
+
+
+def test_bad_dynamics_options_exit_2(tmp_path, capsys):
+    assert main(["simulate", "pendulum", "--t-end", "1", "--formulation", "baumgarte", "--option", "alpha=3"]) == 2
+    assert main(["simulate", "pendulum", "--t-end", "-1"]) == 2
+    assert main(["simulate", "pendulum", "--t-end", "1", "--integrator", "trapezoidal",
+                 "--formulation", "projection"]) == 2
+    assert main(["simulate", "pendulum", "--t-end", "1", "--out", str(tmp_path / "x.txt")]) == 2
+    assert main(["compare", "pendulum", "--t-end", "1", "--formulations", ","]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 5 and all(line.startswith("cmbs: error: ") for line in err)
+    assert list(tmp_path.iterdir()) == []
