@@ -6,18 +6,22 @@ The public API::
     q = cmbs.assemble(model)                      # position analysis
     motion = cmbs.kinematic_analysis(model, t)    # kinematics of a driven model
     motion.save("out.npz")
+    run = cmbs.simulate(model.without_drivers(), t_end=5, formulation="projection")
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from cmbs.dynamics import (Baumgarte, Lagrange, MatrixR, Penalty, Projection, UdwadiaKalaba, formulation)
 from cmbs.errors import CmbsError, ConvergenceError, ExpressionError, ModelError, SingularSystemError
+from cmbs.inputs import SampledInput
 from cmbs.kinematics import (ConstraintReport, accelerations, assemble, constraint_report, kinematic_analysis,
                              singular_configurations, velocities)
 from cmbs.model.drivers import Constant, Expression, PythonFunction, Table
 from cmbs.model.model import Model, Terms
 from cmbs.model.natural import NaturalModelBuilder
+from cmbs.simulate import simulate
 from cmbs.trajectory import Trajectory
 
 __version__ = "0.1.0"
@@ -47,5 +51,6 @@ __all__ = [
     "CmbsError", "ConvergenceError", "ExpressionError", "ModelError", "SingularSystemError",
     "ConstraintReport", "accelerations", "assemble", "constraint_report", "kinematic_analysis",
     "singular_configurations", "velocities", "Constant", "Expression", "PythonFunction", "Table",
-    "Model", "Terms", "NaturalModelBuilder", "Trajectory", "load",
+    "Model", "Terms", "NaturalModelBuilder", "Trajectory", "load", "simulate", "SampledInput", "formulation",
+    "Lagrange", "Baumgarte", "Penalty", "MatrixR", "Projection", "UdwadiaKalaba",
 ]

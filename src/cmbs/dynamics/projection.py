@@ -44,7 +44,11 @@ class Projection:
     inertia
         ``"standard"``, ``"symmetric"`` or ``"parameterised"`` constraint inertia matrix.
     threshold
-        Relative singular-value cut-off of the pseudo-inverse.
+        Singular values of A, with its rows normalised by their norms at the initial
+        configuration, below this are discarded by the pseudo-inverse.  Near a singular
+        configuration this frees the constraint direction that is being lost, so the mechanism
+        moves through on its momentum (Aghili 2005 §V-C); see docs/formulations.md for the
+        trade-off between keeping the assembly branch and the energy error.
     mu
         Scalar of the parameterised variant (mass units); default trace(M)/n.
     """
@@ -62,16 +66,33 @@ class Projection:
         return ProjectionSolver(model, self)
 
 
-def pseudo_inverse(A: np.ndarray, threshold: float) -> tuple[np.ndarray, np.ndarray]:
-    """A⁺ (n, m) and P = I - A⁺A (n, n) by SVD, discarding σ < threshold·σ_max."""
+def pseudo_inverse(A: np.ndarray, threshold: float, row_scale: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """A⁺ (n, m) and P = I - A⁺A (n, n) by SVD.
+
+    Without ``row_scale`` singular values below ``threshold``·σ_max are discarded.  With it,
+    the SVD is taken of D A, D = diag(row_scale) (rows normalised once, e.g. by their norms at
+    the initial configuration), singular values below ``threshold`` are discarded, and
+    A⁺ = (D A)⁺ D, which is the Moore-Penrose inverse of A when nothing is discarded.
+    """
     n = A.shape[1]
     if A.shape[0] == 0:
         return np.zeros((n, 0)), np.eye(n)
-    U, sigma, Vt = np.linalg.svd(A, full_matrices=False)
-    rank = int(np.sum(sigma > threshold * max(sigma[0], 1e-300)))
+    scaled = A if row_scale is None else A * row_scale[:, None]
+    U, sigma, Vt = np.linalg.svd(scaled, full_matrices=False)
+    cutoff = threshold * max(sigma[0], 1e-300) if row_scale is None else threshold
+    rank = int(np.sum(sigma > cutoff))
     V = Vt[:rank].T
     pinv = (V / sigma[:rank]) @ U[:, :rank].T
+    if row_scale is not None:
+        pinv = pinv * row_scale[None, :]
     return pinv, np.eye(n) - V @ V.T
+
+
+def reference_row_scale(model: Model) -> np.ndarray:
+    """1 / (norm of each row of A at the model's initial configuration), 1 for zero rows."""
+    norms = np.linalg.norm(model.jacobian(model.q0, 0.0), axis=1)
+    return 1.0 / np.where(norms > 0, norms, 1.0)
 
 
 class ProjectionSolver(StatelessSolver):
@@ -82,10 +103,11 @@ class ProjectionSolver(StatelessSolver):
         self.semi_definite = bool(np.linalg.eigvalsh(M0)[0] <= 1e-12 * max(np.abs(M0).max(), 1.0))
         self.scale = float(np.trace(M0)) / model.n
         self.identity = np.eye(model.n)
+        self.row_scale = reference_row_scale(model)
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
         M, Q = terms.M, terms.Q
-        pinv, P = pseudo_inverse(terms.A, self.p.threshold)
+        pinv, P = pseudo_inverse(terms.A, self.p.threshold, self.row_scale)
         I_P = self.identity - P
         constrained = pinv @ terms.gamma
         M_hat = M + self.scale * I_P if self.semi_definite else M

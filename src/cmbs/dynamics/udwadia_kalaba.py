@@ -24,7 +24,7 @@ from typing import Callable, ClassVar
 import numpy as np
 
 from cmbs.dynamics.base import Accelerations, StatelessSolver
-from cmbs.dynamics.projection import pseudo_inverse
+from cmbs.dynamics.projection import pseudo_inverse, reference_row_scale
 from cmbs.model.model import Model, Terms
 
 
@@ -33,7 +33,7 @@ class UdwadiaKalaba:
     """Udwadia-Kalaba formulation; ``nonideal(t, q, q̇) -> c`` adds non-ideal constraint work."""
 
     name: ClassVar[str] = "udwadia-kalaba"
-    threshold: float = 1e-9
+    threshold: float = 1e-9  # on the singular values of A M^{-1/2}, rows normalised as in Projection
     nonideal: Callable[[float, np.ndarray, np.ndarray], np.ndarray] | None = None
 
     def bind(self, model: Model) -> "UdwadiaKalabaSolver":
@@ -53,8 +53,10 @@ class UdwadiaKalabaSolver(StatelessSolver):
         self.p = parameters
         M0 = model.mass_matrix(model.q0)
         self.scale = float(np.trace(M0)) / model.n
+        self.mass_scale = np.sqrt(self.scale)  # B = A M^{-1/2}: rows of A scaled by about 1/√m
         self.semi_definite = bool(np.linalg.eigvalsh(M0)[0] <= 1e-12 * max(np.abs(M0).max(), 1.0))
         self._constant_roots = _symmetric_roots(M0) if model.constant_mass and not self.semi_definite else None
+        self.row_scale = reference_row_scale(model)
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
         A, gamma = terms.A, terms.gamma
@@ -67,7 +69,7 @@ class UdwadiaKalabaSolver(StatelessSolver):
             root, inverse_root = self._constant_roots or _symmetric_roots(M)
         a = inverse_root @ (inverse_root @ Q)
         B = A @ inverse_root
-        B_pinv, null_projector = pseudo_inverse(B, self.p.threshold)
+        B_pinv, null_projector = pseudo_inverse(B, self.p.threshold, self.row_scale * self.mass_scale)
         ideal = B_pinv @ (gamma - A @ a)
         scaled_force = ideal
         if self.p.nonideal is not None:
@@ -75,6 +77,6 @@ class UdwadiaKalabaSolver(StatelessSolver):
             scaled_force = ideal + null_projector @ (inverse_root @ c)
         qdd = a + inverse_root @ scaled_force
         force = terms.M @ qdd - terms.Q  # = Q_c of the original system (ideal + non-ideal)
-        A_pinv, _ = pseudo_inverse(A, self.p.threshold)
+        A_pinv, _ = pseudo_inverse(A, self.p.threshold, self.row_scale)
         lam = -A_pinv.T @ force
         return Accelerations(qdd, lam, force)

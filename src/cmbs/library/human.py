@@ -48,8 +48,9 @@ REFERENCE_MASS = round(REFERENCE_MASS, 9)  # 80.639 kg
 ANKLE_HEIGHT = 0.07
 
 
-def human(body_mass: float = REFERENCE_MASS, height: float = REFERENCE_HEIGHT) -> Model:
-    """Build the 14-DOF human model standing upright, at rest."""
+def human(body_mass: float = REFERENCE_MASS, height: float = REFERENCE_HEIGHT, fixed_hip: bool = False) -> Model:
+    """Build the 14-DOF human model standing upright, at rest; ``fixed_hip`` adds constant drivers
+    holding the hip point where it stands (12 DOF left: the trunk and joint angles)."""
     from cmbs.errors import ModelError
 
     for label, value in (("body_mass", body_mass), ("height", height)):
@@ -101,8 +102,11 @@ def human(body_mass: float = REFERENCE_MASS, height: float = REFERENCE_HEIGHT) -
         builder.add_angle(f"{side}_ankle", from_segment=f"{side}_shank", to_segment=f"{side}_foot")
         builder.add_angle(f"{side}_shoulder", from_segment=down, to_segment=f"{side}_arm")
         builder.add_angle(f"{side}_elbow", from_segment=f"{side}_arm", to_segment=f"{side}_forearm")
+    if fixed_hip:
+        builder.add_driver("hip.x", 0.0, name="hip x fixed")
+        builder.add_driver("hip.z", hip, name="hip z fixed")
     for joint in ("neck", "r_hip", "r_knee", "r_ankle", "r_shoulder", "r_elbow",
                   "l_hip", "l_knee", "l_ankle", "l_shoulder", "l_elbow"):
         builder.add_actuator(f"tau_{joint}", coordinate=joint)
     model = builder.build()
-    return model.replace(parameters={"body_mass": body_mass, "height": height})
+    return model.replace(parameters={"body_mass": body_mass, "height": height, "fixed_hip": fixed_hip})
