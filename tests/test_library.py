@@ -21,6 +21,7 @@ from cmbs.library import names
     ("slider-crank-joint", {}, 2, 1),
     ("arm-on-slider", {}, 3, 2),
     ("passive-manipulator-joint", {}, 3, 3),
+    ("chaplygin-sleigh", {}, 3, 3),
 ])
 def test_library_models_assemble_with_their_dof(name, parameters, n, dof):
     model = cmbs.load(name, **parameters)

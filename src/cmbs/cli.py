@@ -84,7 +84,8 @@ def _describe(args: argparse.Namespace) -> int:
     for name, is_driver in zip(model.constraint_names, model.drivers):
         print(f"  {name}{'   [driver]' if is_driver else ''}")
     print(f"rank of A    {report.rank} at q0 (smallest singular value {min(report.singular_values, default=0.0):.3g})")
-    print(f"DOF          {report.dof}")
+    print(f"DOF          {report.dof}" + (f" (velocity DOF {report.velocity_dof}: nonholonomic constraints)"
+                                            if report.velocity_dof != report.dof else ""))
     print(f"redundant    {', '.join(report.redundant) if report.redundant else 'none'}")
     if model.actuator_names:
         print(f"actuators    {', '.join(model.actuator_names)}")

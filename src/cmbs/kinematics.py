@@ -5,7 +5,8 @@ Position analysis is Newton-Raphson on Φ(q, t) = 0 (thesis eq. 3.38-3.40): the 
 minimum-norm sense, ``Δq_f = -A_f⁺ Φ``, which is the plain Newton step when A_f is square and
 regular and still converges (quadratically, to the nearest point of the constraint manifold) for
 under-determined or redundant systems.  Velocities solve ``A q̇ = -Φ_t``, accelerations
-``A q̈ = γ``, with the fixed coordinates' values held.
+``A q̈ = γ``, with the fixed coordinates' values held.  Nonholonomic rows (``model.nonholonomic``)
+take part in velocity and acceleration analysis only; assembly uses the holonomic rows.
 """
 
 from __future__ import annotations
@@ -26,14 +27,18 @@ from cmbs.trajectory import Trajectory
 class ConstraintReport:
     """Rank analysis of A at one configuration.
 
-    ``rank`` (numerical, relative tolerance ``tolerance``), ``dof = n - rank``, ``redundant``
-    constraint names (rows dependent on earlier ones: pivoted QR of Aᵀ), ``singular_values``.
+    ``rank`` of the whole A (numerical, relative tolerance ``tolerance``), ``dof = n - rank`` of
+    the holonomic rows (the dimension of the configuration manifold), ``velocity_dof = n - rank``
+    (the admissible velocities: fewer than ``dof`` when there are nonholonomic constraints, equal
+    otherwise), ``redundant`` constraint names (rows dependent on earlier ones: pivoted QR of
+    Aᵀ), ``singular_values`` of A.
     """
 
     n: int
     m: int
     rank: int
     dof: int
+    velocity_dof: int
     redundant: tuple[str, ...]
     singular_values: np.ndarray
     tolerance: float
@@ -44,20 +49,28 @@ def constraint_report(model: Model, q: np.ndarray, t: float = 0.0, *, tolerance:
 
     A singular value counts as zero below ``tolerance · σ_max``.  Redundant rows: the rows left
     out by QR with column pivoting of Aᵀ, i.e. those that depend linearly on the others
-    (rows are normalised first so that units do not decide).
+    (rows are normalised first so that units do not decide).  ``dof`` counts the holonomic
+    rows only, ``velocity_dof`` all rows (see :class:`ConstraintReport`).
     """
     A = model.jacobian(q, t)
     n, m = model.n, model.m
     if m == 0:
-        return ConstraintReport(n, 0, 0, n, (), np.zeros(0), tolerance)
-    sigma = np.linalg.svd(A, compute_uv=False)
-    threshold = tolerance * max(sigma[0], 1.0)
-    rank = int(np.sum(sigma > threshold))
+        return ConstraintReport(n, 0, 0, n, n, (), np.zeros(0), tolerance)
+
+    def numerical_rank(matrix: np.ndarray) -> tuple[int, np.ndarray]:
+        if matrix.shape[0] == 0:
+            return 0, np.zeros(0)
+        sigma = np.linalg.svd(matrix, compute_uv=False)
+        return int(np.sum(sigma > tolerance * max(sigma[0], 1.0))), sigma
+
+    rank, sigma = numerical_rank(A)
+    holonomic_rank = numerical_rank(A[model.holonomic])[0] if model.nonholonomic.any() else rank
     norms = np.linalg.norm(A, axis=1)
     scaled = A / np.where(norms > 0, norms, 1.0)[:, None]
     _, _, pivots = scipy.linalg.qr(scaled.T, pivoting=True, mode="economic")
     redundant = tuple(model.constraint_names[k] for k in sorted(pivots[rank:]))
-    return ConstraintReport(n, m, rank, n - rank, redundant, sigma, tolerance)
+    return ConstraintReport(n=n, m=m, rank=rank, dof=n - holonomic_rank, velocity_dof=n - rank, redundant=redundant,
+                            singular_values=sigma, tolerance=tolerance)
 
 
 def _free_mask(model: Model, fixed: Sequence[str | int]) -> np.ndarray:
@@ -68,7 +81,8 @@ def _free_mask(model: Model, fixed: Sequence[str | int]) -> np.ndarray:
 
 def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed: Sequence[str | int] = (),
              tolerance: float = 1e-10, max_iterations: int = 50) -> np.ndarray:
-    """Solve Φ(q, t) = 0 by Newton-Raphson from ``q`` (default ``model.q0``).
+    """Solve Φ(q, t) = 0 by Newton-Raphson from ``q`` (default ``model.q0``), on the holonomic
+    rows (nonholonomic rows constrain velocities only).
 
     Parameters
     ----------
@@ -84,26 +98,29 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
         Naming the iteration count, the largest residual and its constraint.
     """
     q = np.array(model.q0 if q is None else q, dtype=float)
-    if model.m == 0:
+    rows = np.flatnonzero(model.holonomic)
+    if rows.size == 0:
         return q
     free = _free_mask(model, fixed)
     terms = model.new_terms()
     zeros = np.zeros(model.n)
     for iteration in range(max_iterations + 1):
         model.evaluate(q, zeros, t, out=terms)
-        residual = np.max(np.abs(terms.phi))
+        phi = terms.phi[rows]
+        residual = np.max(np.abs(phi))
         if not np.isfinite(residual):
             break
         if residual < tolerance:
             return q
         if iteration == max_iterations:
             break
-        step, *_ = np.linalg.lstsq(terms.A[:, free], -terms.phi, rcond=None)
+        step, *_ = np.linalg.lstsq(terms.A[np.ix_(rows, free)], -phi, rcond=None)
         q[free] += step
-    worst = int(np.nanargmax(np.abs(terms.phi))) if np.any(np.isfinite(terms.phi)) else 0
+    phi = terms.phi[rows]
+    worst = int(np.nanargmax(np.abs(phi))) if np.any(np.isfinite(phi)) else 0
     raise ConvergenceError(
         f"model {model.name!r}: assembly at t={t:g} did not converge in {max_iterations} Newton iterations "
-        f"(largest residual {abs(terms.phi[worst]):.3g} in constraint {model.constraint_names[worst]!r}); "
+        f"(largest residual {abs(phi[worst]):.3g} in constraint {model.constraint_names[rows[worst]]!r}); "
         "check the initial positions, the segment lengths and the drivers' values")
 
 

@@ -51,18 +51,23 @@ def _inputs(model: Model, u: Inputs | np.ndarray | None) -> Inputs:
 
 def project_state(model: Model, q: np.ndarray, qd: np.ndarray, t: float, *, tolerance: float = 1e-10,
                   max_iterations: int = 10, threshold: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
-    """Coordinate and velocity projection onto Φ = 0, A q̇ = -Φ_t (Aghili 2005, eq. 45-47)."""
+    """Coordinate and velocity projection onto Φ = 0, A q̇ = -Φ_t (Aghili 2005, eq. 45-47).
+
+    The coordinates are projected with the holonomic rows only (a nonholonomic row has no
+    position-level constraint), the velocities with all rows."""
     if model.m == 0:
         return q, qd
     q = q.copy()
     terms = model.new_terms()
     zeros = np.zeros(model.n)
-    for _ in range(max_iterations):
+    rows = np.flatnonzero(model.holonomic)
+    for _ in range(max_iterations if rows.size else 0):
         model.evaluate(q, zeros, t, out=terms)
-        if np.max(np.abs(terms.phi)) < tolerance:
+        phi = terms.phi[rows]
+        if np.max(np.abs(phi)) < tolerance:
             break
-        pinv, _ = pseudo_inverse(terms.A, threshold)
-        q -= pinv @ terms.phi
+        pinv, _ = pseudo_inverse(terms.A[rows], threshold)
+        q -= pinv @ phi
     model.evaluate(q, zeros, t, out=terms)
     pinv, P = pseudo_inverse(terms.A, threshold)
     return q, P @ qd - pinv @ terms.phi_t
@@ -130,6 +135,9 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
         raise CmbsError(f"dt must be > 0, got {dt}")
     if integrator not in INTEGRATORS:
         raise CmbsError(f"unknown integrator {integrator!r}; choose one of {', '.join(INTEGRATORS)}")
+    if integrator not in EXPLICIT and model.nonholonomic.any():
+        raise CmbsError(f"integrator {integrator!r} enforces constraints at position level and cannot impose the "
+                        f"nonholonomic constraints of model {model.name!r}; use rk45, rk23 or rk4")
     if integrator not in EXPLICIT and formulation is not None:
         raise CmbsError(f"integrator {integrator!r} brings its own formulation (trapezoidal: matrix R in "
                         "independent coordinates, options of matrix-r allowed; backward-euler, "

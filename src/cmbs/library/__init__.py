@@ -67,6 +67,8 @@ _BUILDERS = [
     ("passive-manipulator-joint", "mechanisms", "passive_manipulator_joint",
      "3-link arm with passive third joint (Quasem et al.), joint angles, 3 DOF"),
     ("human", "human", "human", "12-segment 14-DOF planar human body (thesis Table 3.2), 38 coordinates"),
+    ("chaplygin-sleigh", "mechanisms", "chaplygin_sleigh",
+     "Chaplygin sleigh: rigid body with a knife edge (nonholonomic), 3 DOF, 2 velocity DOF"),
 ]
 
 

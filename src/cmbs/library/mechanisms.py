@@ -150,3 +150,53 @@ def passive_manipulator_joint(gravity: float = 0.0) -> Model:
     builder.add_actuator("tau2", coordinate="theta2")
     model = builder.build()
     return model.replace(parameters={"gravity": gravity})
+
+
+def chaplygin_sleigh(mass: float = 1.0, inertia: float = 0.1, distance: float = 0.2, speed: float = 1.0,
+                     angular_velocity: float = 1.0) -> Model:
+    """The Chaplygin sleigh: a planar rigid body on a horizontal plane with a knife edge that
+    allows no sideways sliding — the classic nonholonomic system (Chaplygin 1911; Bloch,
+    *Nonholonomic Mechanics and Control*, §1.7).
+
+    Coordinates (x, z, θ): the centre of mass G in the plane (x-z seen from above, so gravity
+    does no work and is left out) and the heading θ of the body axis e₁ = (cos θ, sin θ).  The
+    knife edge touches the plane at P = G - a e₁, a distance ``distance`` = a behind G; its
+    velocity Ṗ = (ẋ + a sin θ θ̇, ż - a cos θ θ̇) must have no component along the normal
+    e₂ = (-sin θ, cos θ)::
+
+        -sin θ (ẋ + a sin θ θ̇) + cos θ (ż - a cos θ θ̇) = -sin θ ẋ + cos θ ż - a θ̇ = 0
+
+    (a velocity constraint that is not integrable: 3 coordinates, 3 configuration DOF, 2 velocity
+    DOF).  M = diag(m, m, I_G), no applied forces.  In the body-frame forward speed
+    v = cos θ ẋ + sin θ ż and angular velocity ω = θ̇ the motion obeys m v̇ = m a ω²,
+    (I_G + m a²) ω̇ = -m a v ω; E = ½ m v² + ½ (I_G + m a²) ω² is conserved and ω → 0,
+    v → sqrt(2E/m).
+
+    Values chosen (no source gives numbers): ``mass`` m = 1 kg, ``inertia`` I_G = 0.1 kg m²
+    about G, ``distance`` a = 0.2 m.  Start: G at the origin heading along x (θ = 0), forward
+    speed ``speed`` v = 1 m/s and ``angular_velocity`` ω = 1 rad/s, so q̇0 = (v, a ω, ω) (G
+    moves sideways at a ω because it is ahead of the knife edge).  Drawn: G, the contact point P
+    and a nose point 0.3 m ahead of G.
+    """
+    import sympy
+
+    from cmbs.model.equations import from_sympy
+
+    x, z, theta = sympy.symbols("x z theta")
+    x_d, z_d, theta_d = sympy.symbols("x_d z_d theta_d")
+    m, inertia_g, a, nose = (sympy.Float(value) for value in (mass, inertia, distance, 0.3))
+    c, s = sympy.cos(theta), sympy.sin(theta)
+    knife_edge = -s * (x_d + a * s * theta_d) + c * (z_d - a * c * theta_d)
+    model = from_sympy(
+        "chaplygin-sleigh", coordinates=[x, z, theta], velocities=[x_d, z_d, theta_d],
+        mass_matrix=sympy.diag(m, m, inertia_g), forces=[0, 0, 0],
+        velocity_constraints=[knife_edge], velocity_constraint_names=["knife-edge"],
+        points={"G": (x, z), "P": (x - a * c, z - a * s), "nose": (x + nose * c, z + nose * s)},
+        lines=[("P", "G"), ("G", "nose")], q0=[0.0, 0.0, 0.0],
+        qd0=[speed, distance * angular_velocity, angular_velocity],
+        description=f"Chaplygin sleigh: rigid body (m = {mass:g} kg, I_G = {inertia:g} kg m^2) on a horizontal "
+                    f"plane, knife edge {distance:g} m behind the COM; nonholonomic, 3 DOF, 2 velocity DOF",
+        source="S. A. Chaplygin 1911; A. M. Bloch, Nonholonomic Mechanics and Control (2003) §1.7 "
+               "(m, I_G, a and the start chosen)")
+    return model.replace(parameters={**model.parameters, "mass": mass, "inertia": inertia, "distance": distance,
+                                     "speed": speed, "angular_velocity": angular_velocity})

@@ -460,6 +460,8 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
                description: str = "",
                source: str = "",
                constraint_names: Sequence[str] | None = None,
+               velocity_constraints: sympy.Matrix | Sequence[sympy.Expr] | None = None,
+               velocity_constraint_names: Sequence[str] | None = None,
                backend: str = "python",
                cache: bool = True) -> Model:
     """A :class:`Model` from SymPy expressions of the equations of motion (THEORY §1).
@@ -486,8 +488,8 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
         The derived expressions are kept, in the user's symbols, as ``model.equations.A``,
         ``.phi_t`` and ``.gamma``.
     velocities
-        Symbols for ``q̇`` (used in ``forces``).  If None, the symbols named ``f"{q}_d"`` (e.g.
-        ``x_d``) that ``forces`` uses, whatever their assumptions.
+        Symbols for ``q̇`` (used in ``forces`` and ``velocity_constraints``).  If None, the
+        symbols named ``f"{q}_d"`` (e.g. ``x_d``) that those use, whatever their assumptions.
     time
         The time symbol (``sympy.Symbol("t")`` if None).
     inputs
@@ -508,6 +510,15 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
         Free text; ``source`` cites where the model comes from.
     constraint_names
         Names of the m constraints (``"phi[k]"`` if None).
+    velocity_constraints
+        Nonholonomic constraints ``ψ(q, q̇, t) = B(q, t) q̇ + b(q, t) = 0`` (column Matrix or
+        sequence), each linear in the velocity symbols; appended after the rows of
+        ``constraints`` and marked in :attr:`Model.nonholonomic`.  ``B = ∂ψ/∂q̇``, ``b = ψ|_{q̇=0}``
+        and ``γ = -(∂ψ/∂q q̇ + ∂ψ/∂t)`` (so that ``ψ̇ = B q̈ - γ``) are derived symbolically; the
+        row holds ``A = B``, ``Φ = 0``, ``Φ_t = b``, ``γ`` (see :class:`~cmbs.model.model.Terms`).
+        ``drivers`` (if given) then has one entry per row of both kinds.
+    velocity_constraint_names
+        Names of the velocity constraints (``"psi[k]"`` if None).
     backend
         ``"python"`` (default): generated scalar code on the ``math`` module, no compile delay;
         best for small models.  ``"numba"``: the same code compiled by numba (compile time of
@@ -524,7 +535,8 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
     ModelError
         A stray symbol or undefined function (naming the entry, e.g. ``forces[2] uses unknown
         symbol 'k'``), a symbol used where it may not be (e.g. a velocity in Φ), wrong shapes,
-        a non-symmetric M, an M not positive definite at ``q0``, or an evaluation failure at q0.
+        a non-symmetric M, an M not positive definite at ``q0``, a velocity constraint that is
+        not linear in the velocities, or an evaluation failure at q0.
     """
     if backend not in BACKENDS:
         raise ModelError(f"model {name!r}: backend must be one of {BACKENDS}, got {backend!r}")
@@ -532,13 +544,14 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
                           constraints=constraints, velocities=velocities, time=time, inputs=inputs,
                           drivers=drivers, potential=potential, points=points, lines=lines, q0=q0,
                           qd0=qd0, description=description, source=source,
-                          constraint_names=constraint_names, backend=backend, cache=cache))
+                          constraint_names=constraint_names, velocity_constraints=velocity_constraints,
+                          velocity_constraint_names=velocity_constraint_names, backend=backend, cache=cache))
     q = _symbol_list("coordinates", coordinates, name)
     n = len(q)
     if n == 0:
         raise ModelError(f"model {name!r}: coordinates is empty; at least one coordinate is needed")
     if velocities is None:
-        qd = _default_velocities(q, forces, name)
+        qd = _default_velocities(q, forces, name, velocity_constraints)
     else:
         qd = _symbol_list("velocities", velocities, name)
         if len(qd) != n:
@@ -568,11 +581,14 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
     mass = sympy.Matrix(mass_matrix).applyfunc(sympy.sympify)
     Q = _as_vector("forces", forces, name, size=n)
     phi = _as_vector("constraints", constraints, name, size=None)
-    m = len(phi)
+    psi = _as_vector("velocity_constraints", velocity_constraints, name, size=None)
+    m_holonomic = len(phi)
+    m = m_holonomic + len(psi)
     q_set, t_set = set(q), {t}
     checks = [("mass_matrix", list(mass), q_set, "the coordinates", (n, n)),
               ("forces", Q, q_set | set(qd) | t_set | set(u), "coordinates, velocities, time and inputs", None),
-              ("constraints", phi, q_set | t_set, "the coordinates and time", None)]
+              ("constraints", phi, q_set | t_set, "the coordinates and time", None),
+              ("velocity_constraints", psi, q_set | set(qd) | t_set, "coordinates, velocities and time", None)]
     for label, expressions, allowed, allowed_text, shape in checks:
         for index, expression in enumerate(expressions):
             _check_symbols(name, _index_label(label, index, shape), expression, allowed, declared, allowed_text)
@@ -592,8 +608,12 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
     line_pairs = _lines(lines, point_names, name)
     q0_array = _initial_vector("q0", q0, n, name)
     qd0_array = _initial_vector("qd0", qd0, n, name)
-    names = _names("constraint_names", constraint_names, [f"phi[{k}]" for k in range(m)], name)
-    mask = _driver_mask(drivers, [t in expression.free_symbols for expression in phi], name)
+    names = _names("constraint_names", constraint_names, [f"phi[{k}]" for k in range(m_holonomic)], name)
+    names += _names("velocity_constraint_names", velocity_constraint_names,
+                    [f"psi[{k}]" for k in range(len(psi))], name)
+    if len(set(names)) != len(names):
+        raise ModelError(f"model {name!r}: constraint_names and velocity_constraint_names share names: {list(names)}")
+    mask = _driver_mask(drivers, [t in expression.free_symbols for expression in phi + psi], name)
 
     # ------------------------------------------------------------ derived terms
     # Differentiate in real symbols: with sympy's default (complex) symbols the derivative of
@@ -609,12 +629,29 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
         return sympy.sympify(expression).xreplace(mapping)
 
     q_r, qd_r, t_r = canonical["q"], canonical["qd"], canonical["t"][0]
-    phi_r = sympy.Matrix(m, 1, [real(expression) for expression in phi])
+    phi_r = sympy.Matrix(m_holonomic, 1, [real(expression) for expression in phi])
     qd_column = sympy.Matrix(n, 1, qd_r)
-    A_r = phi_r.jacobian(q_r) if m else sympy.zeros(0, n)
-    phi_t_r = phi_r.diff(t_r) if m else sympy.zeros(0, 1)
-    phi_dot = A_r * qd_column + phi_t_r if m else sympy.zeros(0, 1)
-    gamma_r = -(phi_dot.jacobian(q_r) * qd_column + phi_dot.diff(t_r)) if m else sympy.zeros(0, 1)
+    A_r = phi_r.jacobian(q_r) if m_holonomic else sympy.zeros(0, n)
+    phi_t_r = phi_r.diff(t_r) if m_holonomic else sympy.zeros(0, 1)
+    phi_dot = A_r * qd_column + phi_t_r if m_holonomic else sympy.zeros(0, 1)
+    gamma_r = -(phi_dot.jacobian(q_r) * qd_column + phi_dot.diff(t_r)) if m_holonomic else sympy.zeros(0, 1)
+    if psi:
+        # ψ = B q̇ + b: B = ∂ψ/∂q̇ (free of q̇), b = ψ at q̇ = 0, ψ̇ = B q̈ - γ with γ = -(ψ_q q̇ + ψ_t)
+        psi_r = sympy.Matrix(len(psi), 1, [real(expression) for expression in psi])
+        B_r = psi_r.jacobian(qd_r)
+        velocity_set = set(qd_r)
+        for row in range(B_r.rows):
+            nonlinear = [inverse[v].name for v in qd_r if any(v in entry.free_symbols for entry in B_r.row(row))]
+            if nonlinear:
+                raise ModelError(f"model {name!r}: velocity_constraints[{row}] ({names[m_holonomic + row]!r}) is not "
+                                 f"linear in the velocities (it is nonlinear in {', '.join(nonlinear)}): "
+                                 f"{_short(psi[row])}; only B(q, t) q̇ + b(q, t) = 0 is supported")
+        b_r = psi_r.xreplace({v: sympy.S.Zero for v in velocity_set})
+        gamma_psi = -(psi_r.jacobian(q_r) * qd_column + psi_r.diff(t_r))
+        A_r = A_r.col_join(B_r)
+        phi_r = phi_r.col_join(sympy.zeros(len(psi), 1))
+        phi_t_r = phi_t_r.col_join(b_r)
+        gamma_r = gamma_r.col_join(gamma_psi)
     derived = []
     for label, matrix in (("jacobian", A_r), ("constraints_t", phi_t_r), ("gamma", gamma_r)):
         # derivatives of Abs, sign, Heaviside, Min, Max are taken almost everywhere
@@ -648,26 +685,33 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
                  point_names=point_names, lines=line_pairs, equations=equations,
                  description=description, source=source,
                  parameters={"builder": "cmbs.model.equations.from_sympy", "mass_matrix": mass,
-                             "forces": sympy.Matrix(n, 1, Q), "constraints": sympy.Matrix(m, 1, phi),
+                             "forces": sympy.Matrix(n, 1, Q), "constraints": sympy.Matrix(m_holonomic, 1, phi),
+                             "velocity_constraints": sympy.Matrix(len(psi), 1, psi),
                              "potential": potential, "backend": backend},
-                 constant_mass=constant is not None)
+                 constant_mass=constant is not None,
+                 nonholonomic=np.arange(m) >= m_holonomic)
 
 
-def _default_velocities(q: list[sympy.Symbol], forces: object, model: str) -> list[sympy.Symbol]:
-    """The symbols named ``f"{q}_d"`` that ``forces`` uses (whatever their assumptions), else
-    new plain symbols of those names."""
-    try:
-        found = [symbol for entry in sympy.Matrix(forces) for symbol in sympy.sympify(entry).free_symbols]
-    except (TypeError, ValueError, sympy.SympifyError):
-        found = []  # the shape check of forces reports the problem
+def _default_velocities(q: list[sympy.Symbol], forces: object, model: str,
+                        velocity_constraints: object = None) -> list[sympy.Symbol]:
+    """The symbols named ``f"{q}_d"`` that ``forces`` or ``velocity_constraints`` use (whatever
+    their assumptions), else new plain symbols of those names."""
+    found = []
+    for source in (forces, velocity_constraints):
+        if source is None:
+            continue
+        try:
+            found += [symbol for entry in sympy.Matrix(source) for symbol in sympy.sympify(entry).free_symbols]
+        except (TypeError, ValueError, sympy.SympifyError):
+            pass  # the shape checks report the problem
     velocities = []
     for symbol in q:
         wanted = f"{symbol.name}_d"
         matches = sorted({s for s in found if isinstance(s, sympy.Symbol) and s.name == wanted},
                          key=lambda s: str(s.assumptions0))
         if len(matches) > 1:
-            raise ModelError(f"model {model!r}: forces uses several different symbols named {wanted!r} "
-                             f"(assumptions {[m.assumptions0 for m in matches]}); pass velocities")
+            raise ModelError(f"model {model!r}: forces or velocity_constraints use several different symbols "
+                             f"named {wanted!r} (assumptions {[m.assumptions0 for m in matches]}); pass velocities")
         velocities.append(matches[0] if matches else sympy.Symbol(wanted))
     return velocities
 
@@ -722,10 +766,15 @@ class CallableEquations:
     def __init__(self, *, n: int, m: int, n_u: int, mass_matrix: Callable, forces: Callable,
                  constraints: Callable | None, jacobian: Callable, gamma: Callable,
                  constraints_t: Callable | None, potential: Callable | None, points: Callable | None,
-                 n_points: int) -> None:
-        self.n, self.m, self.n_u = n, m, n_u
+                 n_points: int, m_velocity: int = 0, velocity_constraints: Callable | None = None,
+                 velocity_gamma: Callable | None = None) -> None:
+        """``m`` holonomic rows, then ``m_velocity`` nonholonomic rows from
+        ``velocity_constraints(q, t) -> (B, b)`` and ``velocity_gamma(q, qd, t)``."""
+        self.n, self.m_holonomic, self.m_velocity, self.n_u = n, m, m_velocity, n_u
+        self.m = m + m_velocity
         self._mass, self._forces = mass_matrix, forces
         self._phi, self._A, self._gamma, self._phi_t = constraints, jacobian, gamma, constraints_t
+        self._psi, self._psi_gamma = velocity_constraints, velocity_gamma
         self._potential, self._points, self.n_points = potential, points, n_points
 
     def new_terms(self) -> Terms:
@@ -735,14 +784,21 @@ class CallableEquations:
         """Call the user functions at ``(q, q̇, t, u)`` and copy their results into ``terms``."""
         terms.M[...] = self._mass(q)
         terms.Q[...] = self._forces(q, qd, t, u)
-        if self.m:
-            terms.phi[...] = self._phi(q, t)
-            terms.A[...] = self._A(q, t)
-            terms.gamma[...] = self._gamma(q, qd, t)
+        h = self.m_holonomic
+        if h:
+            terms.phi[:h] = self._phi(q, t)
+            terms.A[:h] = self._A(q, t)
+            terms.gamma[:h] = self._gamma(q, qd, t)
             if self._phi_t is not None:
-                terms.phi_t[...] = self._phi_t(q, t)
+                terms.phi_t[:h] = self._phi_t(q, t)
             else:
-                terms.phi_t[...] = 0.0
+                terms.phi_t[:h] = 0.0
+        if self.m_velocity:
+            B, b = self._psi(q, t)
+            terms.phi[h:] = 0.0
+            terms.A[h:] = B
+            terms.phi_t[h:] = b
+            terms.gamma[h:] = self._psi_gamma(q, qd, t)
 
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
         """T = ½ q̇ᵀ M(q) q̇."""
@@ -793,6 +849,20 @@ def _difference_phi_t(phi: Callable, h: float) -> Callable:
     return phi_t
 
 
+def _difference_velocity_gamma(velocity_constraints: Callable, h: float) -> Callable:
+    """γ = -d/ds ψ(q + s q̇, q̇, t + s) at s = 0 with ψ = B q̇ + b (the path with q̈ = 0)."""
+    def gamma(q: np.ndarray, qd: np.ndarray, t: float) -> np.ndarray:
+        q, qd = np.asarray(q, dtype=float), np.asarray(qd, dtype=float)
+        s = h / max(1.0, float(np.max(np.abs(qd), initial=0.0)))
+
+        def psi(step: float) -> np.ndarray:
+            B, b = velocity_constraints(q + step * qd, t + step)
+            return np.asarray(B, float) @ qd + np.asarray(b, float)
+
+        return -(psi(s) - psi(-s)) / (2.0 * s)
+    return gamma
+
+
 def from_callables(name: str, *, coordinate_names: Sequence[str],
                    mass_matrix: Callable[[np.ndarray], np.ndarray],
                    forces: Callable[[np.ndarray, np.ndarray, float, np.ndarray], np.ndarray],
@@ -813,6 +883,9 @@ def from_callables(name: str, *, coordinate_names: Sequence[str],
                    description: str = "",
                    source: str = "",
                    constraint_names: Sequence[str] | None = None,
+                   velocity_constraints: Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]] | None = None,
+                   velocity_gamma: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None,
+                   velocity_constraint_names: Sequence[str] | None = None,
                    finite_differences: bool = False,
                    check: bool = True) -> Model:
     """A :class:`Model` from Python functions of the equations of motion (THEORY §1).
@@ -828,8 +901,14 @@ def from_callables(name: str, *, coordinate_names: Sequence[str],
     ----------
     n_constraints
         m; taken from ``constraints(q0, 0)`` if None (and checked against it otherwise).
+    velocity_constraints, velocity_gamma, velocity_constraint_names
+        Nonholonomic constraints ``B(q, t) q̇ + b(q, t) = 0``: ``velocity_constraints(q, t) ->
+        (B (k, n), b (k,))`` and ``velocity_gamma(q, qd, t) -> (k,)`` with ``B q̈ = γ``, i.e.
+        ``γ = -(dB/dt) q̇ - ḃ`` (by central differences of ψ = B q̇ + b along q + s q̇, t + s
+        when None and ``finite_differences``); names ``"psi[k]"`` if None.  The rows follow
+        the holonomic ones and are marked in :attr:`Model.nonholonomic`.
     drivers
-        Mask of driver rows (all False if None).
+        Mask of driver rows (all False if None), holonomic then nonholonomic rows.
     point_names
         Names of the k points returned by ``points`` (``"p0"``, ... if empty).
     finite_differences
@@ -838,11 +917,12 @@ def from_callables(name: str, *, coordinate_names: Sequence[str],
         relative step 1e-6 (error ~1e-10 relative), ``γ = -d²/ds² Φ(q + s q̇, t + s)`` with step
         1e-4 (error ~1e-7 relative: Φ̈ = A q̈ - γ is then satisfied only to that accuracy, which
         shows as constraint drift), and ``Φ_t`` too when ``constraints_t`` is None.  This costs
-        2n + 3 (+2) calls of ``constraints`` per evaluation.
+        2n + 3 (+2) calls of ``constraints`` per evaluation.  A missing ``velocity_gamma`` is
+        computed likewise (step 1e-5, 2 calls of ``velocity_constraints``).
     check
-        At build, compare the given ``jacobian``, ``gamma`` and ``constraints_t`` with finite
-        differences at ``(q0, q̇, 0)`` (q̇ a fixed pseudo-random vector) and raise
-        :class:`ModelError` when they disagree by more than 1e-4 relative; and reject
+        At build, compare the given ``jacobian``, ``gamma``, ``constraints_t`` and
+        ``velocity_gamma`` with finite differences at ``(q0, q̇, 0)`` (q̇ a fixed pseudo-random
+        vector) and raise :class:`ModelError` when they disagree by more than 1e-4 relative; and reject
         ``constraints`` that change with t when ``constraints_t`` is None.
 
     Raises
@@ -860,7 +940,8 @@ def from_callables(name: str, *, coordinate_names: Sequence[str],
     qd0_array = _initial_vector("qd0", qd0, n, name)
     for label, function in (("mass_matrix", mass_matrix), ("forces", forces), ("constraints", constraints),
                             ("jacobian", jacobian), ("gamma", gamma), ("constraints_t", constraints_t),
-                            ("potential", potential), ("points", points)):
+                            ("potential", potential), ("points", points),
+                            ("velocity_constraints", velocity_constraints), ("velocity_gamma", velocity_gamma)):
         if function is not None and not callable(function):
             raise ModelError(f"model {name!r}: {label} must be callable, got {function!r}")
     if isinstance(n_inputs, bool) or not isinstance(n_inputs, (int, np.integer)) or n_inputs < 0:
@@ -938,8 +1019,49 @@ def from_callables(name: str, *, coordinate_names: Sequence[str],
                                      f"constraints at q0 = {q0_array.tolist()} (max difference {error:.3g}): "
                                      f"given {given.tolist()}, estimated {estimate.tolist()}; "
                                      f"check it or pass check=False")
+    m_velocity = 0
+    if velocity_constraints is None:
+        if velocity_gamma is not None:
+            raise ModelError(f"model {name!r}: velocity_gamma is given but velocity_constraints is None")
+    else:
+        try:
+            pair = velocity_constraints(q0_array.copy(), 0.0)
+        except Exception as error:  # noqa: BLE001 - any failure of user code is reported as such
+            raise ModelError(f"model {name!r}: velocity_constraints failed at q0 = {q0_array.tolist()}: "
+                             f"{type(error).__name__}: {error}") from error
+        if not isinstance(pair, (tuple, list)) or len(pair) != 2:
+            raise ModelError(f"model {name!r}: velocity_constraints must return a pair (B, b), got {pair!r}")
+        B0 = call("velocity_constraints B", lambda: pair[0])
+        b0 = call("velocity_constraints b", lambda: pair[1])
+        if B0.ndim != 2 or B0.shape[1] != n:
+            raise ModelError(f"model {name!r}: velocity_constraints returned B of shape {B0.shape}, expected (k, {n})")
+        m_velocity = B0.shape[0]
+        expect("velocity_constraints b", b0, (m_velocity,))
+        gamma_velocity_fd = _difference_velocity_gamma(velocity_constraints, 1e-5)
+        if velocity_gamma is None:
+            if not finite_differences:
+                raise ModelError(f"model {name!r}: velocity_constraints is given without velocity_gamma; pass it "
+                                 f"(B q̈ = γ = -(dB/dt) q̇ - ḃ) or finite_differences=True")
+            velocity_gamma = gamma_velocity_fd
+        expect("velocity_gamma", call("velocity_gamma", velocity_gamma, q0_array.copy(), qd0_array.copy(), 0.0),
+               (m_velocity,))
+        if check:
+            rng = np.random.default_rng(20240614)
+            qd_test = rng.uniform(-1.0, 1.0, n) * max(1.0, float(np.max(np.abs(qd0_array))))
+            given = call("velocity_gamma", velocity_gamma, q0_array.copy(), qd_test.copy(), 0.0)
+            estimate = gamma_velocity_fd(q0_array, qd_test, 0.0)
+            error = float(np.max(np.abs(given - estimate), initial=0.0))
+            if error > 1e-4 * (1.0 + float(np.max(np.abs(estimate), initial=0.0))):
+                raise ModelError(f"model {name!r}: velocity_gamma disagrees with finite differences of "
+                                 f"velocity_constraints at q0 = {q0_array.tolist()} (max difference {error:.3g}): "
+                                 f"given {given.tolist()}, estimated {estimate.tolist()}; "
+                                 f"check it or pass check=False")
     names = _names("constraint_names", constraint_names, [f"phi[{k}]" for k in range(m)], name)
-    mask = _driver_mask(drivers, [False] * m, name)
+    names += _names("velocity_constraint_names", velocity_constraint_names,
+                    [f"psi[{k}]" for k in range(m_velocity)], name)
+    if len(set(names)) != len(names):
+        raise ModelError(f"model {name!r}: constraint_names and velocity_constraint_names share names: {list(names)}")
+    mask = _driver_mask(drivers, [False] * (m + m_velocity), name)
 
     n_points = 0
     if points is not None:
@@ -957,11 +1079,12 @@ def from_callables(name: str, *, coordinate_names: Sequence[str],
     equations = CallableEquations(n=n, m=m, n_u=n_inputs, mass_matrix=mass_matrix, forces=forces,
                                   constraints=constraints, jacobian=jacobian, gamma=gamma,
                                   constraints_t=constraints_t, potential=potential, points=points,
-                                  n_points=n_points)
+                                  n_points=n_points, m_velocity=m_velocity,
+                                  velocity_constraints=velocity_constraints, velocity_gamma=velocity_gamma)
     return Model(name=name, coordinate_names=coordinate_names, coordinate_kinds=("generic",) * n,
                  constraint_names=names, drivers=mask, actuator_names=actuator_names, q0=q0_array,
                  qd0=qd0_array, point_names=point_names, lines=line_pairs, equations=equations,
                  description=description, source=source,
                  parameters={"builder": "cmbs.model.equations.from_callables",
                              "finite_differences": finite_differences},
-                 constant_mass=False)
+                 constant_mass=False, nonholonomic=np.arange(m + m_velocity) >= m)

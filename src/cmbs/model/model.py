@@ -6,6 +6,13 @@ For coordinates ``q`` (size n), constraints (size m) and actuator inputs ``u`` (
     M(q) q̈ + Aᵀ λ = Q(q, q̇, t, u),     Φ(q, t) = 0,     A = Φ_q,
     A q̇ = -Φ_t,                        A q̈ = γ = -(Ȧ q̇) - 2 Φ_qt q̇ - Φ_tt.
 
+Nonholonomic (velocity-level) constraint rows ``B_k(q, t) q̇ + b_k(q, t) = 0`` (THEORY §1, §3.6;
+:attr:`Model.nonholonomic` marks them) use the same arrays with ``A[k] = B_k``, ``Φ[k] = 0``
+(there is no position-level constraint), ``Φ_t[k] = b_k`` and ``γ[k] = -(dB_k/dt) q̇ - ḃ_k``, so
+that ``A q̇ + Φ_t = 0`` and ``A q̈ = γ`` hold for every row; every formulation works on those
+unchanged, while position-level operations (assembly, coordinate projection, the configuration
+DOF) use the holonomic rows only.
+
 Pinocchio's split between a constant model and per-evaluation data is kept: the frozen
 :class:`Model` holds names, sizes and the compiled evaluator; :class:`Terms` is a caller-owned
 workspace that :meth:`Model.evaluate` fills in place (the fast path, no allocation).  The
@@ -30,6 +37,11 @@ class Terms:
     Attributes (views into one buffer, overwritten by every :meth:`Model.evaluate`):
     ``M`` (n, n), ``Q`` (n,), ``phi`` (m,), ``A`` (m, n), ``gamma`` (m,), ``phi_t`` (m,).
     For models with a constant mass matrix ``M`` is the model's read-only matrix itself.
+
+    A nonholonomic row k (``B_k q̇ + b_k = 0``, see :attr:`Model.nonholonomic`) holds
+    ``A[k] = B_k``, ``phi[k] = 0``, ``phi_t[k] = b_k`` and ``gamma[k] = -(dB_k/dt) q̇ - ḃ_k``:
+    the velocity constraint is ``A q̇ + Φ_t = 0`` and the acceleration constraint ``A q̈ = γ``
+    for holonomic and nonholonomic rows alike.
     """
 
     __slots__ = ("buffer", "M", "Q", "phi", "A", "gamma", "phi_t", "scratch")
@@ -86,9 +98,15 @@ class Model:
     coordinate_kinds
         One of ``"x"``, ``"z"``, ``"angle"``, ``"distance"``, ``"joint"``, ``"generic"`` each.
     constraint_names
-        Names of the m constraints (rows of Φ).
+        Names of the m constraints (rows of Φ, or of A q̇ + Φ_t = 0 for nonholonomic rows).
     drivers
         Boolean mask (m,) of rheonomic driver constraints.
+    nonholonomic
+        Boolean mask (m,) of nonholonomic (velocity-level) constraint rows
+        ``B_k(q, t) q̇ + b_k(q, t) = 0``; None (default) means all False.  Such a row has
+        ``A[k] = B_k``, ``Φ[k] = 0``, ``Φ_t[k] = b_k``, ``γ[k] = -(dB_k/dt) q̇ - ḃ_k`` (see
+        :class:`Terms`); assembly and coordinate projection skip it, velocity and acceleration
+        analysis and the formulations use it like any other row.
     actuator_names
         Names of the n_u actuator inputs ``u``.
     q0
@@ -121,6 +139,7 @@ class Model:
     parameters: dict = field(default_factory=dict, repr=False)
     constant_mass: bool = False
     segment_masses: tuple[tuple[str, float], ...] = ()
+    nonholonomic: np.ndarray | None = None
     _no_input: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -132,8 +151,12 @@ class Model:
                 raise ModelError(f"model {self.name!r}: {label} has shape {np.shape(array)}, expected ({n},)")
         if np.shape(self.drivers) != (len(self.constraint_names),):
             raise ModelError(f"model {self.name!r}: driver mask does not match the constraints")
-        for label in ("q0", "qd0", "drivers"):
-            frozen = np.array(getattr(self, label), dtype=bool if label == "drivers" else float)
+        if self.nonholonomic is None:
+            object.__setattr__(self, "nonholonomic", np.zeros(len(self.constraint_names), dtype=bool))
+        if np.shape(self.nonholonomic) != (len(self.constraint_names),):
+            raise ModelError(f"model {self.name!r}: nonholonomic mask does not match the constraints")
+        for label in ("q0", "qd0", "drivers", "nonholonomic"):
+            frozen = np.array(getattr(self, label), dtype=bool if label in ("drivers", "nonholonomic") else float)
             frozen.setflags(write=False)
             object.__setattr__(self, label, frozen)
         object.__setattr__(self, "_no_input", np.zeros(len(self.actuator_names)))
@@ -153,6 +176,11 @@ class Model:
     def n_u(self) -> int:
         """Number of actuator inputs."""
         return len(self.actuator_names)
+
+    @property
+    def holonomic(self) -> np.ndarray:
+        """Boolean mask (m,) of the position-level rows (``~nonholonomic``)."""
+        return ~self.nonholonomic
 
     @property
     def driver_names(self) -> tuple[str, ...]:
@@ -179,7 +207,8 @@ class Model:
         model's free motion, or to drive it by forces instead); q0, q̇0 are kept."""
         keep = np.flatnonzero(~self.drivers)
         return self.replace(name=f"{self.name}-undriven", constraint_names=tuple(self.constraint_names[k] for k in keep),
-                            drivers=np.zeros(keep.size, dtype=bool), equations=_RowSubset(self.equations, keep))
+                            drivers=np.zeros(keep.size, dtype=bool), nonholonomic=self.nonholonomic[keep],
+                            equations=_RowSubset(self.equations, keep))
 
     def replace(self, **changes: object) -> "Model":
         """A copy with some fields changed (the model itself is never mutated)."""
@@ -215,7 +244,7 @@ class Model:
         return self._at(q, qd, t, u).Q.copy()
 
     def constraints(self, q: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """Φ(q, t), (m,)."""
+        """Φ(q, t), (m,) (0 in nonholonomic rows)."""
         return self._at(q, None, t, None).phi.copy()
 
     def jacobian(self, q: np.ndarray, t: float = 0.0) -> np.ndarray:
@@ -227,7 +256,7 @@ class Model:
         return self._at(q, qd, t, None).gamma.copy()
 
     def constraints_t(self, q: np.ndarray, t: float = 0.0) -> np.ndarray:
-        """Φ_t, (m,)."""
+        """Φ_t, (m,) (b_k in nonholonomic rows B_k q̇ + b_k = 0)."""
         return self._at(q, None, t, None).phi_t.copy()
 
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
