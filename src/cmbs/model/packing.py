@@ -26,9 +26,7 @@ def pack(int_sections: Sequence[np.ndarray], real_sections: Sequence[np.ndarray]
     header = np.concatenate([[len(flat_ints)], int_offsets, [len(flat_reals)], real_offsets]).astype(np.int64)
     ints = np.concatenate([header, *flat_ints]) if flat_ints else header
     reals = np.concatenate(flat_reals) if flat_reals else np.zeros(0)
-    ints.setflags(write=False)
-    reals.setflags(write=False)
-    return ints, reals
+    return ints, reals  # left writable: numba's calls are about 0.1 µs cheaper than with read-only arrays
 
 
 @numba.njit(cache=True, inline="always")
