@@ -228,3 +228,24 @@ def test_sampled_inputs_drive_the_model():
         run = simulate(model, t_end=1.0, u=SampledInput(times, torque, interpolation), rtol=1e-10, atol=1e-12)
         assert np.abs(run.q - exact.q).max() < tolerance
         np.testing.assert_allclose(run["u"][:, 0], np.sin(3 * run.t), atol=1e-4)
+
+
+def test_udwadia_kalaba_equals_the_symmetric_square_root_form():
+    """Nicoara eq. (7)-(12) written with M^{1/2} by eigen-decomposition, ideal and non-ideal terms."""
+    from cmbs.dynamics import UdwadiaKalaba
+
+    model = cmbs.load("slider-crank-joint", gravity=9.81)
+    rng = np.random.default_rng(12)
+    q, qd = model.q0, model.qd0
+    c = rng.normal(size=model.n)
+    terms = model.evaluate(q, qd, 0.0)
+    M, Q, A, gamma = terms.M, terms.Q, terms.A, terms.gamma
+    values, vectors = np.linalg.eigh(M)
+    inverse_root = (vectors / np.sqrt(values)) @ vectors.T
+    a = np.linalg.solve(M, Q)
+    B = A @ inverse_root
+    B_pinv = np.linalg.pinv(B)
+    expected = a + inverse_root @ B_pinv @ (gamma - A @ a) \
+        + inverse_root @ (np.eye(model.n) - B_pinv @ B) @ inverse_root @ c
+    solution = UdwadiaKalaba(nonideal=lambda t, q, qd: c).bind(model).accelerations(terms, q, qd, 0.0)
+    np.testing.assert_allclose(solution.qdd, expected, atol=1e-12)

@@ -43,6 +43,143 @@ def plot_trajectory(trajectory: Trajectory, *, model: Model | None = None,
     return figure
 
 
+#: The number of coordinates :func:`plot_simulation` draws when none are chosen.
+MAX_DEFAULT_COORDINATES = 8
+
+
+def plot_simulation(trajectory: Trajectory, *, model: Model | None = None,
+                    coordinates: Sequence[str] | None = None, snapshots: int = 8) -> plt.Figure:
+    """An overview of a simulation, one panel per quantity the trajectory holds.
+
+    Panels, in this order, laid out at most three to a row:
+
+    * **coordinates** against time: the chosen ``coordinates``, or by default all of them,
+      but at most the first :data:`MAX_DEFAULT_COORDINATES` (the title then says so);
+    * **energy** T + V against time (extra ``energy``), and **energy drift** E(t) - E(0)
+      in its own panel, titled with max |E - E(0)|;
+    * **constraint errors** max|Φ| and max|Φ̇| against time on a log scale (extras
+      ``constraint_error`` and ``velocity_constraint_error``).  Samples that are exactly zero
+      cannot be drawn on a log scale: they are left out and the legend counts them; a
+      quantity that is zero throughout is not drawn and the title says so (if nothing is
+      positive the panel falls back to a linear scale and draws the zeros);
+    * with ``model``, the **mechanism** at ``snapshots`` instants (:func:`draw_snapshots`).
+
+    Panels whose extras the trajectory lacks (e.g. a kinematic analysis has no energy) are
+    left out, so ``len(figure.axes)`` is the number of panels shown.  A failed run
+    (``info["status"] == "failed"``) says so in the figure title.
+    """
+    if len(trajectory.t) == 0:
+        raise CmbsError("cannot plot an empty trajectory (no samples)")
+    if coordinates is not None:
+        names = list(coordinates)
+        if not names:
+            raise CmbsError(f"no coordinates chosen; coordinates: {', '.join(trajectory.names)}")
+        unknown = [name for name in names if name not in trajectory.names]
+        if unknown:
+            raise CmbsError(f"no coordinate(s) {', '.join(unknown)}; coordinates: {', '.join(trajectory.names)}")
+        note = ""
+    else:
+        names = list(trajectory.names[:MAX_DEFAULT_COORDINATES])
+        hidden = len(trajectory.names) - len(names)
+        note = f" (first {len(names)} of {len(trajectory.names)}; choose with coordinates=)" if hidden > 0 else ""
+
+    panels = []
+    if names:
+        panels.append(lambda axis: _draw_coordinates(axis, trajectory, names, note))
+    if "energy" in trajectory.extras:
+        energy = np.asarray(trajectory.extras["energy"], dtype=float).reshape(len(trajectory.t), -1)[:, 0]
+        panels.append(lambda axis: _draw_energy(axis, trajectory.t, energy))
+        panels.append(lambda axis: _draw_energy_drift(axis, trajectory.t, energy))
+    errors = [(label, key) for label, key in ((r"position $\max|\Phi|$", "constraint_error"),
+                                              (r"velocity $\max|\dot\Phi|$", "velocity_constraint_error"))
+              if key in trajectory.extras]
+    if errors:
+        panels.append(lambda axis: _draw_constraint_errors(axis, trajectory, errors))
+    if model is not None:
+        panels.append(lambda axis: draw_snapshots(axis, model, trajectory, snapshots))
+
+    columns = min(3, len(panels))
+    rows = -(-len(panels) // columns)
+    figure, grid = plt.subplots(rows, columns, figsize=(4.4 * columns, 3.6 * rows), constrained_layout=True,
+                                squeeze=False)
+    cells = list(grid.flat)
+    for draw, axis in zip(panels, cells):
+        draw(axis)
+    for axis in cells[len(panels):]:
+        figure.delaxes(axis)
+    title = trajectory.info.get("model", "")
+    how = ", ".join(str(trajectory.info[key]) for key in ("analysis", "formulation", "integrator") if trajectory.info.get(key))
+    title = f"{title} ({how})" if how and title else title or how
+    if trajectory.info.get("status") == "failed":
+        message = trajectory.info.get("message", "")
+        title += f" - run FAILED at t = {trajectory.t[-1]:.6g} s" + (f": {message}" if message else "")
+    figure.suptitle(title)
+    return figure
+
+
+def _draw_coordinates(axis: plt.Axes, trajectory: Trajectory, names: list[str], note: str) -> None:
+    for name in names:
+        axis.plot(trajectory.t, trajectory.q[:, trajectory.names.index(name)], label=name)
+    axis.set_xlabel("t [s]")
+    axis.set_title("coordinates" + note, fontsize="medium")
+    axis.legend(fontsize="small")
+    axis.grid(alpha=0.3)
+
+
+def _draw_energy(axis: plt.Axes, t: np.ndarray, energy: np.ndarray) -> None:
+    axis.plot(t, energy, color="C3")
+    axis.set_xlabel("t [s]")
+    axis.set_ylabel("E = T + V [J]")
+    axis.set_title(f"total energy, E(0) = {energy[0]:.6g} J", fontsize="medium")
+    axis.ticklabel_format(axis="y", useOffset=False)
+    axis.grid(alpha=0.3)
+
+
+def _draw_energy_drift(axis: plt.Axes, t: np.ndarray, energy: np.ndarray) -> None:
+    drift = energy - energy[0]
+    axis.plot(t, drift, color="C3")
+    axis.axhline(0.0, color="0.5", linewidth=0.8)
+    axis.set_xlabel("t [s]")
+    axis.set_ylabel("E(t) - E(0) [J]")
+    worst = np.nanmax(np.abs(drift)) if np.any(np.isfinite(drift)) else float("nan")
+    axis.set_title(f"energy drift, max |E - E(0)| = {worst:.3g} J", fontsize="medium")
+    axis.grid(alpha=0.3)
+
+
+def _draw_constraint_errors(axis: plt.Axes, trajectory: Trajectory, errors: list[tuple[str, str]]) -> None:
+    series = []
+    for (label, key), color in zip(errors, ("C0", "C1")):
+        values = np.asarray(trajectory.extras[key], dtype=float).reshape(len(trajectory.t), -1)[:, 0]
+        series.append((label, values, color))
+    any_positive = any(np.any(np.isfinite(v) & (v > 0)) for _, v, _ in series)
+    notes = []
+    for label, values, color in series:
+        short = label.split()[0]
+        if not np.any(np.isfinite(values)):
+            notes.append(f"{short}: no finite values")
+            continue
+        if np.all(values == 0):
+            notes.append(f"{short}: all exactly 0")
+            if any_positive:
+                continue  # nothing to draw on the log scale; the title says it
+        if any_positive:
+            shown = np.where(np.isfinite(values) & (values > 0), values, np.nan)
+            left_out = int(np.sum(values == 0))
+            if left_out:
+                label += f" ({left_out} exact zero{'s' if left_out > 1 else ''} not shown)"
+        else:
+            shown = values
+        axis.plot(trajectory.t, shown, "-", marker=".", markersize=2, linewidth=1, color=color, label=label)
+    if any_positive:
+        axis.set_yscale("log")
+    axis.set_xlabel("t [s]")
+    axis.set_title("constraint errors" + (" (log)" if any_positive else "") + ("\n" + "; ".join(notes) if notes
+                                                                              else ""), fontsize="medium")
+    if axis.lines:
+        axis.legend(fontsize="small")
+    axis.grid(alpha=0.3, which="both" if any_positive else "major")
+
+
 def draw_snapshots(axis: plt.Axes, model: Model, trajectory: Trajectory, count: int) -> None:
     """The model's segments at ``count`` evenly spaced samples of the trajectory."""
     samples = np.linspace(0, len(trajectory.t) - 1, max(count, 1)).round().astype(int)

@@ -8,7 +8,10 @@ From Gauss's principle, with the unconstrained acceleration a = M⁻¹Q and B = 
 The second term is the ideal constraint force, the third the non-ideal one, with c a
 user-given vector (function of t, q, q̇) describing the work done by the constraint forces on
 virtual displacements.  Redundant (consistent) constraints are handled by the Moore-Penrose
-inverse.  M^{1/2} is the symmetric square root (eigen-decomposition).
+inverse.  Any factor M = L Lᵀ can stand for M^{1/2}: Gauss's principle minimises
+‖Lᵀ(q̈ - a)‖² = (q̈ - a)ᵀ M (q̈ - a) whatever the factor, and the non-ideal term is the same too,
+so the Cholesky factor is used (B = A L⁻ᵀ, M^{-1/2} → L⁻ᵀ on the left, L⁻¹ on the right); the
+test suite checks the result against the symmetric square root.
 
 When M is only semi-definite (natural coordinates with massless angle coordinates) the
 augmented mass M̂ = M + s AᵀA, Q̂ = Q + s Aᵀγ (s = trace(M)/n) is used (Udwadia & Phohomsiri
@@ -22,6 +25,7 @@ from dataclasses import dataclass
 from typing import Callable, ClassVar
 
 import numpy as np
+import scipy.linalg
 
 from cmbs.dynamics.base import Accelerations, StatelessSolver
 from cmbs.dynamics.projection import pseudo_inverse, reference_row_scale
@@ -40,22 +44,15 @@ class UdwadiaKalaba:
         return UdwadiaKalabaSolver(model, self)
 
 
-def _symmetric_roots(M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(M^{1/2}, M^{-1/2}) of a symmetric positive-definite matrix."""
-    values, vectors = np.linalg.eigh(M)
-    root = np.sqrt(values)
-    return (vectors * root) @ vectors.T, (vectors / root) @ vectors.T
-
-
 class UdwadiaKalabaSolver(StatelessSolver):
     def __init__(self, model: Model, parameters: UdwadiaKalaba):
         super().__init__(model)
         self.p = parameters
         M0 = model.mass_matrix(model.q0)
         self.scale = float(np.trace(M0)) / model.n
-        self.mass_scale = np.sqrt(self.scale)  # B = A M^{-1/2}: rows of A scaled by about 1/√m
+        self.mass_scale = np.sqrt(self.scale)  # B = A L⁻ᵀ: rows of A scaled by about 1/√m
         self.semi_definite = bool(np.linalg.eigvalsh(M0)[0] <= 1e-12 * max(np.abs(M0).max(), 1.0))
-        self._constant_roots = _symmetric_roots(M0) if model.constant_mass and not self.semi_definite else None
+        self._constant_factor = np.linalg.cholesky(M0) if model.constant_mass and not self.semi_definite else None
         self.row_scale = reference_row_scale(model)
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
@@ -63,19 +60,19 @@ class UdwadiaKalabaSolver(StatelessSolver):
         if self.semi_definite:
             M = terms.M + self.scale * (A.T @ A)
             Q = terms.Q + self.scale * (A.T @ gamma)
-            root, inverse_root = _symmetric_roots(M)
+            L = np.linalg.cholesky(M)
         else:
-            M, Q = terms.M, terms.Q
-            root, inverse_root = self._constant_roots or _symmetric_roots(M)
-        a = inverse_root @ (inverse_root @ Q)
-        B = A @ inverse_root
+            Q = terms.Q
+            L = self._constant_factor if self._constant_factor is not None else np.linalg.cholesky(terms.M)
+        a = scipy.linalg.cho_solve((L, True), Q, check_finite=False)
+        B = scipy.linalg.solve_triangular(L, A.T, lower=True, check_finite=False).T  # A L⁻ᵀ
         B_pinv, null_projector = pseudo_inverse(B, self.p.threshold, self.row_scale * self.mass_scale)
-        ideal = B_pinv @ (gamma - A @ a)
-        scaled_force = ideal
+        scaled_force = B_pinv @ (gamma - A @ a)
         if self.p.nonideal is not None:
             c = np.asarray(self.p.nonideal(t, q, qd), dtype=float)
-            scaled_force = ideal + null_projector @ (inverse_root @ c)
-        qdd = a + inverse_root @ scaled_force
+            scaled_force = scaled_force + null_projector @ scipy.linalg.solve_triangular(L, c, lower=True,
+                                                                                          check_finite=False)
+        qdd = a + scipy.linalg.solve_triangular(L, scaled_force, lower=True, trans="T", check_finite=False)
         force = terms.M @ qdd - terms.Q  # = Q_c of the original system (ideal + non-ideal)
         A_pinv, _ = pseudo_inverse(A, self.p.threshold, self.row_scale)
         lam = -A_pinv.T @ force

@@ -1,0 +1,245 @@
+"""Animations of a model moving along a :class:`~cmbs.trajectory.Trajectory` (a leaf, like plotting).
+
+    animate(cmbs.load("four-bar"), motion, "four-bar.gif")   # 640 x 480 px, 30 frames per s
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.animation as animation  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from PIL import Image  # noqa: E402  (a dependency of matplotlib)
+
+from cmbs.errors import CmbsError  # noqa: E402
+from cmbs.files_io import atomic_path, checked_output  # noqa: E402
+from cmbs.model.model import Model  # noqa: E402
+from cmbs.trajectory import Trajectory  # noqa: E402
+
+#: Most frames an animation gets; longer motions are shown with a lower frame rate.
+MAX_FRAMES = 600
+#: Figure size in inches; the frames are ``int(FIGURE_SIZE * dpi)`` pixels.
+FIGURE_SIZE = (6.4, 4.8)
+
+
+def frame_times(trajectory: Trajectory, *, fps: float = 30, speed: float = 1.0) -> tuple[np.ndarray, float]:
+    """The simulated times of the frames and the frame rate they are played at.
+
+    ``count = min(MAX_FRAMES, round(fps * duration / speed) + 1)`` frames, evenly spaced from
+    the first to the last time of the trajectory (both included; ``duration`` is their
+    difference).  When the cap applies, the returned frame rate is lowered to
+    ``(count - 1) * speed / duration`` so that the playback still lasts ``duration / speed``.
+    """
+    _check_positive(fps=fps, speed=speed)
+    t = np.asarray(trajectory.t, dtype=float)
+    if t.size == 0:
+        raise CmbsError("cannot animate an empty trajectory (no samples)")
+    duration = float(t[-1] - t[0])
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0):
+        raise CmbsError("cannot animate a trajectory whose times are not finite and increasing")
+    if duration == 0:
+        return t[:1].copy(), float(fps)
+    wanted = int(round(fps * duration / speed)) + 1
+    count = min(MAX_FRAMES, wanted)
+    rate = float(fps) if count == wanted else (count - 1) * speed / duration
+    return np.linspace(t[0], t[-1], count), rate
+
+
+def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fps: float = 30,
+            speed: float = 1.0, trail: str | None = None, dpi: float = 100) -> Path:
+    """Draw ``model`` moving along ``trajectory`` into a ``.gif`` or ``.mp4`` file; returns its path.
+
+    Each frame shows the model's segments (``model.lines`` between ``model.point_positions``),
+    its points, the label ``t = 1.23 s`` (more decimals when frames are closer than 0.02 s
+    apart, so that every frame's label differs) and, with ``trail`` (a name from
+    ``model.point_names``), the path that point has traced so far.  The axis limits are fixed
+    and cover every frame, with equal scales on x and z.
+
+    Frames
+        The coordinates are interpolated linearly between the trajectory's samples to the
+        frame times of :func:`frame_times`: ``min(MAX_FRAMES, round(fps * duration / speed) + 1)``
+        frames (MAX_FRAMES = 600), the first at the first sample and the last at the last.
+        ``speed`` > 1 plays faster than real time.  Motions that would need more than 600
+        frames are played at a lower frame rate instead (same playback length), so a long run
+        still takes seconds to write.  A 5-s motion at 30 fps gives 151 frames.
+        The coordinates are taken as continuous in time (angles not wrapped to ±π).
+    Size
+        ``int(6.4 * dpi)`` x ``int(4.8 * dpi)`` pixels, rounded down (640 x 480 at the default
+        dpi 100); an mp4 is padded by a pixel to even sizes where needed.  A GIF's frames are
+        held in memory until written: about width x height bytes each (600 frames of 640 x 480:
+        185 MB).  Writing takes about 10 ms per frame at the default size.
+    Formats (by extension)
+        ``.gif``: always available (matplotlib's PillowWriter).  GIF stores frame delays in
+        hundredths of a second, so the frame rate is approximate, and viewers play rates above
+        50 fps slower.  ``.mp4``: needs ffmpeg (``matplotlib.animation.writers.is_available
+        ("ffmpeg")``); without it a :class:`CmbsError` suggests ``.gif``.  Anything else is a
+        :class:`CmbsError`.
+    Files
+        Written atomically: to a temporary file in the destination folder, renamed on success,
+        so a failed write leaves neither a partial file nor a changed old one.
+
+    Raises
+    ------
+    CmbsError
+        Bad extension, missing folder, mp4 without ffmpeg, non-positive ``fps``/``speed``/
+        ``dpi``, unknown ``trail`` point, a trajectory of another model or with non-finite
+        coordinates, or a failed write.
+    """
+    path = checked_output(path, (".gif", ".mp4"), "animation")
+    _check_positive(fps=fps, speed=speed, dpi=dpi)
+    mp4 = path.suffix.lower() == ".mp4"
+    if mp4 and not animation.writers.is_available("ffmpeg"):
+        raise CmbsError(f"{path}: writing .mp4 needs ffmpeg, which was not found; "
+                        "install ffmpeg or write a .gif instead (always available)")
+    q = _coordinates_of(model, trajectory)
+    trail_index = None
+    if trail is not None:
+        if trail not in model.point_names:
+            raise CmbsError(f"no point {trail!r} to trail in model {model.name!r}; points: "
+                            f"{', '.join(model.point_names) or 'none'}")
+        trail_index = model.point_names.index(trail)
+
+    times, rate = frame_times(trajectory, fps=fps, speed=speed)
+    sample_times = np.asarray(trajectory.t, dtype=float)
+    frames_q = np.column_stack([np.interp(times, sample_times, q[:, k]) for k in range(q.shape[1])]) \
+        if q.shape[1] else np.zeros((times.size, 0))
+    points = np.array([np.asarray(model.point_positions(row), dtype=float).reshape(-1, 2) for row in frames_q])
+    if not np.all(np.isfinite(points)):
+        raise CmbsError(f"cannot animate model {model.name!r}: non-finite point positions along the trajectory")
+    spacing = float(times[1] - times[0]) if times.size > 1 else 1.0
+    decimals = max(2, math.ceil(math.log10(2.0 / spacing))) if spacing > 0 else 2
+
+    figure = plt.figure(figsize=FIGURE_SIZE, dpi=dpi)
+    try:
+        axis = figure.add_axes((0.1, 0.1, 0.85, 0.8))
+        _fixed_limits(axis, figure, points)
+        axis.set_xlabel("x")
+        axis.set_ylabel("z")
+        axis.grid(alpha=0.3)
+        axis.set_title(model.name + (f" (trail of {trail})" if trail_index is not None else ""))
+        trail_line = axis.plot([], [], "-", color="C1", linewidth=1.2)[0] if trail_index is not None else None
+        segments = [axis.plot([], [], "-", color="C0", linewidth=2.5, solid_capstyle="round")[0]
+                    for _ in model.lines]
+        dots = axis.plot([], [], "o", color="k", markersize=4, zorder=3)[0]
+        label = axis.text(0.02, 0.96, "", transform=axis.transAxes, va="top", family="monospace")
+
+        moving = [artist for artist in (trail_line, *segments, dots, label) if artist is not None]
+
+        def pose(frame: int) -> None:
+            here = points[frame]
+            for line, (i, j) in zip(segments, model.lines):
+                line.set_data(here[[i, j], 0], here[[i, j], 1])
+            dots.set_data(here[:, 0], here[:, 1])
+            if trail_line is not None:
+                trail_line.set_data(points[:frame + 1, trail_index, 0], points[:frame + 1, trail_index, 1])
+            label.set_text(f"t = {times[frame]:.{decimals}f} s")
+
+        # Blitting: the axes, ticks and grid are drawn once; each frame redraws only the moving
+        # artists over that background and hands the canvas to the writer (no savefig per frame).
+        for artist in moving:
+            artist.set_animated(True)
+        figure.canvas.draw()
+        background = figure.canvas.copy_from_bbox(figure.bbox)
+
+        def draw(frame: int) -> None:
+            pose(frame)
+            figure.canvas.restore_region(background)
+            for artist in moving:
+                axis.draw_artist(artist)
+
+        if mp4:
+            # yuv420p (set by matplotlib for h264) needs even sizes: pad odd ones by a pixel
+            writer = _BlitFFMpegWriter(fps=rate, extra_args=["-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2"])
+        else:
+            writer = _BlitPillowWriter(fps=rate)
+            draw(times.size - 1)  # every colour appears in the last frame (full trail)
+            writer.choose_palette(figure)
+        with atomic_path(path) as temporary:
+            with writer.saving(figure, temporary, dpi):
+                for frame in range(times.size):
+                    draw(frame)
+                    writer.grab_canvas()
+    except (OSError, subprocess.CalledProcessError) as error:
+        raise CmbsError(f"{path}: writing the animation failed ({error})") from None
+    finally:
+        plt.close(figure)
+    return path
+
+
+class _BlitPillowWriter(animation.PillowWriter):
+    """matplotlib's PillowWriter, fed from the figure's canvas as it stands (after blitting)
+    instead of a full ``savefig`` per frame.  Frames are kept as palette images (what a GIF
+    stores anyway; a third of the memory of RGB) sharing one 256-colour palette taken from a
+    reference frame, which is quicker than quantizing every frame and keeps colours steady."""
+
+    palette: Image.Image | None = None
+
+    @staticmethod
+    def _canvas_image(figure: plt.Figure) -> Image.Image:
+        canvas = figure.canvas
+        width, height = canvas.get_width_height()
+        return Image.frombuffer("RGBA", (width, height), bytes(canvas.buffer_rgba()), "raw", "RGBA", 0, 1) \
+            .convert("RGB")
+
+    def choose_palette(self, figure: plt.Figure) -> None:
+        """Take the palette from the figure's canvas as it stands now."""
+        self.palette = self._canvas_image(figure).quantize(256, method=Image.Quantize.FASTOCTREE)
+
+    def grab_canvas(self) -> None:
+        image = self._canvas_image(self.fig)
+        self._frames.append(image.quantize(palette=self.palette, dither=Image.Dither.NONE) if self.palette
+                            else image.quantize(256, method=Image.Quantize.FASTOCTREE))
+
+
+class _BlitFFMpegWriter(animation.FFMpegWriter):
+    """matplotlib's FFMpegWriter, fed the figure's canvas pixels (RGBA) as they stand after
+    blitting instead of a full ``savefig`` per frame."""
+
+    def grab_canvas(self) -> None:
+        canvas = self.fig.canvas
+        if canvas.get_width_height() != self.frame_size:
+            raise CmbsError(f"canvas size {canvas.get_width_height()} differs from the video's {self.frame_size}")
+        self._proc.stdin.write(bytes(canvas.buffer_rgba()))
+
+
+def _coordinates_of(model: Model, trajectory: Trajectory) -> np.ndarray:
+    """The trajectory's q with columns in the model's coordinate order."""
+    if set(trajectory.names) != set(model.coordinate_names) or len(trajectory.names) != model.n:
+        raise CmbsError(f"the trajectory's coordinates ({', '.join(trajectory.names)}) are not those of model "
+                        f"{model.name!r} ({', '.join(model.coordinate_names)})")
+    q = np.asarray(trajectory.q, dtype=float)[:, [trajectory.names.index(name) for name in model.coordinate_names]]
+    if not np.all(np.isfinite(q)):
+        raise CmbsError("cannot animate a trajectory with non-finite coordinates")
+    return q
+
+
+def _fixed_limits(axis: plt.Axes, figure: plt.Figure, points: np.ndarray) -> None:
+    """Limits covering every frame's points with a margin, widened to the axes' shape so that
+    x and z have the same scale."""
+    low, high = points.reshape(-1, 2).min(axis=0), points.reshape(-1, 2).max(axis=0)
+    size = float(max(high - low))
+    margin = 0.08 * size if size > 0 else 0.5 * max(1.0, float(np.max(np.abs(low))))
+    low, high = low - margin, high + margin
+    width, height = axis.get_position().width * figure.get_figwidth(), axis.get_position().height * figure.get_figheight()
+    center, span = (low + high) / 2, high - low
+    if span[0] / span[1] < width / height:
+        span[0] = span[1] * width / height
+    else:
+        span[1] = span[0] * height / width
+    axis.set_xlim(center[0] - span[0] / 2, center[0] + span[0] / 2)
+    axis.set_ylim(center[1] - span[1] / 2, center[1] + span[1] / 2)
+    axis.set_aspect("equal", adjustable="datalim")
+    axis.set_autoscale_on(False)
+
+
+def _check_positive(**values: float) -> None:
+    for name, value in values.items():
+        if not (isinstance(value, (int, float, np.integer, np.floating)) and math.isfinite(value) and value > 0):
+            raise CmbsError(f"{name} must be a positive number, got {value!r}")
