@@ -98,7 +98,7 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
              dt: float = 0.01, rtol: float = 1e-6, atol: float = 1e-9, q0: np.ndarray | None = None,
              qd0: np.ndarray | None = None, u: Inputs | np.ndarray | None = None, project: bool = False,
              projection_tolerance: float = 1e-10, formulation_options: Mapping[str, object] | None = None,
-             newton_tolerance: float = 1e-10, progress: bool = False) -> Trajectory:
+             newton_tolerance: float = 1e-10, compiled: bool | None = None, progress: bool = False) -> Trajectory:
     """Forward dynamics of ``model`` from t = 0 to ``t_end``.
 
     Parameters
@@ -120,6 +120,10 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
         Coordinate and velocity projection after every step (explicit integrators).
     newton_tolerance
         Convergence of the implicit integrators' Newton iterations.
+    compiled
+        Run the whole loop compiled (:mod:`cmbs.fast`): None chooses it when the run allows it
+        (rk4; lagrange, baumgarte or standard projection; constant inputs; no projection; no
+        Python time functions), True requires it, False keeps the Python loop.
 
     Returns
     -------
@@ -160,6 +164,15 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
     steps = int(round(t_end / dt))
     times = np.linspace(0.0, steps * dt, steps + 1) if abs(steps * dt - t_end) < 1e-9 * t_end else \
         np.append(np.arange(0.0, t_end, dt), t_end)
+    fast_plan = _compiled_plan(model, chosen, integrator, u, project)
+    if compiled and fast_plan is None:
+        raise CmbsError(f"the compiled loop cannot run this simulation (it needs integrator rk4, formulation lagrange, "
+                        "baumgarte or projection with the standard inertia, constant inputs, no --project and no "
+                        f"Python time functions; model {model.name!r})")
+    if fast_plan is not None and compiled is not False:
+        return _run_compiled(model, solver, chosen, fast_plan, inputs(0.0, q_start, qd_start), q_start, qd_start,
+                             t_end, dt, started, {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol,
+                                                  "project": project})
     bar = _Progress(t_end, progress)
     try:
         if integrator in EXPLICIT:
@@ -312,8 +325,8 @@ def _record(model: Model, solver, inputs: Inputs, result: Integration, chosen: F
     k = result.t.size
     q, qd = result.y[:, :n], result.y[:, n:]
     qdd = np.zeros((k, n))
-    lam, force, u = np.zeros((k, m)), np.zeros((k, n)), np.zeros((k, model.n_u))
-    energy, position_error, velocity_error = np.zeros(k), np.zeros(k), np.zeros(k)
+    lam, u = np.zeros((k, m)), np.zeros((k, model.n_u))
+    position_error, velocity_error = np.zeros(k), np.zeros(k)
     terms = model.new_terms()
     unsolved = 0
     for i, t in enumerate(result.t):
@@ -328,18 +341,86 @@ def _record(model: Model, solver, inputs: Inputs, result: Integration, chosen: F
         if accelerations is None:  # the integrator's own accelerations; λ by least squares
             qdd[i] = result.dy[i, n:]
             lam[i] = np.linalg.lstsq(terms.A.T, terms.Q - terms.M @ qdd[i], rcond=None)[0] if m else lam[i]
-            force[i] = -terms.A.T @ lam[i]
         else:
-            qdd[i], lam[i], force[i] = accelerations.qdd, accelerations.lam, accelerations.constraint_force
-        energy[i] = model.energy(q[i], qd[i])
+            qdd[i], lam[i] = accelerations.qdd, accelerations.lam
         position_error[i] = np.max(np.abs(terms.phi), initial=0.0)
         velocity_error[i] = np.max(np.abs(terms.A @ qd[i] + terms.phi_t), initial=0.0)
-    parameters = {key: value for key, value in vars(chosen).items() if not callable(value)} if chosen else {}
-    info = {"model": model.name, "formulation": chosen.name if chosen else "index-3 lagrange",
-            "formulation_options": parameters, **options,
-            "status": result.status, "message": result.message, **result.counters}
+    info = _info(model, chosen, options, result.status, result.message, result.counters)
     if unsolved:
         info["outputs_from_integrator"] = unsolved
-    return Trajectory(result.t, q, qd, qdd, model.coordinate_names,
+    return _trajectory(model, result.t, q, qd, qdd, lam, u, position_error, velocity_error, info)
+
+
+def _info(model: Model, chosen: Formulation | None, options: dict, status: str, message: str, counters: dict) -> dict:
+    parameters = {key: value for key, value in vars(chosen).items() if not callable(value)} if chosen else {}
+    return {"model": model.name, "formulation": chosen.name if chosen else "index-3 lagrange",
+            "formulation_options": parameters, **options, "status": status, "message": message, **counters}
+
+
+def _trajectory(model: Model, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, lam: np.ndarray,
+                u: np.ndarray, position_error: np.ndarray, velocity_error: np.ndarray, info: dict) -> Trajectory:
+    """The result, with the constraint forces -Aᵀλ and the energy evaluated at each output."""
+    force = np.zeros_like(q)
+    energy = np.zeros(t.size)
+    for i in range(t.size):
+        force[i] = -model.jacobian(q[i], t[i]).T @ lam[i] if model.m else 0.0
+        energy[i] = model.energy(q[i], qd[i])
+    return Trajectory(t, q, qd, qdd, model.coordinate_names,
                       {"lam": lam, "constraint_force": force, "u": u, "energy": energy,
                        "constraint_error": position_error, "velocity_constraint_error": velocity_error}, info)
+
+
+def _compiled_plan(model: Model, chosen: Formulation, integrator: str, u: object, project: bool) -> tuple | None:
+    """(kernel kind, method, parameters) when :mod:`cmbs.fast` can run the simulation, else None."""
+    from cmbs import fast
+    from cmbs.dynamics import Baumgarte, Lagrange, Projection
+
+    kind = fast.supported(model)
+    if integrator != "rk4" or project or callable(u) or kind is None:
+        return None
+    if isinstance(chosen, (Lagrange, Baumgarte)) and not chosen.least_squares:
+        method = fast.BAUMGARTE if isinstance(chosen, Baumgarte) else fast.LAGRANGE
+        xi, omega = (chosen.xi, chosen.omega) if isinstance(chosen, Baumgarte) else (0.0, 0.0)
+        return kind, method, np.array([xi, omega, chosen.singular_tolerance, 0.0, 0.0])
+    if isinstance(chosen, Projection) and chosen.inertia == "standard":
+        return kind, fast.PROJECTION, np.array([0.0, 0.0, chosen.threshold, 0.0, 0.0])
+    return None
+
+
+def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, u: np.ndarray, q0: np.ndarray,
+                  qd0: np.ndarray, t_end: float, dt: float, started: float, options: dict) -> Trajectory:
+    """The whole RK4 loop in :func:`cmbs.fast.rk4`; outputs at every step (dt is the step)."""
+    from cmbs import fast
+
+    kind, method, parameters = plan
+    steps = int(round(t_end / dt))
+    if abs(steps * dt - t_end) > 1e-9 * t_end:
+        raise CmbsError(f"the compiled rk4 loop needs t_end to be a multiple of dt (t_end={t_end:g}, dt={dt:g})")
+    if method == fast.PROJECTION:
+        parameters[3] = solver.scale
+        parameters[4] = 1.0 if solver.semi_definite else 0.0
+    terms = model.new_terms()
+    equations = model.equations
+    ints, reals = (equations.ints, equations.reals) if kind == fast.KIND_NATURAL else (equations.ip, equations.rp)
+    mass = np.ascontiguousarray(terms.M) if kind == fast.KIND_NATURAL else np.zeros((model.n, model.n))
+    loop_started = time.perf_counter()
+    T, Q, QD, QDD, LAM, PHI, PHID, recorded, status, t_fail, q_fail, qd_fail = fast.rk4(
+        kind, method, parameters, np.array(q0), np.array(qd0), dt, steps, 1, np.asarray(u, dtype=float), ints, reals,
+        terms.buffer.size, mass, np.ascontiguousarray(solver.row_scale), model.m)
+    loop_wall = time.perf_counter() - loop_started
+    message = ""
+    if status != fast.OK:  # let the Python solver explain the failure at the state where it happened
+        try:
+            model.evaluate(q_fail, qd_fail, t_fail, u, out=terms)
+            solver.accelerations(terms, q_fail, qd_fail, t_fail)
+            message = f"non-finite accelerations at t={t_fail:.6g}"
+        except CmbsError as error:
+            message = str(error)
+    info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall}, "success" if status ==
+                 fast.OK else "failed", message, {"steps": steps if status == fast.OK else recorded,
+                                                  "evaluations": 4 * steps})
+    k = recorded
+    trajectory = _trajectory(model, T[:k], Q[:k], QD[:k], QDD[:k], LAM[:k], np.tile(u, (k, 1)), PHI[:k], PHID[:k],
+                             info)
+    info["wall_time"] = time.perf_counter() - started
+    return trajectory

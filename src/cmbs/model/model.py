@@ -208,7 +208,8 @@ class Model:
         keep = np.flatnonzero(~self.drivers)
         return self.replace(name=f"{self.name}-undriven", constraint_names=tuple(self.constraint_names[k] for k in keep),
                             drivers=np.zeros(keep.size, dtype=bool), nonholonomic=self.nonholonomic[keep],
-                            equations=_RowSubset(self.equations, keep))
+                            equations=self.equations.without_drivers() if hasattr(self.equations, "without_drivers")
+                            and np.array_equal(keep, np.arange(keep.size)) else _RowSubset(self.equations, keep))
 
     def replace(self, **changes: object) -> "Model":
         """A copy with some fields changed (the model itself is never mutated)."""

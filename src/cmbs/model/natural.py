@@ -31,6 +31,7 @@ c = I_i/L² (thesis eq. 3.30)::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Sequence
@@ -591,6 +592,17 @@ class NaturalEquations:
 
     def new_terms(self) -> Terms:
         return Terms(self.n, self.m, constant_mass=self.mass, scratch=self._scratch_size)
+
+    def without_drivers(self) -> "NaturalEquations":
+        """The same equations with the driver rows (the last section of constraints) removed."""
+        ints, reals = self.ints, self.reals
+        int_sections = [ints[ints[1 + k]:ints[2 + k]] for k in range(int(ints[0]))]
+        base = int(ints[0]) + 2
+        real_sections = [reals[ints[base + 1 + k]:ints[base + 2 + k]] for k in range(int(ints[base]))]
+        drivers = int_sections[_DRIVER].size // 2
+        int_sections[_DRIVER] = np.zeros(0, dtype=np.int64)
+        new_ints, new_reals = pack(int_sections, real_sections)
+        return dataclasses.replace(self, m=self.m - drivers, ints=new_ints, reals=new_reals)
 
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
         for k, function in self.time_functions.python:
