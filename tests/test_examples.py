@@ -8,7 +8,7 @@ import pytest
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 SHORT = {"baumgarte_drift.py": ["--t-end", "2"], "slider_crank_singular.py": ["--t-end", "1.5"],
-         "compare_formulations.py": ["--t-end", "0.5"]}
+         "compare_formulations.py": ["--t-end", "0.5"], "four_bar_inverse_dynamics.py": ["--t-end", "1"]}
 
 
 def test_every_example_is_listed():

@@ -16,6 +16,7 @@ from pathlib import Path
 from cmbs.dynamics import (Baumgarte, Lagrange, MatrixR, Penalty, Projection, UdwadiaKalaba, formulation)
 from cmbs.errors import CmbsError, ConvergenceError, ExpressionError, ModelError, SingularSystemError
 from cmbs.inputs import SampledInput
+from cmbs.inverse import InverseDynamics, inverse_dynamics
 from cmbs.kinematics import (ConstraintReport, accelerations, assemble, constraint_report, kinematic_analysis,
                              singular_configurations, velocities)
 from cmbs.model.drivers import Constant, Expression, PythonFunction, Table
@@ -52,5 +53,6 @@ __all__ = [
     "ConstraintReport", "accelerations", "assemble", "constraint_report", "kinematic_analysis",
     "singular_configurations", "velocities", "Constant", "Expression", "PythonFunction", "Table",
     "Model", "Terms", "NaturalModelBuilder", "Trajectory", "load", "simulate", "SampledInput", "formulation",
-    "Lagrange", "Baumgarte", "Penalty", "MatrixR", "Projection", "UdwadiaKalaba",
+    "Lagrange", "Baumgarte", "Penalty", "MatrixR", "Projection", "UdwadiaKalaba", "InverseDynamics",
+    "inverse_dynamics",
 ]

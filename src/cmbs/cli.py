@@ -181,6 +181,32 @@ def _compare(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
+def _inverse(args: argparse.Namespace) -> int:
+    from cmbs.inverse import inverse_dynamics
+
+    if args.t_end <= 0 or args.dt <= 0:
+        raise _UsageError(f"--t-end and --dt must be > 0, got {args.t_end} and {args.dt}")
+    for path, suffixes, option in ((args.out, (".npz", ".csv"), "--out"), (args.plot, (".png", ".pdf", ".svg"),
+                                                                           "--plot")):
+        if path:
+            _check_output(path, suffixes, option)
+    model = _load(args)
+    times = np.linspace(0.0, args.t_end, int(round(args.t_end / args.dt)) + 1)
+    result = inverse_dynamics(model, times, method=args.method, **_formulation_options(args))
+    print(f"{model.name}: inverse dynamics ({args.method}) over {len(times)} instants")
+    for name in result.driven_coordinates:
+        force = result.force(name)
+        print(f"  force on {name:<14} min {force.min(): .6g}  max {force.max(): .6g}  "
+              f"RMS {np.sqrt(np.mean(force**2)):.6g}")
+    if args.out:
+        print(f"  result -> {result.motion.save(args.out)}")
+    if args.plot:
+        from cmbs.plotting import plot_driver_forces, save_figure
+
+        print(f"  figure -> {save_figure(plot_driver_forces(result.motion, result.driven_coordinates), args.plot)}")
+    return 0
+
+
 def _check_output(path: str, suffixes: tuple[str, ...], option: str) -> None:
     """Check an output path before any work is done, so that a bad --plot cannot fail after the
     result file has already been written."""
@@ -235,6 +261,17 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--plot", help="figure: coordinates, energy, constraint error (.png, .pdf, .svg)")
     simulate.add_argument("--animate", help="animation of the mechanism (.gif; .mp4 with ffmpeg)")
     simulate.set_defaults(run=_simulate)
+
+    inverse = model_command("inverse", "inverse dynamics: the forces on the driven coordinates of a driven model")
+    inverse.add_argument("--t-end", type=float, required=True, help="final time [s]")
+    inverse.add_argument("--dt", type=float, required=True, help="time step of the output grid [s]")
+    inverse.add_argument("--method", default="lagrange", choices=("lagrange", "baumgarte", "penalty", "matrix-r"),
+                         help="driver multipliers of a formulation, or matrix-R Q_IDA")
+    inverse.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                         help="option of the method's formulation, e.g. alpha=1e8 for penalty")
+    inverse.add_argument("--out", help="result file (.npz or .csv) with the motion and driver_forces")
+    inverse.add_argument("--plot", help="figure of the forces and the motion")
+    inverse.set_defaults(run=_inverse)
 
     compare = model_command("compare", "run several formulations on the same model and tabulate them")
     compare.add_argument("--formulations", required=True, help="comma-separated names, the first is the reference")

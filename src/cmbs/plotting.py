@@ -201,3 +201,20 @@ def save_figure(figure: plt.Figure, path: str | os.PathLike) -> Path:
     finally:
         plt.close(figure)
     return path
+
+
+def plot_driver_forces(trajectory: Trajectory, driven: Sequence[str]) -> plt.Figure:
+    """Inverse dynamics: the generalized force on each driven coordinate against time, and the
+    prescribed coordinates themselves."""
+    forces = np.asarray(trajectory.extras["driver_forces"])
+    figure, (top, bottom) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, constrained_layout=True)
+    for k, name in enumerate(driven):
+        top.plot(trajectory.t, forces[:, k], label=f"on {name}")
+        bottom.plot(trajectory.t, trajectory[name], label=name)
+    top.set(title="driving forces / torques (inverse dynamics)", ylabel="N or N m")
+    bottom.set(title="prescribed motion", xlabel="t [s]")
+    for axis in (top, bottom):
+        axis.grid(alpha=0.3)
+        axis.legend(fontsize="small")
+    figure.suptitle(f"{trajectory.info.get('model', '')} ({trajectory.info.get('method', '')})")
+    return figure
