@@ -17,6 +17,7 @@ kernels read; :func:`evaluate_time_functions` fills an ``(k, 3)`` array of value
 
 from __future__ import annotations
 
+import abc
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -30,11 +31,12 @@ from cmbs.model.expressions import Program, evaluate_program, parse_expression
 KIND_EXPRESSION, KIND_PIECEWISE, KIND_PYTHON = 0, 1, 2
 
 
-class TimeFunction:
+class TimeFunction(abc.ABC):
     """Interface: ``f(t) -> (value, first derivative, second derivative)``."""
 
-    def __call__(self, t: float) -> tuple[float, float, float]:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abc.abstractmethod
+    def __call__(self, t: float) -> tuple[float, float, float]:
+        """Value and first two derivatives at ``t``."""
 
 
 @dataclass(frozen=True)
