@@ -362,8 +362,11 @@ def _trajectory(model: Model, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd:
     """The result, with the constraint forces -Aᵀλ and the energy evaluated at each output."""
     force = np.zeros_like(q)
     energy = np.zeros(t.size)
+    terms = model.new_terms()
     for i in range(t.size):
-        force[i] = -model.jacobian(q[i], t[i]).T @ lam[i] if model.m else 0.0
+        if model.m:
+            model.evaluate(q[i], qd[i], t[i], u[i], out=terms)
+            force[i] = -terms.A.T @ lam[i]
         energy[i] = model.energy(q[i], qd[i])
     return Trajectory(t, q, qd, qdd, model.coordinate_names,
                       {"lam": lam, "constraint_force": force, "u": u, "energy": energy,
