@@ -249,3 +249,12 @@ def test_udwadia_kalaba_equals_the_symmetric_square_root_form():
         + inverse_root @ (np.eye(model.n) - B_pinv @ B) @ inverse_root @ c
     solution = UdwadiaKalaba(nonideal=lambda t, q, qd: c).bind(model).accelerations(terms, q, qd, 0.0)
     np.testing.assert_allclose(solution.qdd, expected, atol=1e-12)
+
+
+def test_a_singular_linear_system_ends_the_run_with_a_message():
+    """The penalty matrix M + αAᵀA loses definiteness when the slider-crank (with gravity) reaches
+    its singular position: the run stops with a failed status and a message, no traceback."""
+    model = cmbs.load("slider-crank", gravity=9.81)
+    run = simulate(model, t_end=10.0, integrator="rk4", dt=1e-3, formulation="penalty")
+    assert run.info["status"] == "failed" and 0 < run.t[-1] < 10.0
+    assert "linear system is singular" in run.info["message"]

@@ -20,10 +20,11 @@ import time
 from typing import Callable, Mapping
 
 import numpy as np
+import scipy.linalg
 
 from cmbs.dynamics import Formulation, formulation as make_formulation
 from cmbs.dynamics.projection import pseudo_inverse
-from cmbs.errors import CmbsError
+from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.integrate.explicit import Integration, integrate as integrate_explicit
 from cmbs.integrate.implicit import BACKWARD_EULER, TRAPEZOIDAL, Scheme, generalized_alpha, integrate_index3
 from cmbs.integrate.tableaus import TABLEAUS
@@ -186,10 +187,12 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
                                  bar)
     finally:
         bar.close()
-    wall = time.perf_counter() - started
-    return _record(model, solver, inputs, result, chosen if integrator in EXPLICIT or integrator == "trapezoidal"
-                   else None, {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol, "project": project,
-                               "wall_time": wall})
+    loop_wall = time.perf_counter() - started
+    trajectory = _record(model, solver, inputs, result, chosen if integrator in EXPLICIT or integrator == "trapezoidal"
+                         else None, {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol,
+                                     "project": project, "loop_wall_time": loop_wall})
+    trajectory.info["wall_time"] = time.perf_counter() - started
+    return trajectory
 
 
 def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, times: np.ndarray,
@@ -201,7 +204,7 @@ def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.
     def field(t: float, y: np.ndarray) -> np.ndarray:
         q, qd = y[:n], y[n:]
         model.evaluate(q, qd, t, inputs(t, q, qd), out=terms)
-        return np.concatenate([qd, solver.accelerations(terms, q, qd, t).qdd])
+        return np.concatenate([qd, _solve(solver, model, terms, q, qd, t).qdd])
 
     def after_step(t: float, y: np.ndarray) -> np.ndarray:
         q, qd = solver.after_step(y[:n], y[n:], t)
@@ -214,6 +217,16 @@ def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.
                               step=dt if tableau.b_error is None else None,
                               after_step=after_step if project or solver.adjusts_state else None, progress=bar,
                               stop_on=(CmbsError,))
+
+
+def _solve(solver, model: Model, terms, q: np.ndarray, qd: np.ndarray, t: float):
+    """The formulation's accelerations; a singular linear system becomes a SingularSystemError
+    (so that the run ends with a failed status and the message, not a traceback)."""
+    try:
+        return solver.accelerations(terms, q, qd, t)
+    except (np.linalg.LinAlgError, scipy.linalg.LinAlgError) as error:
+        raise SingularSystemError(f"model {model.name!r} at t={t:.6g}: the formulation's linear system is singular "
+                                  f"({error}); try formulation 'projection' or 'udwadia-kalaba'") from None
 
 
 def _force_derivatives(model: Model, inputs: Inputs, q: np.ndarray, qd: np.ndarray, t: float,
@@ -335,7 +348,7 @@ def _record(model: Model, solver, inputs: Inputs, result: Integration, chosen: F
         accelerations = None
         if chosen is not None:
             try:
-                accelerations = solver.accelerations(terms, q[i], qd[i], t)
+                accelerations = _solve(solver, model, terms, q[i], qd[i], t)
             except CmbsError:  # e.g. an output instant closer to a singular position than any step
                 unsolved += 1
         if accelerations is None:  # the integrator's own accelerations; λ by least squares
@@ -421,7 +434,7 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, u: np.
             message = str(error)
     info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall}, "success" if status ==
                  fast.OK else "failed", message, {"steps": steps if status == fast.OK else recorded,
-                                                  "evaluations": 4 * steps})
+                                                  "evaluations": 4 * (steps if status == fast.OK else recorded)})
     k = recorded
     trajectory = _trajectory(model, T[:k], Q[:k], QD[:k], QDD[:k], LAM[:k], np.tile(u, (k, 1)), PHI[:k], PHID[:k],
                              info)
