@@ -258,3 +258,23 @@ def test_a_singular_linear_system_ends_the_run_with_a_message():
     run = simulate(model, t_end=10.0, integrator="rk4", dt=1e-3, formulation="penalty")
     assert run.info["status"] == "failed" and 0 < run.t[-1] < 10.0
     assert "linear system is singular" in run.info["message"]
+
+
+@pytest.mark.parametrize("name, options, problem", [
+    ("projection", {"threshold": "abc"}, "threshold must be a number >= 0, got 'abc'"),
+    ("penalty", {"alpha": -5}, "alpha must be a number > 0"),
+    ("penalty", {"iterations": 2.5}, "iterations must be an integer >= 0"),
+    ("matrix-r", {"condition_growth": 1}, "condition_growth must be a number > 1"),
+    ("baumgarte", {"omega": float("nan")}, "omega must be a number >= 0"),
+    ("projection", {"mu": 0}, "mu must be a number > 0"),
+])
+def test_formulation_options_are_checked(name, options, problem):
+    with pytest.raises(CmbsError, match=problem):
+        formulation(name, **options)
+
+
+def test_rk4_with_an_odd_final_time_runs_the_python_loop():
+    model = cmbs.load("pendulum")
+    run = simulate(model, t_end=1.0, integrator="rk4", dt=0.3)
+    assert run.info["status"] == "success" and "compiled" not in run.info
+    np.testing.assert_allclose(run.t, [0.0, 0.3, 0.6, 0.9, 1.0])

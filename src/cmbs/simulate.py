@@ -165,11 +165,11 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
     steps = int(round(t_end / dt))
     times = np.linspace(0.0, steps * dt, steps + 1) if abs(steps * dt - t_end) < 1e-9 * t_end else \
         np.append(np.arange(0.0, t_end, dt), t_end)
-    fast_plan = _compiled_plan(model, chosen, integrator, u, project)
+    fast_plan = _compiled_plan(model, chosen, integrator, u, project, t_end, dt)
     if compiled and fast_plan is None:
-        raise CmbsError(f"the compiled loop cannot run this simulation (it needs integrator rk4, formulation lagrange, "
-                        "baumgarte or projection with the standard inertia, constant inputs, no --project and no "
-                        f"Python time functions; model {model.name!r})")
+        raise CmbsError(f"the compiled loop cannot run this simulation (it needs integrator rk4 with t_end a "
+                        "multiple of dt, formulation lagrange, baumgarte or projection with the standard inertia, "
+                        f"constant inputs, no --project and no Python time functions; model {model.name!r})")
     if fast_plan is not None and compiled is not False:
         return _run_compiled(model, solver, chosen, fast_plan, inputs(0.0, q_start, qd_start), q_start, qd_start,
                              t_end, dt, started, {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol,
@@ -386,13 +386,15 @@ def _trajectory(model: Model, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd:
                        "constraint_error": position_error, "velocity_constraint_error": velocity_error}, info)
 
 
-def _compiled_plan(model: Model, chosen: Formulation, integrator: str, u: object, project: bool) -> tuple | None:
+def _compiled_plan(model: Model, chosen: Formulation, integrator: str, u: object, project: bool, t_end: float,
+                   dt: float) -> tuple | None:
     """(kernel kind, method, parameters) when :mod:`cmbs.fast` can run the simulation, else None."""
     from cmbs import fast
     from cmbs.dynamics import Baumgarte, Lagrange, Projection
 
     kind = fast.supported(model)
-    if integrator != "rk4" or project or callable(u) or kind is None:
+    steps = round(t_end / dt)
+    if integrator != "rk4" or project or callable(u) or kind is None or abs(steps * dt - t_end) > 1e-9 * t_end:
         return None
     if isinstance(chosen, (Lagrange, Baumgarte)) and not chosen.least_squares:
         method = fast.BAUMGARTE if isinstance(chosen, Baumgarte) else fast.LAGRANGE
@@ -410,8 +412,6 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, u: np.
 
     kind, method, parameters = plan
     steps = int(round(t_end / dt))
-    if abs(steps * dt - t_end) > 1e-9 * t_end:
-        raise CmbsError(f"the compiled rk4 loop needs t_end to be a multiple of dt (t_end={t_end:g}, dt={dt:g})")
     if method == fast.PROJECTION:
         parameters[3] = solver.scale
         parameters[4] = 1.0 if solver.semi_definite else 0.0

@@ -66,3 +66,30 @@ class StatelessSolver:
 def constraint_velocity(terms: Terms, qd: np.ndarray) -> np.ndarray:
     """Φ̇ = A q̇ + Φ_t."""
     return terms.A @ qd + terms.phi_t
+
+
+def check_parameters(formulation: object, **rules: str) -> None:
+    """Validate a formulation's numeric options: each rule is ``"positive"``, ``"non-negative"``,
+    ``"count"`` (integer ≥ 0), ``"above-one"`` or ``"optional-positive"`` (None allowed).
+
+    Raises :class:`~cmbs.errors.CmbsError` naming the formulation, the option and the value.
+    """
+    from cmbs.errors import CmbsError
+
+    name = getattr(formulation, "name", type(formulation).__name__)
+    for option, rule in rules.items():
+        value = getattr(formulation, option)
+        if rule == "optional-positive" and value is None:
+            continue
+        if rule == "count":
+            ok = isinstance(value, int) and not isinstance(value, bool) and value >= 0
+            expected = "an integer >= 0"
+        else:
+            number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+            finite = number and bool(np.isfinite(value))
+            ok = finite and {"positive": value > 0, "optional-positive": value > 0, "non-negative": value >= 0,
+                             "above-one": value > 1}[rule] if finite else False
+            expected = {"positive": "a number > 0", "optional-positive": "a number > 0", "non-negative":
+                        "a number >= 0", "above-one": "a number > 1"}[rule]
+        if not ok:
+            raise CmbsError(f"formulation {name!r}: option {option} must be {expected}, got {value!r}")

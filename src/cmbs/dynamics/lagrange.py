@@ -19,7 +19,7 @@ from typing import ClassVar
 import numpy as np
 import scipy.linalg
 
-from cmbs.dynamics.base import Accelerations, StatelessSolver, constraint_velocity
+from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters, constraint_velocity
 from cmbs.errors import SingularSystemError
 from cmbs.model.model import Model, Terms
 
@@ -43,6 +43,9 @@ class Lagrange:
     least_squares: bool = False
     singular_tolerance: float = 1e-4
 
+    def __post_init__(self) -> None:
+        check_parameters(self, singular_tolerance="non-negative")
+
     def bind(self, model: Model) -> "KKTSolver":
         return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=0.0, omega=0.0)
 
@@ -59,6 +62,9 @@ class Baumgarte:
     omega: float = 10.0
     least_squares: bool = False
     singular_tolerance: float = 1e-4
+
+    def __post_init__(self) -> None:
+        check_parameters(self, xi="non-negative", omega="non-negative", singular_tolerance="non-negative")
 
     def bind(self, model: Model) -> "KKTSolver":
         return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=self.xi, omega=self.omega)

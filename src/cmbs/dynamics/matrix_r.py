@@ -24,7 +24,7 @@ from typing import ClassVar
 import numpy as np
 import scipy.linalg
 
-from cmbs.dynamics.base import Accelerations
+from cmbs.dynamics.base import Accelerations, check_parameters
 from cmbs.errors import CmbsError, ConvergenceError, SingularSystemError
 from cmbs.model.model import Model, Terms
 
@@ -52,6 +52,9 @@ class MatrixR:
     rank_tolerance: float = 1e-9
     position_tolerance: float = 1e-12
     max_iterations: int = 20
+
+    def __post_init__(self) -> None:
+        check_parameters(self, condition_growth="above-one", rank_tolerance="positive", position_tolerance="positive", max_iterations="count")
 
     def bind(self, model: Model) -> "MatrixRSolver":
         return MatrixRSolver(model, self)

@@ -24,7 +24,7 @@ from typing import ClassVar
 import numpy as np
 import scipy.linalg
 
-from cmbs.dynamics.base import Accelerations, StatelessSolver, constraint_velocity
+from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters, constraint_velocity
 from cmbs.errors import ConvergenceError
 from cmbs.model.model import Model, Terms
 
@@ -40,6 +40,9 @@ class Penalty:
     Omega: float = 10.0
     iterations: int = 0
     tolerance: float = 1e-12
+
+    def __post_init__(self) -> None:
+        check_parameters(self, alpha="positive", mu="non-negative", Omega="non-negative", iterations="count", tolerance="positive")
 
     def bind(self, model: Model) -> "PenaltySolver":
         return PenaltySolver(model, self)

@@ -28,7 +28,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from cmbs.dynamics.base import Accelerations, StatelessSolver
+from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters
 from cmbs.errors import CmbsError
 from cmbs.model.model import Model, Terms
 
@@ -59,6 +59,7 @@ class Projection:
     mu: float | None = None
 
     def __post_init__(self) -> None:
+        check_parameters(self, threshold="non-negative", mu="optional-positive")
         if self.inertia not in INERTIAS:
             raise CmbsError(f"projection inertia must be one of {', '.join(INERTIAS)}, got {self.inertia!r}")
 

@@ -27,7 +27,7 @@ from typing import Callable, ClassVar
 import numpy as np
 import scipy.linalg
 
-from cmbs.dynamics.base import Accelerations, StatelessSolver
+from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.projection import pseudo_inverse, reference_row_scale
 from cmbs.model.model import Model, Terms
 
@@ -39,6 +39,9 @@ class UdwadiaKalaba:
     name: ClassVar[str] = "udwadia-kalaba"
     threshold: float = 1e-9  # on the singular values of A M^{-1/2}, rows normalised as in Projection
     nonideal: Callable[[float, np.ndarray, np.ndarray], np.ndarray] | None = None
+
+    def __post_init__(self) -> None:
+        check_parameters(self, threshold="non-negative")
 
     def bind(self, model: Model) -> "UdwadiaKalabaSolver":
         return UdwadiaKalabaSolver(model, self)

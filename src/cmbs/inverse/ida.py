@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cmbs.dynamics import formulation as make_formulation
-from cmbs.errors import CmbsError
+from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.kinematics import kinematic_analysis
 from cmbs.model.model import Model
 from cmbs.trajectory import Trajectory
@@ -103,7 +103,11 @@ def inverse_dynamics(model: Model, times: np.ndarray | Trajectory, *, method: st
         solver = make_formulation(method, **options).bind(model)
         for i, t in enumerate(motion.t):
             model.evaluate(motion.q[i], motion.qd[i], t, out=terms)
-            lam[i] = solver.accelerations(terms, motion.q[i], motion.qd[i], t).lam
+            try:
+                lam[i] = solver.accelerations(terms, motion.q[i], motion.qd[i], t).lam
+            except np.linalg.LinAlgError as error:
+                raise SingularSystemError(f"model {model.name!r} at t={t:.6g}: the {method} system is singular "
+                                          f"({error}); try method 'matrix-r' or 'lagrange'") from None
             forces[i] = -lam[i, driver_rows]
     result = Trajectory(motion.t, motion.q, motion.qd, motion.qdd, motion.names,
                         {**motion.extras, "driver_forces": forces, "lam": lam},
