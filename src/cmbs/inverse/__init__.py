@@ -1,5 +1,6 @@
 """Inverse dynamics: the forces that produce a prescribed motion."""
 
 from cmbs.inverse.ida import InverseDynamics, inverse_dynamics
+from cmbs.inverse.reactions import joint_reaction_history, joint_reactions
 
-__all__ = ["InverseDynamics", "inverse_dynamics"]
+__all__ = ["InverseDynamics", "inverse_dynamics", "joint_reactions", "joint_reaction_history"]

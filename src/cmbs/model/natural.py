@@ -502,12 +502,21 @@ class _Assembler:
         gravity_ext = np.zeros(n_ext)
         g = np.array(b.gravity, dtype=float)
         segment_masses = []
+        segment_data = []
         for k, segment in enumerate(b._segments.values()):
             idx = self._resolve(rigid[k], n)
             element = element_mass_matrix(segment.mass, segment.length, segment.com, segment.inertia)
+            element_gravity = point_map(segment.length, segment.com).T @ (segment.mass * g)
             mass_ext[np.ix_(idx, idx)] += element
-            gravity_ext[idx] += point_map(segment.length, segment.com).T @ (segment.mass * g)
+            gravity_ext[idx] += element_gravity
             segment_masses.append((segment.name, segment.mass))
+            element.setflags(write=False)
+            element_gravity.setflags(write=False)
+            idx.setflags(write=False)
+            segment_data.append(SegmentData(
+                name=segment.name, points=(segment.i, segment.j), indices=idx, mass_matrix=element,
+                gravity=element_gravity, rigid_row=k, mass=segment.mass, length=segment.length,
+                com=segment.com, inertia=segment.inertia))
         for point in b._points.values():
             if point.mass:
                 idx = self._resolve(self.point_index[point.name], n)
@@ -537,7 +546,7 @@ class _Assembler:
             n=n, m=m, ints=ints, reals=reals, mass=mass, time_functions=tf,
             constants=np.array(self.constants), gravity_ext=gravity_ext,
             springs=(resolve(spring_rows, 4), np.array(spring_parameters).reshape(-1, 3)),
-            point_xz=point_xz)
+            point_xz=point_xz, segments=tuple(segment_data))
         return Model(
             name=b.name, coordinate_names=tuple(self.names), coordinate_kinds=tuple(self.kinds),
             constraint_names=tuple(constraint_names), drivers=drivers, actuator_names=tuple(b._actuators),
@@ -572,6 +581,29 @@ def _force_rows(rows: list, n: int, assembler: _Assembler) -> np.ndarray:
 
 
 @dataclass(frozen=True)
+class SegmentData:
+    """One rigid segment as assembled (used e.g. by :mod:`cmbs.inverse.reactions`).
+
+    ``indices``: the extended indices (x_i, z_i, x_j, z_j) of its two points (q followed by the
+    constants, so fixed points have indices ≥ n); ``mass_matrix``: its 4×4 element mass matrix
+    (module docstring); ``gravity``: its element gravity generalized force C_Gᵀ (m g), (4,);
+    ``rigid_row``: the row of its rigidity constraint 'rigid NAME' (segments come first, in
+    order); ``com`` (along, across) in the segment frame and ``inertia`` about the COM.
+    """
+
+    name: str
+    points: tuple[str, str]
+    indices: np.ndarray
+    mass_matrix: np.ndarray
+    gravity: np.ndarray
+    rigid_row: int
+    mass: float
+    length: float
+    com: tuple[float, float]
+    inertia: float
+
+
+@dataclass(frozen=True)
 class NaturalEquations:
     """Compiled evaluator of a natural-coordinate model (see the module docstring)."""
 
@@ -585,6 +617,7 @@ class NaturalEquations:
     gravity_ext: np.ndarray
     springs: tuple[np.ndarray, np.ndarray]
     point_xz: np.ndarray
+    segments: tuple[SegmentData, ...] = ()
 
     @property
     def _scratch_size(self) -> int:
