@@ -83,3 +83,17 @@ def test_cli_inverse(tmp_path, capsys):
     assert (tmp_path / "ida.png").read_bytes()[:4] == b"\x89PNG"
     assert "alpha" in capsys.readouterr().out
     assert main(["inverse", "pendulum", "--t-end", "1", "--dt", "0.1"]) == 2
+
+
+def test_cli_inverse_with_reactions(tmp_path, capsys):
+    out = tmp_path / "ida.csv"
+    assert main(["inverse", "four-bar", "--t-end", "1", "--dt", "0.1", "--reactions", "--out", str(out)]) == 0
+    result = Trajectory.load(out)
+    at_a = result.extras["reaction crank@A"]
+    at_b = result.extras["reaction rocker@B"]
+    assert at_a.shape == (11, 2)
+    # the ground carries the weight and the inertia: total vertical ground force - weight = Σ m a_z
+    assert np.all(np.isfinite(at_a)) and np.abs(at_a[:, 1] + at_b[:, 1]).max() > 50.0
+    np.testing.assert_allclose(result.extras["joint torque alpha"], result.extras["driver_forces"][:, 0],
+                               rtol=1e-9, atol=1e-9)
+    assert "reaction on coupler at P1" in capsys.readouterr().out

@@ -198,8 +198,24 @@ def _inverse(args: argparse.Namespace) -> int:
         force = result.force(name)
         print(f"  force on {name:<14} min {force.min(): .6g}  max {force.max(): .6g}  "
               f"RMS {np.sqrt(np.mean(force**2)):.6g}")
+    motion = result.motion
+    if args.reactions:
+        from cmbs.inverse import joint_reaction_history
+
+        reactions = joint_reaction_history(model, motion)
+        extras = dict(motion.extras)
+        for (segment, point), force in reactions["forces"].items():
+            extras[f"reaction {segment}@{point}"] = force
+            print(f"  reaction on {segment} at {point:<10} max |F| {np.hypot(*force.T).max():.6g} N")
+        for angle, torque in reactions["torques"].items():
+            extras[f"joint torque {angle}"] = torque
+            print(f"  joint torque {angle:<16} max |τ| {np.abs(torque).max():.6g} N m")
+        for slider, force in reactions["sliders"].items():
+            extras[f"slider force {slider}"] = force
+            print(f"  slider force {slider:<16} max |F| {np.hypot(*force.T).max():.6g} N")
+        motion = cmbs.Trajectory(motion.t, motion.q, motion.qd, motion.qdd, motion.names, extras, motion.info)
     if args.out:
-        print(f"  result -> {result.motion.save(args.out)}")
+        print(f"  result -> {motion.save(args.out)}")
     if args.plot:
         from cmbs.plotting import plot_driver_forces, save_figure
 
@@ -269,6 +285,9 @@ def build_parser() -> argparse.ArgumentParser:
                          help="driver multipliers of a formulation, or matrix-R Q_IDA")
     inverse.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                          help="option of the method's formulation, e.g. alpha=1e8 for penalty")
+    inverse.add_argument("--reactions", action="store_true",
+                         help="also the joint reactions at every segment point, joint torques and slider forces "
+                              "(natural-coordinate models)")
     inverse.add_argument("--out", help="result file (.npz or .csv) with the motion and driver_forces")
     inverse.add_argument("--plot", help="figure of the forces and the motion")
     inverse.set_defaults(run=_inverse)
