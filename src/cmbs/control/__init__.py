@@ -1,0 +1,7 @@
+"""Controllers in closed loop with any forward formulation: small callables u(t, q, q̇)."""
+
+from cmbs.control.base import Reference, ZeroOrderHold
+from cmbs.control.computed_torque import ComputedTorque
+from cmbs.control.pd import PD
+
+__all__ = ["Reference", "ZeroOrderHold", "PD", "ComputedTorque"]

@@ -1,0 +1,77 @@
+"""References and sampling shared by the controllers.
+
+A controller is a callable ``u(t, q, q̇)`` that :func:`cmbs.simulate` calls with the state; it
+sees the same model interface as everything else.  :class:`Reference` gives the desired
+independent coordinates z_ref(t) with their first two derivatives, from a kinematic motion
+(interpolated by a C² cubic spline) — typically the motion of the model's own drivers.
+:class:`ZeroOrderHold` turns a continuous law into a digital controller sampled at a fixed
+period (Aghili's experiment ran at 1 kHz): the input is computed at t = 0, T, 2T, ... and held
+between samples, not re-evaluated at Runge-Kutta stages.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from cmbs.errors import CmbsError
+from cmbs.trajectory import Trajectory
+
+Law = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Desired values of ``coordinates`` over time: z_ref(t), ż_ref(t), z̈_ref(t) from the motion's
+    positions by a cubic spline (not-a-knot); held constant outside the motion's time span."""
+
+    motion: Trajectory
+    coordinates: tuple[str, ...]
+    _spline: CubicSpline = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        unknown = [name for name in self.coordinates if name not in self.motion.names]
+        if unknown:
+            raise CmbsError(f"reference: no coordinate(s) {', '.join(unknown)} in the motion "
+                            f"({', '.join(self.motion.names)})")
+        if self.motion.t.size < 4:
+            raise CmbsError("reference: the motion needs at least 4 samples")
+        columns = [self.motion.names.index(name) for name in self.coordinates]
+        object.__setattr__(self, "coordinates", tuple(self.coordinates))
+        object.__setattr__(self, "_spline", CubicSpline(self.motion.t, self.motion.q[:, columns], axis=0))
+
+    def __call__(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = min(max(t, self.motion.t[0]), self.motion.t[-1])
+        return self._spline(t), self._spline(t, 1), self._spline(t, 2)
+
+
+class ZeroOrderHold:
+    """Sample ``law`` every ``period`` seconds and hold its value (a digital controller)."""
+
+    def __init__(self, law: Law, period: float):
+        if not period > 0:
+            raise CmbsError(f"sample period must be > 0, got {period}")
+        self.law = law
+        self.period = period
+        self.sample_time = -np.inf
+        self.value: np.ndarray | None = None
+
+    def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        sample = np.floor(t / self.period + 1e-9) * self.period
+        if self.value is None or sample != self.sample_time:
+            self.sample_time = sample
+            self.value = np.array(self.law(t, q, qd), dtype=float)
+        return self.value
+
+
+def actuator_map(model, coordinates: Sequence[str]) -> np.ndarray:
+    """(n_u, k) matrix B_z with u-to-generalized-force gains restricted to ``coordinates``: the
+    generalized force on coordinate j from input i (measured from the model: Q(u = e_i) - Q(0))."""
+    q, qd = model.q0, np.zeros(model.n)
+    base = model.forces(q, qd, 0.0, np.zeros(model.n_u))
+    columns = model.coordinate_indices(list(coordinates))
+    gains = np.array([(model.forces(q, qd, 0.0, e) - base)[columns] for e in np.eye(model.n_u)])
+    return gains
