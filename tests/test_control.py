@@ -65,3 +65,58 @@ def test_controllers_need_actuators_on_the_reference_coordinates():
     fake = cmbs.Trajectory(motion.t, np.zeros((11, 6)), np.zeros((11, 6)), np.zeros((11, 6)), model.coordinate_names)
     with pytest.raises(CmbsError, match="actuators cannot act"):
         PD(model, Reference(fake, ("theta1",)), kp=1.0, kd=1.0)
+
+
+def four_bar_with_coupler_mass(mass):
+    b = cmbs.NaturalModelBuilder("four-bar")
+    base = cmbs.load("four-bar")
+    b.add_point("A", 0.0, 0.0, fixed=True)
+    b.add_point("B", 10.0, 0.0, fixed=True)
+    b.add_point("P1", *base.q0[0:2])
+    b.add_point("P2", *base.q0[2:4])
+    b.add_segment("crank", "A", "P1", mass=1.0, com=(1.0, 0.0), inertia=1 / 3, length=2.0)
+    b.add_segment("coupler", "P1", "P2", mass=mass, com=(5.0, 0.0), inertia=mass * 100 / 12, length=10.0)
+    b.add_segment("rocker", "P2", "B", mass=3.0, com=(3.0, 0.0), inertia=9.0, length=6.0)
+    b.add_angle("alpha", segment="crank")
+    b.add_actuator("torque", coordinate="alpha")
+    return b.build()
+
+
+def test_mass_fault_equals_the_heavier_mechanism_after_t0():
+    from cmbs.control.faults import mass_fault
+
+    nominal = cmbs.load("four-bar").without_drivers()
+    faulty = mass_fault(nominal, "coupler", factor=1.025, t0=1.0)
+    heavier = four_bar_with_coupler_mass(5.0 * 1.025)
+    rng = np.random.default_rng(4)
+    q, qd = nominal.q0 + 0.01 * rng.normal(size=nominal.n), rng.normal(size=nominal.n)
+    before, after = faulty.evaluate(q, qd, 0.5), faulty.evaluate(q, qd, 1.5)
+    np.testing.assert_allclose(before.M, nominal.mass_matrix(q), atol=1e-12)
+    np.testing.assert_allclose(after.M, heavier.mass_matrix(q), atol=1e-12)
+    np.testing.assert_allclose(after.Q, heavier.forces(q, qd, 1.5), atol=1e-12)
+    with pytest.raises(CmbsError, match="no segment 'bar'"):
+        mass_fault(nominal, "bar", factor=2.0)
+
+
+def test_faults_disturb_computed_torque_tracking(four_bar):
+    from cmbs.control.faults import ActuatorFault, SensorNoise, mass_fault
+
+    model, motion, free, _ = four_bar
+    reference = Reference(motion, ("alpha",))
+    law = ComputedTorque(free, reference, kp=100.0, kd=20.0)
+    settings = dict(t_end=2.0, rtol=1e-9, atol=1e-11, dt=0.01)
+
+    def worst_error(run):
+        return np.abs(motion["alpha"][:run.t.size * 2:2] - run["alpha"]).max()
+
+    exact = worst_error(cmbs.simulate(free, u=law, **settings))
+    heavier = worst_error(cmbs.simulate(mass_fault(free, "coupler", factor=1.025, t0=0.5), u=law, **settings))
+    offset = worst_error(cmbs.simulate(free, u=ActuatorFault(law, t0=0.5, offset=5.0), **settings))
+    assert exact < 1e-6
+    assert 1e-5 < heavier < 0.05 and 1e-4 < offset < 0.05
+    # a constant torque offset d gives the steady error e = d / (K_p m̄), m̄ the reduced inertia: bounded, not zero
+    # noisy measurements through a 1 kHz digital controller, fixed-step RK4 at the sample period
+    noisy = [cmbs.simulate(free, u=ZeroOrderHold(SensorNoise(law, position=1e-3, seed=7), period=1e-3), t_end=2.0,
+                           integrator="rk4", dt=1e-3)["alpha"] for _ in range(2)]
+    np.testing.assert_array_equal(noisy[0], noisy[1])  # seeded: reproducible
+    assert 1e-6 < np.abs(noisy[0][::10] - motion["alpha"][:201 * 2:2]).max() < 0.05

@@ -2,6 +2,7 @@
 
 from cmbs.control.base import Reference, ZeroOrderHold
 from cmbs.control.computed_torque import ComputedTorque
+from cmbs.control.faults import ActuatorFault, SensorNoise, mass_fault
 from cmbs.control.pd import PD
 
-__all__ = ["Reference", "ZeroOrderHold", "PD", "ComputedTorque"]
+__all__ = ["Reference", "ZeroOrderHold", "PD", "ComputedTorque", "ActuatorFault", "SensorNoise", "mass_fault"]

@@ -1,0 +1,112 @@
+"""Faults for robustness studies (thesis ch. 7): what the controller does not know.
+
+- :func:`mass_fault`: a segment's mass (and inertia) scaled by a factor from time t0 on — the
+  plant changes, the controller keeps its nominal model.  For natural-coordinate models the
+  segment's element mass matrix and gravity force are scaled (both are linear in the mass).
+- :class:`ActuatorFault`: the inputs reaching the plant are ``scale·u + offset`` from t0 on.
+- :class:`SensorNoise`: the controller sees q + noise, q̇ + noise (Gaussian, seeded, drawn
+  once per distinct time so that repeated stage evaluations at one time agree).
+- A wrong initial state is simply a different ``q0``/``qd0`` given to :func:`cmbs.simulate`.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import numpy as np
+
+from cmbs.errors import CmbsError
+from cmbs.model.model import Model, Terms
+from cmbs.model.natural import NaturalEquations
+
+Law = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
+
+
+class _MassFaultEquations:
+    """Natural-coordinate equations with ΔM, ΔQ_gravity added from t0 on."""
+
+    def __init__(self, inner: NaturalEquations, delta_mass: np.ndarray, delta_gravity: np.ndarray, t0: float):
+        self.inner = inner
+        self.delta_mass = delta_mass
+        self.delta_gravity = delta_gravity
+        self.t0 = t0
+        self.inner_terms = inner.new_terms()
+        self.nominal_mass = inner.mass
+
+    def new_terms(self) -> Terms:
+        return Terms(self.inner.n, self.inner.m, scratch=0)
+
+    def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
+        inner = self.inner_terms
+        self.inner.evaluate(q, qd, t, u, inner)
+        terms.Q[:] = inner.Q
+        terms.phi[:] = inner.phi
+        terms.A[:] = inner.A
+        terms.gamma[:] = inner.gamma
+        terms.phi_t[:] = inner.phi_t
+        terms.M[:] = self.nominal_mass
+        if t >= self.t0:
+            terms.M += self.delta_mass
+            terms.Q += self.delta_gravity
+
+    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        return self.inner.kinetic_energy(q, qd)
+
+    def potential_energy(self, q: np.ndarray) -> float:
+        return self.inner.potential_energy(q)
+
+    def point_positions(self, q: np.ndarray) -> np.ndarray:
+        return self.inner.point_positions(q)
+
+
+def mass_fault(model: Model, segment: str, *, factor: float, t0: float = 0.0) -> Model:
+    """``model`` whose segment ``segment`` has ``factor`` times its mass and inertia from ``t0``
+    (e.g. factor 1.025 for the thesis's 2.5 % fault).  Natural-coordinate models only.
+    Energies are reported with the nominal masses."""
+    equations = model.equations
+    if not isinstance(equations, NaturalEquations):
+        raise CmbsError(f"mass faults need a natural-coordinate model; {model.name!r} is not one")
+    names = [s.name for s in equations.segments]
+    if segment not in names:
+        raise CmbsError(f"model {model.name!r} has no segment {segment!r}; segments: {', '.join(names)}")
+    data = equations.segments[names.index(segment)]
+    n = model.n
+    keep = data.indices < n
+    local = np.flatnonzero(keep)
+    rows = data.indices[keep]
+    delta_mass = np.zeros((n, n))
+    delta_mass[np.ix_(rows, rows)] = (factor - 1.0) * data.mass_matrix[np.ix_(local, local)]
+    delta_gravity = np.zeros(n)
+    delta_gravity[rows] = (factor - 1.0) * data.gravity[local]
+    faulty = _MassFaultEquations(equations, delta_mass, delta_gravity, t0)
+    return model.replace(name=f"{model.name} ({segment} mass x{factor:g} from t={t0:g})", equations=faulty,
+                         constant_mass=False)
+
+
+class ActuatorFault:
+    """Wrap a control law: from ``t0`` the plant receives ``scale·u + offset``."""
+
+    def __init__(self, law: Law, *, t0: float = 0.0, scale: float = 1.0, offset: float | Sequence[float] = 0.0):
+        self.law, self.t0, self.scale = law, t0, scale
+        self.offset = np.asarray(offset, dtype=float)
+
+    def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        u = np.asarray(self.law(t, q, qd), dtype=float)
+        return self.scale * u + self.offset if t >= self.t0 else u
+
+
+class SensorNoise:
+    """Wrap a control law so that it sees noisy measurements (standard deviations
+    ``position`` and ``velocity``; generator seeded by ``seed``)."""
+
+    def __init__(self, law: Law, *, position: float, velocity: float = 0.0, seed: int = 0):
+        self.law = law
+        self.position, self.velocity = position, velocity
+        self.rng = np.random.default_rng(seed)
+        self.last: tuple[float, np.ndarray, np.ndarray] | None = None
+
+    def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        if self.last is None or self.last[0] != t:
+            self.last = (t, self.rng.normal(0.0, self.position, q.shape), self.rng.normal(0.0, self.velocity,
+                                                                                       qd.shape))
+        return self.law(t, q + self.last[1], qd + self.last[2])
