@@ -120,3 +120,17 @@ def test_faults_disturb_computed_torque_tracking(four_bar):
                            integrator="rk4", dt=1e-3)["alpha"] for _ in range(2)]
     np.testing.assert_array_equal(noisy[0], noisy[1])  # seeded: reproducible
     assert 1e-6 < np.abs(noisy[0][::10] - motion["alpha"][:201 * 2:2]).max() < 0.05
+
+
+def test_cli_track(tmp_path, capsys):
+    from cmbs.cli import main
+
+    out = tmp_path / "track.npz"
+    assert main(["track", "four-bar", "--controller", "ctc", "--initial-error", "0.1", "--t-end", "1.5",
+                 "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "NRMSE" in text and "settling time (1 %) 0.6" in text  # (1 + 10t) e^{-10t} = 0.01 at t ≈ 0.66 s
+    assert cmbs.Trajectory.load(out).t[-1] == pytest.approx(1.5)
+    assert main(["track", "four-bar", "--t-end", "1", "--fault", "bogus"]) == 2
+    assert main(["track", "pendulum", "--t-end", "1"]) == 2
+    assert "expected mass:SEGMENT" in capsys.readouterr().err

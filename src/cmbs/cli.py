@@ -223,6 +223,76 @@ def _inverse(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fault(model: cmbs.Model, law, text: str):
+    """--fault mass:SEGMENT:FACTOR[:T0] | offset:VALUE[:T0] | scale:FACTOR[:T0] | noise:SIGMA[:SEED]."""
+    from cmbs.control import ActuatorFault, SensorNoise, mass_fault
+
+    kind, _, rest = text.partition(":")
+    parts = rest.split(":") if rest else []
+    try:
+        if kind == "mass" and len(parts) in (2, 3):
+            return mass_fault(model, parts[0], factor=float(parts[1]), t0=float(parts[2]) if len(parts) == 3
+                              else 0.0), law
+        if kind in ("offset", "scale") and len(parts) in (1, 2):
+            t0 = float(parts[1]) if len(parts) == 2 else 0.0
+            options = {"offset": float(parts[0])} if kind == "offset" else {"scale": float(parts[0])}
+            return model, ActuatorFault(law, t0=t0, **options)
+        if kind == "noise" and len(parts) in (1, 2):
+            return model, SensorNoise(law, position=float(parts[0]), seed=int(parts[1]) if len(parts) == 2 else 0)
+    except ValueError:
+        pass
+    raise _UsageError(f"--fault {text!r}: expected mass:SEGMENT:FACTOR[:T0], offset:VALUE[:T0], "
+                      "scale:FACTOR[:T0] or noise:SIGMA[:SEED]")
+
+
+def _track(args: argparse.Namespace) -> int:
+    from cmbs.control import PD, ComputedTorque, Reference
+    from cmbs.metrics import nrmse, peak_norm, rms_norm, settling_time
+
+    if args.t_end <= 0 or args.dt <= 0:
+        raise _UsageError(f"--t-end and --dt must be > 0, got {args.t_end} and {args.dt}")
+    for path, suffixes, option in ((args.out, (".npz", ".csv"), "--out"), (args.plot, (".png", ".pdf", ".svg"),
+                                                                           "--plot")):
+        if path:
+            _check_output(path, suffixes, option)
+    driven = _load(args)
+    if not driven.drivers.any():
+        raise _UsageError(f"model {driven.name!r} has no drivers: the reference motion comes from a driven model")
+    times = np.linspace(0.0, args.t_end, int(round(args.t_end / args.dt)) + 1)
+    motion = cmbs.kinematic_analysis(driven, times)
+    plant = driven.without_drivers()
+    driven_coordinates = cmbs.inverse_dynamics(driven, motion).driven_coordinates
+    reference = Reference(motion, driven_coordinates)
+    if args.controller == "ctc":
+        law = ComputedTorque(plant, reference, kp=args.kp, kd=args.kd)
+    else:
+        law = PD(plant, reference, kp=args.kp, kd=args.kd)
+    for text in args.fault:
+        plant, law = _fault(plant, law, text)
+    q0 = plant.q0.copy()
+    if args.initial_error:
+        column = plant.coordinate_index(driven_coordinates[0])
+        q0[column] += args.initial_error
+        q0 = cmbs.assemble(plant, q0, fixed=[driven_coordinates[0]])
+    run = cmbs.simulate(plant, t_end=args.t_end, u=law, q0=q0, qd0=np.zeros(plant.n), dt=args.dt, rtol=args.rtol,
+                        atol=args.atol)
+    k = run.t.size
+    columns = [run.names.index(name) for name in driven_coordinates]
+    error = motion.q[:k, columns] - run.q[:, columns]
+    print(f"{plant.name}: {args.controller} tracking of {', '.join(driven_coordinates)}, {run.info['status']} "
+          f"at t = {run.t[-1]:.6g} s")
+    print(f"  NRMSE {', '.join(f'{v:.4g}' for v in np.atleast_1d(nrmse(run.t, run.q[:, columns], motion.q[:k, columns])))}"
+          f"; settling time (1 %) {settling_time(run.t, error):.4g} s")
+    print(f"  actuation RMS norm {rms_norm(run.t, run['u']):.6g}, peak norm {peak_norm(run['u']):.6g}")
+    if args.out:
+        print(f"  result -> {run.save(args.out)}")
+    if args.plot:
+        from cmbs.plotting import plot_simulation, save_figure
+
+        print(f"  figure -> {save_figure(plot_simulation(run, model=plant), args.plot)}")
+    return 0 if run.info["status"] == "success" else 1
+
+
 def _check_output(path: str, suffixes: tuple[str, ...], option: str) -> None:
     """Check an output path before any work is done, so that a bad --plot cannot fail after the
     result file has already been written."""
@@ -291,6 +361,22 @@ def build_parser() -> argparse.ArgumentParser:
     inverse.add_argument("--out", help="result file (.npz or .csv) with the motion and driver_forces")
     inverse.add_argument("--plot", help="figure of the forces and the motion")
     inverse.set_defaults(run=_inverse)
+
+    track = model_command("track", "closed-loop tracking of a driven model's motion by its actuators")
+    track.add_argument("--controller", choices=("pd", "ctc"), default="ctc", help="PD or computed torque")
+    track.add_argument("--kp", type=float, default=100.0, help="proportional gain (ctc: s^-2; pd: force/unit)")
+    track.add_argument("--kd", type=float, default=20.0, help="derivative gain (ctc: s^-1; pd: force s/unit)")
+    track.add_argument("--fault", action="append", default=[],
+                       help="mass:SEGMENT:FACTOR[:T0], offset:VALUE[:T0], scale:FACTOR[:T0], noise:SIGMA[:SEED]")
+    track.add_argument("--initial-error", type=float, default=0.0,
+                       help="offset of the first driven coordinate at t = 0 (wrong initial state)")
+    track.add_argument("--t-end", type=float, required=True, help="final time [s]")
+    track.add_argument("--dt", type=float, default=0.01, help="output interval [s]")
+    track.add_argument("--rtol", type=float, default=1e-8)
+    track.add_argument("--atol", type=float, default=1e-10)
+    track.add_argument("--out", help="result file (.npz or .csv)")
+    track.add_argument("--plot", help="figure (.png, .pdf, .svg)")
+    track.set_defaults(run=_track)
 
     compare = model_command("compare", "run several formulations on the same model and tabulate them")
     compare.add_argument("--formulations", required=True, help="comma-separated names, the first is the reference")
