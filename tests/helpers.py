@@ -119,3 +119,27 @@ def kitchen_sink(*, drivers: bool = True, loads: bool = True, python_driver: boo
         else:
             b.add_driver("F.x", "0.4 + 0.05*sin(t)", name="f-drive")
     return b.build()
+
+
+def library_four_bar_variant(name: str, *, coupler_mass: float = 5.0, driver: object | None = None,
+                             actuator: bool = False):
+    """The library four-bar rebuilt with the builder (same points and bars), optionally with another
+    coupler mass (inertia scaled with it), a constant driver on alpha, or a torque actuator."""
+    import cmbs
+
+    base = cmbs.load("four-bar")
+    b = cmbs.NaturalModelBuilder(name)
+    b.add_point("A", 0.0, 0.0, fixed=True)
+    b.add_point("B", 10.0, 0.0, fixed=True)
+    b.add_point("P1", *base.q0[0:2])
+    b.add_point("P2", *base.q0[2:4])
+    b.add_segment("crank", "A", "P1", mass=1.0, com=(1.0, 0.0), inertia=1 / 3, length=2.0)
+    b.add_segment("coupler", "P1", "P2", mass=coupler_mass, com=(5.0, 0.0), inertia=coupler_mass * 100 / 12,
+                  length=10.0)
+    b.add_segment("rocker", "P2", "B", mass=3.0, com=(3.0, 0.0), inertia=9.0, length=6.0)
+    b.add_angle("alpha", segment="crank")
+    if driver is not None:
+        b.add_driver("alpha", driver)
+    if actuator:
+        b.add_actuator("torque", coordinate="alpha")
+    return b.build()

@@ -9,6 +9,7 @@ import pytest
 import cmbs
 from cmbs.control import PD, ComputedTorque, Reference, ZeroOrderHold
 from cmbs.errors import CmbsError
+from helpers import library_four_bar_variant
 
 
 @pytest.fixture(scope="module")
@@ -67,27 +68,12 @@ def test_controllers_need_actuators_on_the_reference_coordinates():
         PD(model, Reference(fake, ("theta1",)), kp=1.0, kd=1.0)
 
 
-def four_bar_with_coupler_mass(mass):
-    b = cmbs.NaturalModelBuilder("four-bar")
-    base = cmbs.load("four-bar")
-    b.add_point("A", 0.0, 0.0, fixed=True)
-    b.add_point("B", 10.0, 0.0, fixed=True)
-    b.add_point("P1", *base.q0[0:2])
-    b.add_point("P2", *base.q0[2:4])
-    b.add_segment("crank", "A", "P1", mass=1.0, com=(1.0, 0.0), inertia=1 / 3, length=2.0)
-    b.add_segment("coupler", "P1", "P2", mass=mass, com=(5.0, 0.0), inertia=mass * 100 / 12, length=10.0)
-    b.add_segment("rocker", "P2", "B", mass=3.0, com=(3.0, 0.0), inertia=9.0, length=6.0)
-    b.add_angle("alpha", segment="crank")
-    b.add_actuator("torque", coordinate="alpha")
-    return b.build()
-
-
 def test_mass_fault_equals_the_heavier_mechanism_after_t0():
     from cmbs.control.faults import mass_fault
 
     nominal = cmbs.load("four-bar").without_drivers()
     faulty = mass_fault(nominal, "coupler", factor=1.025, t0=1.0)
-    heavier = four_bar_with_coupler_mass(5.0 * 1.025)
+    heavier = library_four_bar_variant("four-bar", coupler_mass=5.0 * 1.025, actuator=True)
     rng = np.random.default_rng(4)
     q, qd = nominal.q0 + 0.01 * rng.normal(size=nominal.n), rng.normal(size=nominal.n)
     before, after = faulty.evaluate(q, qd, 0.5), faulty.evaluate(q, qd, 1.5)

@@ -11,6 +11,7 @@ from cmbs.cli import main
 from cmbs.errors import CmbsError
 from cmbs.inverse import inverse_dynamics
 from cmbs.trajectory import Trajectory
+from helpers import library_four_bar_variant
 
 
 def test_lagrange_multipliers_and_matrix_r_agree():
@@ -42,18 +43,7 @@ def test_replayed_torque_reproduces_the_motion():
 def test_static_balance_against_statics():
     """Held still (α constant), the crank torque balances gravity: computed independently from
     the virtual work of the weights along the mechanism's one-DOF motion (finite differences)."""
-    b = cmbs.NaturalModelBuilder("four-bar-held")
-    base = cmbs.load("four-bar")
-    b.add_point("A", 0.0, 0.0, fixed=True)
-    b.add_point("B", 10.0, 0.0, fixed=True)
-    b.add_point("P1", *base.q0[0:2])
-    b.add_point("P2", *base.q0[2:4])
-    b.add_segment("crank", "A", "P1", mass=1.0, com=(1.0, 0.0), inertia=1 / 3, length=2.0)
-    b.add_segment("coupler", "P1", "P2", mass=5.0, com=(5.0, 0.0), inertia=5 * 100 / 12, length=10.0)
-    b.add_segment("rocker", "P2", "B", mass=3.0, com=(3.0, 0.0), inertia=9.0, length=6.0)
-    b.add_angle("alpha", segment="crank")
-    b.add_driver("alpha", -math.pi / 4)
-    held = b.build()
+    held = library_four_bar_variant("four-bar-held", driver=-math.pi / 4)
     torque = inverse_dynamics(held, np.array([0.0, 0.1])).force("alpha")[0]
     free = held.without_drivers()
 

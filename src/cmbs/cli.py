@@ -184,12 +184,7 @@ def _compare(args: argparse.Namespace) -> int:
 def _inverse(args: argparse.Namespace) -> int:
     from cmbs.inverse import inverse_dynamics
 
-    if args.t_end <= 0 or args.dt <= 0:
-        raise _UsageError(f"--t-end and --dt must be > 0, got {args.t_end} and {args.dt}")
-    for path, suffixes, option in ((args.out, (".npz", ".csv"), "--out"), (args.plot, (".png", ".pdf", ".svg"),
-                                                                           "--plot")):
-        if path:
-            _check_output(path, suffixes, option)
+    _check_time_grid_and_outputs(args)
     model = _load(args)
     times = np.linspace(0.0, args.t_end, int(round(args.t_end / args.dt)) + 1)
     result = inverse_dynamics(model, times, method=args.method, **_formulation_options(args))
@@ -249,12 +244,7 @@ def _track(args: argparse.Namespace) -> int:
     from cmbs.control import PD, ComputedTorque, Reference
     from cmbs.metrics import nrmse, peak_norm, rms_norm, settling_time
 
-    if args.t_end <= 0 or args.dt <= 0:
-        raise _UsageError(f"--t-end and --dt must be > 0, got {args.t_end} and {args.dt}")
-    for path, suffixes, option in ((args.out, (".npz", ".csv"), "--out"), (args.plot, (".png", ".pdf", ".svg"),
-                                                                           "--plot")):
-        if path:
-            _check_output(path, suffixes, option)
+    _check_time_grid_and_outputs(args)
     driven = _load(args)
     if not driven.drivers.any():
         raise _UsageError(f"model {driven.name!r} has no drivers: the reference motion comes from a driven model")
@@ -291,6 +281,16 @@ def _track(args: argparse.Namespace) -> int:
 
         print(f"  figure -> {save_figure(plot_simulation(run, model=plant), args.plot)}")
     return 0 if run.info["status"] == "success" else 1
+
+
+def _check_time_grid_and_outputs(args: argparse.Namespace) -> None:
+    """--t-end and --dt positive; --out and --plot paths valid (checked before any work)."""
+    if args.t_end <= 0 or args.dt <= 0:
+        raise _UsageError(f"--t-end and --dt must be > 0, got {args.t_end} and {args.dt}")
+    for path, suffixes, option in ((args.out, (".npz", ".csv"), "--out"),
+                                   (args.plot, (".png", ".pdf", ".svg"), "--plot")):
+        if path:
+            _check_output(path, suffixes, option)
 
 
 def _check_output(path: str, suffixes: tuple[str, ...], option: str) -> None:
