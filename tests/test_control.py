@@ -120,3 +120,44 @@ def test_cli_track(tmp_path, capsys):
     assert main(["track", "four-bar", "--t-end", "1", "--fault", "bogus"]) == 2
     assert main(["track", "pendulum", "--t-end", "1"]) == 2
     assert "expected mass:SEGMENT" in capsys.readouterr().err
+
+
+def driven_arm(arm, drivers):
+    """The library arm on a slider with drivers on some joint angles (for a reference motion)."""
+    from cmbs.model.joints import JointModelBuilder
+
+    lengths, masses = (0.5, 0.5, 0.25), (3.0, 2.0, 0.8)
+    builder = JointModelBuilder("arm-driven", gravity=(0.0, 0.0))
+    parent = None
+    for k, (length, mass, angle) in enumerate(zip(lengths, masses, arm.q0), start=1):
+        builder.add_link(f"link{k}", parent=parent, coordinate=f"theta{k}",
+                         origin=(0.0, 0.0) if parent is None else (lengths[k - 2], 0.0), length=length, mass=mass,
+                         com=(length / 2, 0.0), inertia=mass * length**2 / 12, q0=angle)
+        parent = f"link{k}"
+    builder.add_closure("slider", point="link3.end", to=(0.0, 0.5), directions="z")
+    for coordinate, function in drivers.items():
+        builder.add_driver(coordinate, function)
+    return builder.build()
+
+
+def test_pidc_tracks_with_the_designed_error_dynamics_and_minimum_norm_torque():
+    from cmbs.control import PIDC
+
+    arm = cmbs.load("arm-on-slider")
+    q0 = arm.q0
+    reference_model = driven_arm(arm, {"theta2": f"{float(q0[1])!r} + 0.2*sin(2*t)",
+                                       "theta3": f"{float(q0[2])!r} - 0.1*sin(3*t)"})
+    motion = cmbs.kinematic_analysis(reference_model, np.linspace(0.0, 1.5, 301))
+    start = motion.q[0].copy()
+    start[1] += 0.05  # theta2 wrong by 0.05 rad
+    start = cmbs.assemble(arm, start, fixed=["theta2", "theta3"])
+    qd_start = cmbs.velocities(arm, start, qd=motion.qd[0], fixed=["theta2", "theta3"])
+    law = PIDC(arm, Reference(motion, ("theta2", "theta3")), kp=100.0, kd=20.0)
+    run = cmbs.simulate(arm, t_end=1.5, u=law, q0=start, qd0=qd_start, rtol=1e-10, atol=1e-12, dt=0.005)
+    assert run.info["status"] == "success"
+    error = motion["theta2"] - run["theta2"]
+    designed = -0.05 * (1 + 10 * run.t) * np.exp(-10 * run.t)
+    assert np.abs(error - designed).max() < 1e-5
+    for k in range(0, run.t.size, 50):  # the actuation lies in null(A)
+        A = arm.jacobian(run.q[k])
+        assert abs((A @ run["u"][k])[0]) < 1e-8 * max(1.0, np.abs(run["u"][k]).max())
