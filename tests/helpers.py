@@ -121,10 +121,10 @@ def kitchen_sink(*, drivers: bool = True, loads: bool = True, python_driver: boo
     return b.build()
 
 
-def library_four_bar_variant(name: str, *, coupler_mass: float = 5.0, driver: object | None = None,
-                             actuator: bool = False):
+def library_four_bar_variant(name: str, *, coupler_mass: float = 5.0, coupler_com: tuple = (5.0, 0.0),
+                             driver: object | None = None, actuator: bool = False):
     """The library four-bar rebuilt with the builder (same points and bars), optionally with another
-    coupler mass (inertia scaled with it), a constant driver on alpha, or a torque actuator."""
+    coupler mass (inertia scaled with it) or COM, a driver on alpha, or a torque actuator."""
     import cmbs
 
     base = cmbs.load("four-bar")
@@ -134,7 +134,7 @@ def library_four_bar_variant(name: str, *, coupler_mass: float = 5.0, driver: ob
     b.add_point("P1", *base.q0[0:2])
     b.add_point("P2", *base.q0[2:4])
     b.add_segment("crank", "A", "P1", mass=1.0, com=(1.0, 0.0), inertia=1 / 3, length=2.0)
-    b.add_segment("coupler", "P1", "P2", mass=coupler_mass, com=(5.0, 0.0), inertia=coupler_mass * 100 / 12,
+    b.add_segment("coupler", "P1", "P2", mass=coupler_mass, com=coupler_com, inertia=coupler_mass * 100 / 12,
                   length=10.0)
     b.add_segment("rocker", "P2", "B", mass=3.0, com=(3.0, 0.0), inertia=9.0, length=6.0)
     b.add_angle("alpha", segment="crank")

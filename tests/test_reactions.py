@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import cmbs
+from helpers import library_four_bar_variant
 from cmbs.errors import CmbsError
 from cmbs.inverse import inverse_dynamics
 from cmbs.inverse.reactions import joint_reaction_history, joint_reactions
@@ -23,18 +24,7 @@ def cross(a, b):
 def four_bar(coupler_com=(5.0, 0.0), driver="(pi/4) * sin(pi*t - pi/2)", name="four-bar-r"):
     """The library four-bar (A, B fixed; crank 2 m 1 kg, coupler 10 m 5 kg, rocker 6 m 3 kg), its
     coupler's COM optionally moved off the line of its points."""
-    base = cmbs.load("four-bar")
-    b = cmbs.NaturalModelBuilder(name)
-    b.add_point("A", 0.0, 0.0, fixed=True)
-    b.add_point("B", 10.0, 0.0, fixed=True)
-    b.add_point("P1", *base.q0[0:2])
-    b.add_point("P2", *base.q0[2:4])
-    b.add_segment("crank", "A", "P1", mass=1.0, com=(1.0, 0.0), inertia=1 / 3, length=2.0)
-    b.add_segment("coupler", "P1", "P2", mass=5.0, com=coupler_com, inertia=5 * 100 / 12, length=10.0)
-    b.add_segment("rocker", "P2", "B", mass=3.0, com=(3.0, 0.0), inertia=9.0, length=6.0)
-    b.add_angle("alpha", segment="crank")
-    b.add_driver("alpha", driver)
-    return b.build()
+    return library_four_bar_variant(name, coupler_com=coupler_com, driver=driver)
 
 
 # segment: (i, j, mass, length, (along, across), I_G) — the numbers above, restated

@@ -75,3 +75,20 @@ def actuator_map(model, coordinates: Sequence[str]) -> np.ndarray:
     columns = model.coordinate_indices(list(coordinates))
     gains = np.array([(model.forces(q, qd, 0.0, e) - base)[columns] for e in np.eye(model.n_u)])
     return gains
+
+
+def gain_vector(value: float | Sequence[float], size: int, label: str) -> np.ndarray:
+    """A scalar or per-coordinate gain as a (size,) array."""
+    try:
+        return np.broadcast_to(np.asarray(value, dtype=float), (size,)).copy()
+    except ValueError:
+        raise CmbsError(f"gain {label} must be a number or {size} numbers, got {value!r}") from None
+
+
+def input_map(model, coordinates: Sequence[str]) -> np.ndarray:
+    """(k, n_u) matrix turning generalized forces on ``coordinates`` into inputs u, after
+    checking that the actuators can act on every one of them."""
+    gains = actuator_map(model, coordinates)
+    if np.linalg.matrix_rank(gains) < len(coordinates):
+        raise CmbsError(f"model {model.name!r}: the actuators cannot act on every one of {', '.join(coordinates)}")
+    return np.linalg.pinv(gains.T)

@@ -16,9 +16,8 @@ from typing import Sequence
 
 import numpy as np
 
-from cmbs.control.base import Reference, actuator_map
+from cmbs.control.base import Reference, gain_vector, input_map
 from cmbs.dynamics import MatrixR
-from cmbs.errors import CmbsError
 from cmbs.model.model import Model
 
 
@@ -30,15 +29,10 @@ class ComputedTorque:
         self.model = model
         self.reference = reference
         self.columns = model.coordinate_indices(list(reference.coordinates))
-        k = self.columns.size
-        self.kp = np.broadcast_to(np.asarray(kp, dtype=float), (k,)).copy()
-        self.kd = np.broadcast_to(np.asarray(kd, dtype=float), (k,)).copy()
+        self.kp = gain_vector(kp, self.columns.size, "kp")
+        self.kd = gain_vector(kd, self.columns.size, "kd")
         self.solver = MatrixR(independent=tuple(reference.coordinates)).bind(model)
-        gains = actuator_map(model, reference.coordinates)
-        if np.linalg.matrix_rank(gains) < k:
-            raise CmbsError(f"model {model.name!r}: the actuators cannot act on every one of "
-                            f"{', '.join(reference.coordinates)}")
-        self.inverse_gains = np.linalg.pinv(gains.T)
+        self.inverse_gains = input_map(model, reference.coordinates)
         self.terms = model.new_terms()
         self.no_input = np.zeros(model.n_u)
 

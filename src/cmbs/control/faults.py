@@ -16,7 +16,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from cmbs.errors import CmbsError
-from cmbs.model.model import Model, Terms
+from cmbs.model.model import Model, Terms, assign_terms
 from cmbs.model.natural import NaturalEquations
 
 Law = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
@@ -31,20 +31,13 @@ class _MassFaultEquations:
         self.delta_gravity = delta_gravity
         self.t0 = t0
         self.inner_terms = inner.new_terms()
-        self.nominal_mass = inner.mass
 
     def new_terms(self) -> Terms:
         return Terms(self.inner.n, self.inner.m, scratch=0)
 
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
-        inner = self.inner_terms
-        self.inner.evaluate(q, qd, t, u, inner)
-        terms.Q[:] = inner.Q
-        terms.phi[:] = inner.phi
-        terms.A[:] = inner.A
-        terms.gamma[:] = inner.gamma
-        terms.phi_t[:] = inner.phi_t
-        terms.M[:] = self.nominal_mass
+        self.inner.evaluate(q, qd, t, u, self.inner_terms)
+        assign_terms(terms, self.inner_terms)
         if t >= self.t0:
             terms.M += self.delta_mass
             terms.Q += self.delta_gravity

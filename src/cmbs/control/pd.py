@@ -7,8 +7,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from cmbs.control.base import Reference, actuator_map
-from cmbs.errors import CmbsError
+from cmbs.control.base import Reference, gain_vector, input_map
 from cmbs.model.model import Model
 
 
@@ -20,14 +19,9 @@ class PD:
                  kd: float | Sequence[float], feed_forward: Callable[[float], np.ndarray] | None = None):
         self.columns = model.coordinate_indices(list(reference.coordinates))
         self.reference = reference
-        k = self.columns.size
-        self.kp = np.broadcast_to(np.asarray(kp, dtype=float), (k,)).copy()
-        self.kd = np.broadcast_to(np.asarray(kd, dtype=float), (k,)).copy()
-        gains = actuator_map(model, reference.coordinates)  # (n_u, k)
-        if np.linalg.matrix_rank(gains) < k:
-            raise CmbsError(f"model {model.name!r}: the actuators cannot act on every one of "
-                            f"{', '.join(reference.coordinates)}")
-        self.inverse_gains = np.linalg.pinv(gains.T)  # u = pinv(B_zᵀ) τ_z
+        self.kp = gain_vector(kp, self.columns.size, "kp")
+        self.kd = gain_vector(kd, self.columns.size, "kd")
+        self.inverse_gains = input_map(model, reference.coordinates)
         self.feed_forward = feed_forward
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:

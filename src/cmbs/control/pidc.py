@@ -17,8 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-from cmbs.control.base import Reference, actuator_map
-from cmbs.errors import CmbsError
+from cmbs.control.base import Reference, gain_vector, input_map
 from cmbs.inverse.projected import pidc_torque
 from cmbs.kinematics import accelerations
 from cmbs.model.model import Model
@@ -32,14 +31,10 @@ class PIDC:
         self.model = model
         self.reference = reference
         self.columns = model.coordinate_indices(list(reference.coordinates))
-        k = self.columns.size
-        self.kp = np.broadcast_to(np.asarray(kp, dtype=float), (k,)).copy()
-        self.kd = np.broadcast_to(np.asarray(kd, dtype=float), (k,)).copy()
+        self.kp = gain_vector(kp, self.columns.size, "kp")
+        self.kd = gain_vector(kd, self.columns.size, "kd")
         self.weight = weight
-        gains = actuator_map(model, model.coordinate_names)  # (n_u, n)
-        if np.linalg.matrix_rank(gains) < model.n:
-            raise CmbsError(f"model {model.name!r}: PIDC needs actuators on every coordinate")
-        self.inverse_gains = np.linalg.pinv(gains.T)
+        self.inverse_gains = input_map(model, model.coordinate_names)  # PIDC acts on every coordinate
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         z_ref, zd_ref, zdd_ref = self.reference(t)

@@ -66,6 +66,17 @@ class Terms:
         self.scratch = take(scratch)
 
 
+def assign_terms(target: "Terms", source: "Terms", rows: np.ndarray | slice = slice(None)) -> None:
+    """Copy Q, M and the constraint rows ``rows`` of ``source`` into ``target``."""
+    target.Q[:] = source.Q
+    target.phi[:] = source.phi[rows]
+    target.A[:] = source.A[rows]
+    target.gamma[:] = source.gamma[rows]
+    target.phi_t[:] = source.phi_t[rows]
+    if target.M is not source.M:
+        target.M[:] = source.M
+
+
 class ModelEquations(Protocol):
     """What a model builder provides (natural coordinates, joint coordinates, user equations)."""
 
@@ -290,15 +301,8 @@ class _RowSubset:
         return Terms(self.n, self.rows.size, constant_mass=constant)
 
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
-        inner = self.inner_terms
-        self.inner.evaluate(q, qd, t, u, inner)
-        terms.Q[:] = inner.Q
-        terms.phi[:] = inner.phi[self.rows]
-        terms.A[:] = inner.A[self.rows]
-        terms.gamma[:] = inner.gamma[self.rows]
-        terms.phi_t[:] = inner.phi_t[self.rows]
-        if terms.M is not inner.M:
-            terms.M[:] = inner.M
+        self.inner.evaluate(q, qd, t, u, self.inner_terms)
+        assign_terms(terms, self.inner_terms, self.rows)
 
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
         return self.inner.kinetic_energy(q, qd)
