@@ -86,4 +86,4 @@ def test_cli_inverse_with_reactions(tmp_path, capsys):
     assert np.all(np.isfinite(at_a)) and np.abs(at_a[:, 1] + at_b[:, 1]).max() > 50.0
     np.testing.assert_allclose(result.extras["joint torque alpha"], result.extras["driver_forces"][:, 0],
                                rtol=1e-9, atol=1e-9)
-    assert "reaction on coupler at P1" in capsys.readouterr().out
+    assert "reaction coupler@P1" in capsys.readouterr().out

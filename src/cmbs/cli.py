@@ -186,6 +186,8 @@ def _inverse(args: argparse.Namespace) -> int:
 
     _check_time_grid_and_outputs(args)
     model = _load(args)
+    if args.motion:
+        model = _prescribed(model, args)
     times = np.linspace(0.0, args.t_end, int(round(args.t_end / args.dt)) + 1)
     result = inverse_dynamics(model, times, method=args.method, **_formulation_options(args))
     print(f"{model.name}: inverse dynamics ({args.method}) over {len(times)} instants")
@@ -197,17 +199,11 @@ def _inverse(args: argparse.Namespace) -> int:
     if args.reactions:
         from cmbs.inverse import joint_reaction_history
 
-        reactions = joint_reaction_history(model, motion)
         extras = dict(motion.extras)
-        for (segment, point), force in reactions["forces"].items():
-            extras[f"reaction {segment}@{point}"] = force
-            print(f"  reaction on {segment} at {point:<10} max |F| {np.hypot(*force.T).max():.6g} N")
-        for angle, torque in reactions["torques"].items():
-            extras[f"joint torque {angle}"] = torque
-            print(f"  joint torque {angle:<16} max |τ| {np.abs(torque).max():.6g} N m")
-        for slider, force in reactions["sliders"].items():
-            extras[f"slider force {slider}"] = force
-            print(f"  slider force {slider:<16} max |F| {np.hypot(*force.T).max():.6g} N")
+        for label, value, unit in _reaction_series(joint_reaction_history(model, motion)):
+            extras[label] = value
+            size = np.hypot(*value.T) if value.ndim == 2 else np.abs(value)
+            print(f"  {label:<32} max {size.max():.6g} {unit}")
         motion = cmbs.Trajectory(motion.t, motion.q, motion.qd, motion.qdd, motion.names, extras, motion.info)
     if args.out:
         print(f"  result -> {motion.save(args.out)}")
@@ -216,6 +212,32 @@ def _inverse(args: argparse.Namespace) -> int:
 
         print(f"  figure -> {save_figure(plot_driver_forces(result.motion, result.driven_coordinates), args.plot)}")
     return 0
+
+
+def _prescribed(model: cmbs.Model, args: argparse.Namespace) -> cmbs.Model:
+    """The model driven by ``--motion`` (expressions or a file) on ``--coordinates``."""
+    from cmbs.motion import prescribe, read_motion
+
+    coordinates = [name.strip() for name in args.coordinates.split(",")] if args.coordinates else None
+    functions = read_motion(args.motion, model, coordinates=coordinates)
+    for name, function in functions.items():
+        times = getattr(function, "times", None)
+        if times is not None and not (times[0] <= 0.0 and args.t_end <= times[-1] + 1e-12):
+            raise _UsageError(f"--motion {args.motion}: column {name!r} covers t = {times[0]:g}..{times[-1]:g} s, "
+                              f"not 0..{args.t_end:g} s (--t-end)")
+    return prescribe(model, functions)
+
+
+def _reaction_series(reactions: dict) -> list[tuple[str, np.ndarray, str]]:
+    """(label, history, unit) of every joint reaction, for printing and saving; natural-coordinate
+    models report forces per segment end, joint-coordinate models per joint."""
+    if "joint_forces" in reactions:
+        return ([(f"reaction on {link}", force, "N") for link, force in reactions["forces"].items()]
+                + [(f"joint force {name}", force, "N or N m") for name, force in reactions["joint_forces"].items()]
+                + [(f"closure force {name}", force, "N") for name, force in reactions["closures"].items()])
+    return ([(f"reaction {segment}@{point}", force, "N") for (segment, point), force in reactions["forces"].items()]
+            + [(f"joint torque {angle}", torque, "N m") for angle, torque in reactions["torques"].items()]
+            + [(f"slider force {slider}", force, "N") for slider, force in reactions["sliders"].items()])
 
 
 def _fault(model: cmbs.Model, law, text: str):
@@ -246,8 +268,12 @@ def _track(args: argparse.Namespace) -> int:
 
     _check_time_grid_and_outputs(args)
     driven = _load(args)
+    if args.reference:
+        args.motion = args.reference
+        driven = _prescribed(driven, args)
     if not driven.drivers.any():
-        raise _UsageError(f"model {driven.name!r} has no drivers: the reference motion comes from a driven model")
+        raise _UsageError(f"model {driven.name!r} has no drivers: give the reference motion with --reference "
+                          "or use a driven model")
     times = np.linspace(0.0, args.t_end, int(round(args.t_end / args.dt)) + 1)
     motion = cmbs.kinematic_analysis(driven, times)
     plant = driven.without_drivers()
@@ -355,9 +381,15 @@ def build_parser() -> argparse.ArgumentParser:
                          help="driver multipliers of a formulation, or matrix-R Q_IDA")
     inverse.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                          help="option of the method's formulation, e.g. alpha=1e8 for penalty")
+    inverse.add_argument("--motion", metavar="FILE|EXPR",
+                         help="prescribed motion replacing the model's drivers: 'NAME = EXPR; ...' or a .npz/.csv "
+                              "file (a cmbs result, or a table with header t,NAME,...)")
+    inverse.add_argument("--coordinates", metavar="A,B",
+                         help="with --motion FILE: the columns to prescribe (default: the model's driven "
+                              "coordinates if the file has them, else every matching column)")
     inverse.add_argument("--reactions", action="store_true",
-                         help="also the joint reactions at every segment point, joint torques and slider forces "
-                              "(natural-coordinate models)")
+                         help="also the joint reactions: at every segment end, joint torques and slider forces "
+                              "(natural coordinates); at every joint and closure (joint coordinates)")
     inverse.add_argument("--out", help="result file (.npz or .csv) with the motion and driver_forces")
     inverse.add_argument("--plot", help="figure of the forces and the motion")
     inverse.set_defaults(run=_inverse)
@@ -366,6 +398,9 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument("--controller", choices=("pd", "ctc"), default="ctc", help="PD or computed torque")
     track.add_argument("--kp", type=float, default=100.0, help="proportional gain (ctc: s^-2; pd: force/unit)")
     track.add_argument("--kd", type=float, default=20.0, help="derivative gain (ctc: s^-1; pd: force s/unit)")
+    track.add_argument("--reference", metavar="FILE|EXPR",
+                       help="reference motion replacing the model's drivers: 'NAME = EXPR; ...' or a .npz/.csv file")
+    track.add_argument("--coordinates", metavar="A,B", help="with --reference FILE: the columns to track")
     track.add_argument("--fault", action="append", default=[],
                        help="mass:SEGMENT:FACTOR[:T0], offset:VALUE[:T0], scale:FACTOR[:T0], noise:SIGMA[:SEED]")
     track.add_argument("--initial-error", type=float, default=0.0,

@@ -1,4 +1,5 @@
-"""Joint reaction forces of planar natural-coordinate models (THEORY §1-2).
+"""Joint reaction forces of planar natural-coordinate models (THEORY §1-2); joint-coordinate
+models are handled by :mod:`cmbs.inverse.tree_reactions`.
 
 Convention of the library: ``M q̈ + Aᵀλ = Q``, so the generalized constraint force of row r is
 ``-A_rᵀ λ_r``.  Work in extended coordinates (q followed by the constants of fixed points, whose
@@ -54,7 +55,7 @@ from __future__ import annotations
 import numpy as np
 
 from cmbs.errors import CmbsError
-from cmbs.model.model import Model
+from cmbs.model.model import Model, base_equations, base_multipliers
 from cmbs.model.natural import _ANGLE, _DISTANCE, _PARALLEL, NaturalEquations
 from cmbs.trajectory import Trajectory
 
@@ -67,26 +68,31 @@ def _cross(a: np.ndarray, b: np.ndarray) -> float:
     return float(a[0] * b[1] - a[1] * b[0])
 
 
-def _equations(model: Model) -> NaturalEquations:
-    equations = model.equations
+def _equations(model: Model) -> tuple[NaturalEquations, np.ndarray, list[str]]:
+    """The natural-coordinate equations under the model's wrappers, the base row of every
+    model row (-1: none) and the names of the base rows."""
+    equations, rows = base_equations(model)
     if not isinstance(equations, NaturalEquations):
         raise CmbsError(f"model {model.name!r}: joint reactions need a natural-coordinate model")
     if not equations.segments and any(name.startswith("rigid ") for name in model.constraint_names):
         raise CmbsError(f"model {model.name!r}: its equations carry no segment data")
-    return equations
+    names = [""] * equations.m
+    for k in np.flatnonzero(rows >= 0):
+        names[rows[k]] = model.constraint_names[k]
+    return equations, rows, names
 
 
-def _couple_rows(model: Model, equations: NaturalEquations):
+def _couple_rows(names: list[str], equations: NaturalEquations):
     """(row, kind, name, extended indices) of the angle and slider (parallel) rows."""
     ints = equations.ints
     row = len(equations.segments) + _section(ints, _DISTANCE).size // 5
     rows = []
     angle = _section(ints, _ANGLE).reshape(-1, 9)
     for r in angle:
-        rows.append((row, "angle", model.constraint_names[row].partition(" ")[2], r))
+        rows.append((row, "angle", names[row].partition(" ")[2], r))
         row += 1
     for r in _section(ints, _PARALLEL).reshape(-1, 8):
-        name = model.constraint_names[row].partition(" ")[2]
+        name = names[row].partition(" ")[2]
         kind = "lock" if name.endswith(" lock") else "slider"
         rows.append((row, kind, name[:-5] if kind == "lock" else name, r))
         row += 1
@@ -116,10 +122,11 @@ def joint_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
         ``slider_couples``: {slider: float} — for sliders with ``lock``, the couple on the
         locked segment.
     """
-    equations = _equations(model)
+    equations, rows, names = _equations(model)
     q, qdd, lam = (np.asarray(a, dtype=float) for a in (q, qdd, lam))
     if lam.shape != (model.m,):
         raise CmbsError(f"lam has shape {lam.shape}, expected ({model.m},)")
+    lam = base_multipliers(lam, rows, equations.m)
     x = np.concatenate([q, equations.constants])
     a = np.concatenate([qdd, np.zeros(equations.constants.size)])
 
@@ -131,7 +138,7 @@ def joint_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     generalized = [np.zeros(4) for _ in equations.segments]   # C_s in (x_i, z_i, x_j, z_j)
     couples = np.zeros(len(equations.segments))
     torques, sliders, slider_couples = {}, {}, {}
-    for row, kind, name, r in _couple_rows(model, equations):
+    for row, kind, name, r in _couple_rows(names, equations):
         u = x[r[2:4]] - x[r[0:2]]
         w = x[r[6:8]] - x[r[4:6]]
         if kind == "angle":
@@ -172,14 +179,23 @@ def joint_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
 
 
 def joint_reaction_history(model: Model, motion: Trajectory) -> dict:
-    """:func:`joint_reactions` at every instant of ``motion`` (a trajectory of this model with
-    extras ``'lam'`` (k, m), e.g. ``inverse_dynamics(...).motion``); the same keys, each value
-    with a leading time axis ((k, 2) for forces, (k,) for couples and torques)."""
+    """Joint reactions at every instant of ``motion`` (a trajectory of this model with extras
+    ``'lam'`` (k, m), e.g. ``inverse_dynamics(...).motion``, and ``'u'`` (k, n_u) if the inputs
+    were not zero): :func:`joint_reactions` for natural-coordinate models,
+    :func:`~cmbs.inverse.tree_reactions.tree_reactions` for joint-coordinate ones.  The same keys,
+    each value with a leading time axis ((k, 2) for forces, (k,) for scalars)."""
+    from cmbs.inverse.tree_reactions import tree_reactions
+
     if "lam" not in motion.extras:
         raise CmbsError("the trajectory has no 'lam' extra (multipliers); use inverse_dynamics' motion")
     lam = np.asarray(motion.extras["lam"], dtype=float)
-    per_time = [joint_reactions(model, motion.q[i], motion.qd[i], motion.qdd[i], lam[i], motion.t[i])
-                for i in range(motion.t.size)]
+    if isinstance(base_equations(model)[0], NaturalEquations):
+        per_time = [joint_reactions(model, motion.q[i], motion.qd[i], motion.qdd[i], lam[i], motion.t[i])
+                    for i in range(motion.t.size)]
+    else:
+        inputs = np.asarray(motion.extras.get("u", np.zeros((motion.t.size, model.n_u))), dtype=float)
+        per_time = [tree_reactions(model, motion.q[i], motion.qd[i], motion.qdd[i], lam[i], inputs[i])
+                    for i in range(motion.t.size)]
     if not per_time:
         raise CmbsError("the trajectory is empty")
     return {key: {name: np.array([step[key][name] for step in per_time]) for name in per_time[0][key]}

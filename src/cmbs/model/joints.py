@@ -51,7 +51,7 @@ from cmbs.errors import ModelError
 from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions
 from cmbs.model.model import Model, Terms
 
-__all__ = ["JointModelBuilder", "JointEquations"]
+__all__ = ["JointModelBuilder", "JointEquations", "JointLayout"]
 
 REVOLUTE, PRISMATIC = 0, 1
 _JOINT_TYPES = {"revolute": REVOLUTE, "prismatic": PRISMATIC}
@@ -330,6 +330,54 @@ class JointEquations:
     def point_positions(self, q: np.ndarray) -> np.ndarray:
         """(n_points, 2): ``{link}.origin`` and ``{link}.end`` of every link, then the user points."""
         return _points_kernel(self.ip, self.rp, q)
+
+    def layout(self) -> "JointLayout":
+        """The links, closures, drivers and actuators decoded from the packed arrays."""
+        ip, rp, n = self.ip, self.rp, self.n
+        links = np.asarray(rp[2:2 + _LINK_REALS * n]).reshape(n, _LINK_REALS)
+        nr, nd, nu = int(ip[I_NR]), int(ip[I_ND]), int(ip[I_NU])
+        closure_links = np.asarray(ip[ip[I_OCLOSURE]:ip[I_OCLOSURE] + 2 * nr]).reshape(nr, 2)
+        closure_reals = np.asarray(rp[ip[R_OCLOSURE]:ip[R_OCLOSURE] + _CLOSURE_REALS * nr]).reshape(nr, _CLOSURE_REALS)
+        drivers = np.asarray(ip[ip[I_ODRIVER]:ip[I_ODRIVER] + 2 * nd]).reshape(nd, 2)[:, 0]
+        return JointLayout(
+            gravity=np.asarray(rp[0:2]), parent=np.asarray(ip[ip[I_OPARENT]:ip[I_OPARENT] + n]),
+            revolute=np.asarray(ip[ip[I_OTYPE]:ip[I_OTYPE] + n]) == REVOLUTE,
+            order=np.asarray(ip[ip[I_OORDER]:ip[I_OORDER] + n]), origin=links[:, 0:2], angle=links[:, 2],
+            com=links[:, 3:5], mass=links[:, 5], inertia=links[:, 6], closure_links=closure_links,
+            closure_a=closure_reals[:, 0:2], closure_b=closure_reals[:, 2:4], closure_direction=closure_reals[:, 4:6],
+            driver_coordinates=drivers, actuator_coordinates=np.asarray(ip[ip[I_OACT]:ip[I_OACT] + nu]),
+            actuator_gains=np.asarray(rp[ip[R_OGAIN]:ip[R_OGAIN] + nu]))
+
+
+@dataclass(frozen=True)
+class JointLayout:
+    """A joint-coordinate model in plain arrays (read-only views of its packed parameters).
+
+    Per link k (model order): ``parent[k]`` (-1: ground), ``revolute[k]``, ``origin[k]`` (o_k in
+    the parent frame), ``angle[k]`` (α_k), ``com[k]``, ``mass[k]``, ``inertia[k]`` (about G);
+    ``order`` parents before children.  Per closure row r: the links of points a and b
+    (-1: ground), their local coordinates (ground coordinates when the link is -1) and the
+    ground-fixed direction n_r.  Driver rows follow the closure rows; ``driver_coordinates[d]``
+    is the coordinate of driver d; actuator i adds ``actuator_gains[i] u_i`` to Q at
+    ``actuator_coordinates[i]``.
+    """
+
+    gravity: np.ndarray
+    parent: np.ndarray
+    revolute: np.ndarray
+    order: np.ndarray
+    origin: np.ndarray
+    angle: np.ndarray
+    com: np.ndarray
+    mass: np.ndarray
+    inertia: np.ndarray
+    closure_links: np.ndarray
+    closure_a: np.ndarray
+    closure_b: np.ndarray
+    closure_direction: np.ndarray
+    driver_coordinates: np.ndarray
+    actuator_coordinates: np.ndarray
+    actuator_gains: np.ndarray
 
 
 # ------------------------------------------------------------------ the builder

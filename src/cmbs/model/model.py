@@ -77,6 +77,29 @@ def assign_terms(target: "Terms", source: "Terms", rows: np.ndarray | slice = sl
         target.M[:] = source.M
 
 
+def base_equations(model: "Model") -> tuple[object, np.ndarray]:
+    """The equations a model's wrappers (drivers removed or prescribed, faults) are built on,
+    and for each model row its row there (-1: a row the base equations do not have).  A wrapper
+    has ``inner`` and, when it changes the rows, ``row_origin`` (its row k is inner row
+    ``row_origin[k]``, -1 for a row of its own)."""
+    equations = model.equations
+    rows = np.arange(model.m)
+    while hasattr(equations, "inner"):
+        origin = getattr(equations, "row_origin", None)
+        if origin is not None:
+            rows = np.where(rows >= 0, np.asarray(origin)[np.maximum(rows, 0)], -1)
+        equations = equations.inner
+    return equations, rows
+
+
+def base_multipliers(lam: np.ndarray, rows: np.ndarray, size: int) -> np.ndarray:
+    """Multipliers of the base equations' ``size`` rows from a model's ``lam`` and its
+    :func:`base_equations` rows (zero for base rows the model does not have)."""
+    base = np.zeros(size)
+    base[rows[rows >= 0]] = lam[rows >= 0]
+    return base
+
+
 class ModelEquations(Protocol):
     """What a model builder provides (natural coordinates, joint coordinates, user equations)."""
 
@@ -292,6 +315,7 @@ class _RowSubset:
     def __init__(self, equations: ModelEquations, rows: np.ndarray):
         self.inner = equations
         self.rows = rows
+        self.row_origin = rows          # row k of these equations is row rows[k] of ``inner``
         self.inner_terms = equations.new_terms()
         self.n = self.inner_terms.Q.size
 
