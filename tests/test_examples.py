@@ -8,7 +8,10 @@ import pytest
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 SHORT = {"baumgarte_drift.py": ["--t-end", "2"], "slider_crank_singular.py": ["--t-end", "1.5"],
-         "compare_formulations.py": ["--t-end", "0.5"], "four_bar_inverse_dynamics.py": ["--t-end", "1"]}
+         "compare_formulations.py": ["--t-end", "0.5"], "four_bar_inverse_dynamics.py": ["--t-end", "1"],
+         "aghili_arm_on_slider.py": ["--t-end", "0.3"],
+         "aghili_slider_crank.py": ["--t-end", "0.3", "--t-forward", "0.5"],
+         "udwadia_kalaba_tracking.py": ["--t-end", "1"], "passive_manipulator_servo.py": ["--t-end", "0.5"]}
 
 
 def test_every_example_is_listed():

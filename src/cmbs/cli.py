@@ -240,31 +240,10 @@ def _reaction_series(reactions: dict) -> list[tuple[str, np.ndarray, str]]:
             + [(f"slider force {slider}", force, "N") for slider, force in reactions["sliders"].items()])
 
 
-def _fault(model: cmbs.Model, law, text: str):
-    """--fault mass:SEGMENT:FACTOR[:T0] | offset:VALUE[:T0] | scale:FACTOR[:T0] | noise:SIGMA[:SEED]."""
-    from cmbs.control import ActuatorFault, SensorNoise, mass_fault
-
-    kind, _, rest = text.partition(":")
-    parts = rest.split(":") if rest else []
-    try:
-        if kind == "mass" and len(parts) in (2, 3):
-            return mass_fault(model, parts[0], factor=float(parts[1]), t0=float(parts[2]) if len(parts) == 3
-                              else 0.0), law
-        if kind in ("offset", "scale") and len(parts) in (1, 2):
-            t0 = float(parts[1]) if len(parts) == 2 else 0.0
-            options = {"offset": float(parts[0])} if kind == "offset" else {"scale": float(parts[0])}
-            return model, ActuatorFault(law, t0=t0, **options)
-        if kind == "noise" and len(parts) in (1, 2):
-            return model, SensorNoise(law, position=float(parts[0]), seed=int(parts[1]) if len(parts) == 2 else 0)
-    except ValueError:
-        pass
-    raise _UsageError(f"--fault {text!r}: expected mass:SEGMENT:FACTOR[:T0], offset:VALUE[:T0], "
-                      "scale:FACTOR[:T0] or noise:SIGMA[:SEED]")
-
-
 def _track(args: argparse.Namespace) -> int:
     from cmbs.control import PD, ComputedTorque, Reference
-    from cmbs.metrics import nrmse, peak_norm, rms_norm, settling_time
+    from cmbs.control.study import Fault, format_table, robustness_study, track
+    from cmbs.inverse.ida import driven_columns
 
     _check_time_grid_and_outputs(args)
     driven = _load(args)
@@ -274,39 +253,43 @@ def _track(args: argparse.Namespace) -> int:
     if not driven.drivers.any():
         raise _UsageError(f"model {driven.name!r} has no drivers: give the reference motion with --reference "
                           "or use a driven model")
+    faults = [Fault.parse(text) for text in args.fault]
+    if args.initial_error:
+        faults.insert(0, Fault.parse(f"initial:{args.initial_error!r}"))
     times = np.linspace(0.0, args.t_end, int(round(args.t_end / args.dt)) + 1)
     motion = cmbs.kinematic_analysis(driven, times)
     plant = driven.without_drivers()
-    driven_coordinates = cmbs.inverse_dynamics(driven, motion).driven_coordinates
-    reference = Reference(motion, driven_coordinates)
-    if args.controller == "ctc":
-        law = ComputedTorque(plant, reference, kp=args.kp, kd=args.kd)
-    else:
-        law = PD(plant, reference, kp=args.kp, kd=args.kd)
-    for text in args.fault:
-        plant, law = _fault(plant, law, text)
-    q0 = plant.q0.copy()
-    if args.initial_error:
-        column = plant.coordinate_index(driven_coordinates[0])
-        q0[column] += args.initial_error
-        q0 = cmbs.assemble(plant, q0, fixed=[driven_coordinates[0]])
-    run = cmbs.simulate(plant, t_end=args.t_end, u=law, q0=q0, qd0=np.zeros(plant.n), dt=args.dt, rtol=args.rtol,
-                        atol=args.atol)
-    k = run.t.size
-    columns = [run.names.index(name) for name in driven_coordinates]
-    error = motion.q[:k, columns] - run.q[:, columns]
-    print(f"{plant.name}: {args.controller} tracking of {', '.join(driven_coordinates)}, {run.info['status']} "
+    coordinates = [driven.coordinate_names[c] for c in driven_columns(driven)]
+    reference = Reference(motion, coordinates)
+    controller = ComputedTorque if args.controller == "ctc" else PD
+    law = controller(plant, reference, kp=args.kp, kd=args.kd)
+    if args.sample_rate:
+        from cmbs.control import ZeroOrderHold
+
+        law = ZeroOrderHold(law, 1.0 / args.sample_rate)
+    options = {"rtol": args.rtol, "atol": args.atol, "integrator": args.integrator}
+    if args.study:
+        common = [fault for fault in faults if fault.kind == "initial"]
+        cases = [fault for fault in faults if fault.kind != "initial"]
+        runs = robustness_study(plant, law, motion, coordinates, t_end=args.t_end, faults=cases, common=common,
+                                **options)
+        print(format_table(runs, f"{plant.name}: {args.controller} robustness study"
+                                 + (f" (all cases: {', '.join(f.text for f in common)})" if common else "")))
+        return 0 if all(run.succeeded for run in runs) else 1
+    result = track(plant, law, motion, coordinates, t_end=args.t_end, faults=faults,
+                   label=", ".join(f.text for f in faults) or "nominal", **options)
+    run = result.run
+    print(f"{plant.name}: {args.controller} tracking of {', '.join(coordinates)}, {run.info['status']} "
           f"at t = {run.t[-1]:.6g} s")
-    print(f"  NRMSE {', '.join(f'{v:.4g}' for v in np.atleast_1d(nrmse(run.t, run.q[:, columns], motion.q[:k, columns])))}"
-          f"; settling time (1 %) {settling_time(run.t, error):.4g} s")
-    print(f"  actuation RMS norm {rms_norm(run.t, run['u']):.6g}, peak norm {peak_norm(run['u']):.6g}")
+    print(f"  NRMSE {', '.join(f'{v:.4g}' for v in result.nrmse)}; settling time (1 %) {result.settling_time:.4g} s")
+    print(f"  actuation RMS norm {result.rms_norm:.6g}, peak norm {result.peak_norm:.6g}")
     if args.out:
         print(f"  result -> {run.save(args.out)}")
     if args.plot:
         from cmbs.plotting import plot_simulation, save_figure
 
         print(f"  figure -> {save_figure(plot_simulation(run, model=plant), args.plot)}")
-    return 0 if run.info["status"] == "success" else 1
+    return 0 if result.succeeded else 1
 
 
 def _check_time_grid_and_outputs(args: argparse.Namespace) -> None:
@@ -402,11 +385,18 @@ def build_parser() -> argparse.ArgumentParser:
                        help="reference motion replacing the model's drivers: 'NAME = EXPR; ...' or a .npz/.csv file")
     track.add_argument("--coordinates", metavar="A,B", help="with --reference FILE: the columns to track")
     track.add_argument("--fault", action="append", default=[],
-                       help="mass:SEGMENT:FACTOR[:T0], offset:VALUE[:T0], scale:FACTOR[:T0], noise:SIGMA[:SEED]")
+                       help="a fault (repeatable): mass:SEGMENT:FACTOR[:T0], offset:VALUE[:T0], scale:FACTOR[:T0], "
+                            "noise:SIGMA[:SEED] or initial:DELTA")
+    track.add_argument("--study", action="store_true",
+                       help="robustness study: the nominal run and one run per --fault, as a table (thesis Table 7.2)")
     track.add_argument("--initial-error", type=float, default=0.0,
                        help="offset of the first driven coordinate at t = 0 (wrong initial state)")
     track.add_argument("--t-end", type=float, required=True, help="final time [s]")
-    track.add_argument("--dt", type=float, default=0.01, help="output interval [s]")
+    track.add_argument("--dt", type=float, default=0.01,
+                       help="output interval [s]; also the step of fixed-step integrators")
+    track.add_argument("--integrator", default="rk45", choices=_integrator_names(), help="time integrator")
+    track.add_argument("--sample-rate", type=float, metavar="HZ",
+                       help="digital controller: sample and hold the law at this rate (e.g. 1000)")
     track.add_argument("--rtol", type=float, default=1e-8)
     track.add_argument("--atol", type=float, default=1e-10)
     track.add_argument("--out", help="result file (.npz or .csv)")
@@ -418,6 +408,12 @@ def build_parser() -> argparse.ArgumentParser:
     dynamics_options(compare)
     compare.set_defaults(run=_compare)
     return parser
+
+
+def _integrator_names() -> tuple[str, ...]:
+    from cmbs.simulate import INTEGRATORS
+
+    return INTEGRATORS
 
 
 def _formulation_names() -> list[str]:

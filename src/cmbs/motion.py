@@ -22,6 +22,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from cmbs.errors import CmbsError, ExpressionError
+from cmbs.inverse.ida import driven_columns
 from cmbs.model.drivers import Expression, Table, TimeFunction
 from cmbs.model.model import Model, Terms, assign_terms
 from cmbs.trajectory import Trajectory
@@ -150,7 +151,7 @@ def _motion_from_file(path: Path, model: Model, coordinates: Sequence[str] | Non
         times, columns = _read_table(path)
     available = [name for name in model.coordinate_names if name in columns]
     if coordinates is None:
-        driven = [model.coordinate_names[int(np.flatnonzero(row)[0])] for row in _driver_rows(model)]
+        driven = [model.coordinate_names[c] for c in driven_columns(model)] if model.drivers.any() else []
         coordinates = driven if driven and all(name in columns for name in driven) else available
     missing = [name for name in coordinates if name not in columns]
     if missing or not coordinates:
@@ -163,15 +164,6 @@ def _motion_from_file(path: Path, model: Model, coordinates: Sequence[str] | Non
         except CmbsError as error:
             raise CmbsError(f"{path}, column {name!r}: {error}") from None
     return functions
-
-
-def _driver_rows(model: Model) -> list[np.ndarray]:
-    """Rows of A belonging to drivers that fix exactly one coordinate."""
-    if not model.drivers.any():
-        return []
-    A = model.jacobian(model.q0, 0.0)
-    rows = [A[k] for k in np.flatnonzero(model.drivers)]
-    return [row for row in rows if np.count_nonzero(row) == 1]
 
 
 def _is_result_csv(path: Path) -> bool:

@@ -59,6 +59,13 @@ class ZeroOrderHold:
         self.sample_time = -np.inf
         self.value: np.ndarray | None = None
 
+    def reset(self) -> None:
+        """Forget the held value (and reset the wrapped law if it keeps state), for a new run."""
+        self.sample_time = -np.inf
+        self.value = None
+        if hasattr(self.law, "reset"):
+            self.law.reset()
+
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         sample = np.floor(t / self.period + 1e-9) * self.period
         if self.value is None or sample != self.sample_time:

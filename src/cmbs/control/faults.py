@@ -5,7 +5,7 @@
   segment's element mass matrix and gravity force are scaled (both are linear in the mass).
 - :class:`ActuatorFault`: the inputs reaching the plant are ``scale·u + offset`` from t0 on.
 - :class:`SensorNoise`: the controller sees q + noise, q̇ + noise (Gaussian, seeded, drawn
-  once per distinct time so that repeated stage evaluations at one time agree).
+  once per sensor sample period and held, so that it is a fixed function of time).
 - A wrong initial state is simply a different ``q0``/``qd0`` given to :func:`cmbs.simulate`.
 """
 
@@ -89,17 +89,24 @@ class ActuatorFault:
 
 
 class SensorNoise:
-    """Wrap a control law so that it sees noisy measurements (standard deviations
-    ``position`` and ``velocity``; generator seeded by ``seed``)."""
+    """Wrap a control law so that it sees noisy measurements: Gaussian noise of standard
+    deviations ``position`` and ``velocity``, drawn once per sensor sample (every ``period``
+    seconds) and held in between.  The noise of sample k comes from a generator seeded by
+    (``seed``, k), so it is a fixed function of time: repeated calls, Runge-Kutta stages and
+    step rejections all see the same measurement, and adaptive integrators step over the
+    sample instants as over any piecewise-smooth input."""
 
-    def __init__(self, law: Law, *, position: float, velocity: float = 0.0, seed: int = 0):
+    def __init__(self, law: Law, *, position: float, velocity: float = 0.0, seed: int = 0, period: float = 1e-3):
+        if position < 0 or velocity < 0 or not period > 0:
+            raise CmbsError(f"sensor noise needs standard deviations >= 0 and a period > 0, got {position}, "
+                            f"{velocity}, {period}")
         self.law = law
-        self.position, self.velocity = position, velocity
-        self.rng = np.random.default_rng(seed)
-        self.last: tuple[float, np.ndarray, np.ndarray] | None = None
+        self.position, self.velocity, self.seed, self.period = position, velocity, seed, period
+        self.last: tuple[int, np.ndarray, np.ndarray] | None = None
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        if self.last is None or self.last[0] != t:
-            self.last = (t, self.rng.normal(0.0, self.position, q.shape), self.rng.normal(0.0, self.velocity,
-                                                                                       qd.shape))
+        sample = int(np.floor(t / self.period + 1e-9))
+        if self.last is None or self.last[0] != sample:
+            rng = np.random.default_rng([self.seed, sample])
+            self.last = (sample, rng.normal(0.0, self.position, q.shape), rng.normal(0.0, self.velocity, qd.shape))
         return self.law(t, q + self.last[1], qd + self.last[2])

@@ -52,7 +52,7 @@ class InverseDynamics:
         return self.forces[:, self.driven_coordinates.index(coordinate)]
 
 
-def _driven_coordinates(model: Model) -> np.ndarray:
+def driven_columns(model: Model) -> np.ndarray:
     """Index of the coordinate each driver row drives (its A row is a unit row vector)."""
     A = model.jacobian(model.q0, 0.0)[model.drivers]
     columns = []
@@ -82,7 +82,7 @@ def inverse_dynamics(model: Model, times: np.ndarray | Trajectory, *, method: st
     if not model.drivers.any():
         raise CmbsError(f"model {model.name!r} has no drivers: nothing prescribes the motion")
     motion = times if isinstance(times, Trajectory) else kinematic_analysis(model, np.asarray(times, dtype=float))
-    columns = _driven_coordinates(model)
+    columns = driven_columns(model)
     driver_rows = np.flatnonzero(model.drivers)
     k = motion.t.size
     forces = np.zeros((k, columns.size))
