@@ -22,7 +22,6 @@ from cmbs.control.faults import mass_fault
 from cmbs.control.udwadia_kalaba import CirclePath, TrackingTask, UdwadiaKalabaTracking, point_output
 from cmbs.errors import CmbsError
 from cmbs.metrics import peak_norm, rms_norm, rmse, settling_time
-from cmbs.model.joints import JointModelBuilder
 
 parser = argparse.ArgumentParser(description=__doc__)
 parser.add_argument("--out-dir", default="out", help="folder for the figure")
@@ -35,35 +34,6 @@ Path(args.out_dir).mkdir(parents=True, exist_ok=True)
 START = (-math.pi / 4, math.pi / 4)  # at rest, tip at (1.707, -0.707): 0.32 m from the circle's start
 CIRCLE = CirclePath(center=(1.0, -0.6), radius=0.4, period=2.0)
 KP, KD = args.kp, 2.0 * math.sqrt(args.kp)
-
-
-def natural_arm() -> cmbs.Model:
-    """Two uniform rods (1 m, 1 kg), points P1, P2, absolute θ1, relative θ2, torques on both."""
-    b = cmbs.NaturalModelBuilder("arm2-natural", gravity=(0.0, -9.81), description="two-link arm, natural coords")
-    p1 = np.array([math.cos(START[0]), math.sin(START[0])])
-    p2 = p1 + [math.cos(sum(START)), math.sin(sum(START))]
-    b.add_point("O", 0.0, 0.0, fixed=True)
-    b.add_point("P1", *p1)
-    b.add_point("P2", *p2)
-    b.add_segment("upper", "O", "P1", mass=1.0, com=(0.5, 0.0), inertia=1 / 12, length=1.0)
-    b.add_segment("lower", "P1", "P2", mass=1.0, com=(0.5, 0.0), inertia=1 / 12, length=1.0)
-    b.add_angle("theta1", segment="upper")
-    b.add_angle("theta2", from_segment="upper", to_segment="lower")
-    b.add_actuator("tau1", coordinate="theta1")
-    b.add_actuator("tau2", coordinate="theta2")
-    return b.build()
-
-
-def joint_arm() -> cmbs.Model:
-    """The same arm in joint angles θ1, θ2 (no constraints)."""
-    b = JointModelBuilder("arm2-joint", gravity=(0.0, -9.81), description="two-link arm, joint coords")
-    b.add_link("upper", parent=None, coordinate="theta1", length=1.0, mass=1.0, com=(0.5, 0.0), inertia=1 / 12,
-               q0=START[0])
-    b.add_link("lower", parent="upper", coordinate="theta2", origin=(1.0, 0.0), length=1.0, mass=1.0,
-               com=(0.5, 0.0), inertia=1 / 12, q0=START[1])
-    b.add_actuator("tau1", coordinate="theta1")
-    b.add_actuator("tau2", coordinate="theta2")
-    return b.build()
 
 
 def track(label: str, model: cmbs.Model, tip: str, plant: cmbs.Model | None = None, **options) -> dict:
@@ -87,7 +57,8 @@ def track(label: str, model: cmbs.Model, tip: str, plant: cmbs.Model | None = No
             "status": run.info["status"]}
 
 
-natural, joint = natural_arm(), joint_arm()
+natural = cmbs.load("two-link-arm", theta1=START[0], theta2=START[1])  # natural coordinates
+joint = cmbs.load("two-link-arm-joint", theta1=START[0], theta2=START[1])  # the same arm in joint angles
 runs = [track("natural, lagrange", natural, "P2", formulation="lagrange"),
         track("natural, projection", natural, "P2", formulation="projection"),
         track("natural, udwadia-kalaba", natural, "P2", formulation="udwadia-kalaba"),

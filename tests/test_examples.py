@@ -11,7 +11,8 @@ SHORT = {"baumgarte_drift.py": ["--t-end", "2"], "slider_crank_singular.py": ["-
          "compare_formulations.py": ["--t-end", "0.5"], "four_bar_inverse_dynamics.py": ["--t-end", "1"],
          "aghili_arm_on_slider.py": ["--t-end", "0.3"],
          "aghili_slider_crank.py": ["--t-end", "0.3", "--t-forward", "0.5"],
-         "udwadia_kalaba_tracking.py": ["--t-end", "1"], "passive_manipulator_servo.py": ["--t-end", "0.5"]}
+         "udwadia_kalaba_tracking.py": ["--t-end", "1"], "passive_manipulator_servo.py": ["--t-end", "0.5"],
+         "thesis_four_bar_control.py": ["--t-end", "1"]}
 
 
 def test_every_example_is_listed():

@@ -21,6 +21,8 @@ from cmbs.library import names
     ("slider-crank-joint", {}, 2, 1),
     ("arm-on-slider", {}, 3, 2),
     ("passive-manipulator-joint", {}, 3, 3),
+    ("two-link-arm", {}, 6, 2),
+    ("two-link-arm-joint", {"tool": (0.8, 0.1)}, 2, 2),
     ("chaplygin-sleigh", {}, 3, 3),
 ])
 def test_library_models_assemble_with_their_dof(name, parameters, n, dof):

@@ -50,7 +50,7 @@ def test_element_mass_matrix_equals_rigid_body_kinetic_energy():
     ("particle-circle", {}), ("pendulum", {}), ("double-pendulum", {}), ("four-bar", {}),
     ("chain", {"links": 5}), ("chain", {"links": 6, "closed": True}), ("slider-crank", {}),
     ("passive-manipulator", {}), ("human", {}), ("slider-crank-joint", {}), ("arm-on-slider", {}),
-    ("passive-manipulator-joint", {}),
+    ("passive-manipulator-joint", {}), ("two-link-arm", {}), ("two-link-arm-joint", {}),
 ])
 def test_library_model_derivatives(name, parameters):
     model = cmbs.load(name, **parameters)

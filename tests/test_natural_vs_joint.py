@@ -34,8 +34,10 @@ def natural_state(natural, joint, theta, theta_dot):
 NATURAL_TO_JOINT = {
     "slider-crank": {"A": "crank.end", "C": "rod.end"},
     "passive-manipulator": {"P1": "link1.end", "P2": "link2.end", "P3": "link3.end"},
+    "two-link-arm": {"P1": "upper.end", "P2": "lower.end"},
 }
-PAIRS = [("slider-crank", "slider-crank-joint"), ("passive-manipulator", "passive-manipulator-joint")]
+PAIRS = [("slider-crank", "slider-crank-joint"), ("passive-manipulator", "passive-manipulator-joint"),
+         ("two-link-arm", "two-link-arm-joint")]
 
 
 @pytest.mark.parametrize("natural_name, joint_name", PAIRS)

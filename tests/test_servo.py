@@ -14,6 +14,7 @@ from cmbs.errors import CmbsError
 from cmbs.inverse.servo import (LinePath, ServoConvergenceError, callable_output, coordinate_output, segment_point,
                                 servo_inverse_dynamics)
 from cmbs.model.joints import JointModelBuilder
+from cmbs.motion import prescribe, read_motion
 from helpers import SmoothPath, first_derivative_fd, second_derivative_fd
 
 RED, GEN = "passive-manipulator", "passive-manipulator-joint"
@@ -321,20 +322,9 @@ def test_pendulum_torque_matches_the_closed_form():
 
 
 def driven_double_pendulum():
-    """The library double pendulum with torques on θ1, θ2 and drivers prescribing them."""
-    b = cmbs.NaturalModelBuilder("double-pendulum-driven")
-    b.add_point("O", 0.0, 0.0, fixed=True)
-    b.add_point("P1", math.cos(-0.6), math.sin(-0.6))
-    b.add_point("P2", math.cos(-0.6) + math.cos(-0.3), math.sin(-0.6) + math.sin(-0.3))
-    b.add_segment("upper", "O", "P1", mass=1.0, com=(0.5, 0.0), inertia=1 / 12, length=1.0)
-    b.add_segment("lower", "P1", "P2", mass=1.0, com=(0.5, 0.0), inertia=1 / 12, length=1.0)
-    b.add_angle("theta1", segment="upper")
-    b.add_angle("theta2", from_segment="upper", to_segment="lower")
-    b.add_actuator("tau1", coordinate="theta1")
-    b.add_actuator("tau2", coordinate="theta2")
-    b.add_driver("theta1", "-0.6 + 0.4*sin(2*t)")
-    b.add_driver("theta2", "0.3 + 0.5*sin(3*t)")
-    return b.build()
+    """The library two-link arm (the double pendulum with torques on θ1, θ2) with θ1, θ2 prescribed."""
+    arm = cmbs.load("two-link-arm", theta1=-0.6, theta2=0.3)
+    return prescribe(arm, read_motion("theta1 = -0.6 + 0.4*sin(2*t); theta2 = 0.3 + 0.5*sin(3*t)", arm))
 
 
 def test_fully_actuated_double_pendulum_matches_inverse_dynamics():

@@ -18,7 +18,6 @@ from cmbs.control.faults import mass_fault
 from cmbs.control.udwadia_kalaba import (CirclePath, CoordinateOutput, FunctionOutput, TrackingTask,
                                          UdwadiaKalabaTracking, point_output)
 from cmbs.errors import CmbsError
-from cmbs.model.joints import JointModelBuilder
 from helpers import SmoothPath, first_derivative_fd, second_derivative_fd
 
 WRONG = (-math.pi / 4, math.pi / 4)         # start of the arms: tip at (1 + √½, -√½), off the circle
@@ -26,35 +25,15 @@ CIRCLE = CirclePath(center=(1.0, -0.6), radius=0.4, period=2.0)  # starts at (1.
 
 
 # ------------------------------------------------------------------ the two-link arm, two ways
-def natural_arm(theta: tuple[float, float] = WRONG, gravity: float = 9.81) -> cmbs.Model:
-    """Two uniform rods (1 m, 1 kg) in natural coordinates with torques on θ1 (absolute) and θ2
-    (relative): M is singular (massless angle coordinates), four constraints."""
-    b = cmbs.NaturalModelBuilder("arm2-natural", gravity=(0.0, -gravity))
-    p1 = np.array([math.cos(theta[0]), math.sin(theta[0])])
-    p2 = p1 + [math.cos(sum(theta)), math.sin(sum(theta))]
-    b.add_point("O", 0.0, 0.0, fixed=True)
-    b.add_point("P1", *p1)
-    b.add_point("P2", *p2)
-    b.add_segment("upper", "O", "P1", mass=1.0, com=(0.5, 0.0), inertia=1 / 12, length=1.0)
-    b.add_segment("lower", "P1", "P2", mass=1.0, com=(0.5, 0.0), inertia=1 / 12, length=1.0)
-    b.add_angle("theta1", segment="upper")
-    b.add_angle("theta2", from_segment="upper", to_segment="lower")
-    b.add_actuator("tau1", coordinate="theta1")
-    b.add_actuator("tau2", coordinate="theta2")
-    return b.build()
+def natural_arm(theta: tuple[float, float] = WRONG) -> cmbs.Model:
+    """The library two-link arm (uniform rods 1 m, 1 kg) in natural coordinates with torques on
+    θ1 (absolute) and θ2 (relative): M is singular (massless angle coordinates), four constraints."""
+    return cmbs.load("two-link-arm", theta1=theta[0], theta2=theta[1])
 
 
-def joint_arm(theta: tuple[float, float] = WRONG, gravity: float = 9.81) -> cmbs.Model:
+def joint_arm(theta: tuple[float, float] = WRONG) -> cmbs.Model:
     """The same arm in joint angles (no constraints), with a tool point on the lower link."""
-    b = JointModelBuilder("arm2-joint", gravity=(0.0, -gravity))
-    b.add_link("upper", parent=None, coordinate="theta1", length=1.0, mass=1.0, com=(0.5, 0.0), inertia=1 / 12,
-               q0=theta[0])
-    b.add_link("lower", parent="upper", coordinate="theta2", origin=(1.0, 0.0), length=1.0, mass=1.0,
-               com=(0.5, 0.0), inertia=1 / 12, q0=theta[1])
-    b.add_point("tool", link="lower", local=(0.8, 0.1))
-    b.add_actuator("tau1", coordinate="theta1")
-    b.add_actuator("tau2", coordinate="theta2")
-    return b.build()
+    return cmbs.load("two-link-arm-joint", theta1=theta[0], theta2=theta[1], tool=(0.8, 0.1))
 
 
 def natural_state(theta: np.ndarray, rate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

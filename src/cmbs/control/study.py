@@ -75,7 +75,8 @@ class Fault:
 
 @dataclass(frozen=True)
 class TrackingRun:
-    """A closed-loop run and its measures (NRMSE per tracked coordinate, in their order)."""
+    """A closed-loop run and its measures (NRMSE per tracked coordinate, in their order;
+    ``settling_time`` is NaN when the run starts without error, inf when it never settles)."""
 
     label: str
     run: Trajectory
@@ -119,7 +120,7 @@ def track(plant: Model, law: Law, motion: Trajectory, coordinates: Sequence[str]
     reference = motion.q[:k, columns]
     values = run.q[:, [run.names.index(name) for name in coordinates]]
     error = reference - values
-    measured_settling = settling_time(run.t, error) if np.abs(error[0]).max() > 0 else 0.0
+    measured_settling = settling_time(run.t, error) if np.abs(error[0]).max() > 0 else np.nan
     return TrackingRun(label, run, tuple(coordinates), np.atleast_1d(nrmse(run.t, values, reference)),
                        measured_settling, rms_norm(run.t, run["u"]), peak_norm(run["u"]), wall)
 
@@ -149,6 +150,6 @@ def format_table(runs: Sequence[TrackingRun], title: str = "") -> str:
     lines += [header, "-" * len(header)]
     for run in runs:
         lines.append(f"{run.label:<{width}} " + " ".join(f"{100 * v:>16.4g}" for v in run.nrmse)
-                     + f" {run.settling_time:>10.4g} {run.rms_norm:>10.4g} {run.peak_norm:>10.4g} "
+                     + f" {'-' if np.isnan(run.settling_time) else f'{run.settling_time:.4g}':>10} {run.rms_norm:>10.4g} {run.peak_norm:>10.4g} "
                      f"{run.wall_time:>8.3g}  {run.run.info.get('status', '?')}")
     return "\n".join(lines)

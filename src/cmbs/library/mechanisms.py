@@ -1,6 +1,7 @@
 """Builders of the library mechanisms taken from Aghili (2005) and Quasem, Uhlar & Betsch (2009),
-in natural coordinates.  Parameter values and their status (read from the source or chosen) are
-given in each docstring; docs/models.md collects them."""
+a fully actuated two-link arm and the Chaplygin sleigh, in natural or joint coordinates.
+Parameter values and their status (read from the source or chosen) are given in each docstring;
+docs/models.md collects them."""
 
 from __future__ import annotations
 
@@ -150,6 +151,62 @@ def passive_manipulator_joint(gravity: float = 0.0) -> Model:
     builder.add_actuator("tau2", coordinate="theta2")
     model = builder.build()
     return model.replace(parameters={"gravity": gravity})
+
+
+def two_link_arm(theta1: float = -math.pi / 4, theta2: float = math.pi / 4, gravity: float = 9.81) -> Model:
+    """Fully actuated two-link planar arm in natural coordinates: the ``double-pendulum`` library
+    model with torque actuators ``tau1``, ``tau2`` on its angle coordinates (the arm of the
+    Udwadia-Kalaba tracking example, control through constraints after Nicoara 2016 §5).
+
+    Links ``upper`` O-P1 and ``lower`` P1-P2: uniform rods of 1 m and 1 kg, I_G = m l²/12
+    (chosen, as in the double pendulum); O fixed.  Coordinates (P1.x, P1.z, P2.x, P2.z, theta1,
+    theta2): ``theta1`` absolute, ``theta2`` relative (upper to lower); 4 constraints, 2 DOF; M is
+    singular (the angle coordinates carry no mass).  ``gravity`` m/s² along -z (default 9.81).
+    Start at rest at ``theta1``, ``theta2`` in radians, the start values of the coordinates of
+    the same names (default -45°, +45°: the lower link horizontal, tip at (1 + √½, -√½)).
+    """
+    p1 = np.array([math.cos(theta1), math.sin(theta1)])
+    p2 = p1 + [math.cos(theta1 + theta2), math.sin(theta1 + theta2)]
+    builder = NaturalModelBuilder(
+        "two-link-arm", gravity=(0.0, -gravity),
+        description="fully actuated two-link arm: two uniform rods (1 m, 1 kg), torques tau1, tau2 on theta1, theta2",
+        source="textbook compound double pendulum (uniform rods, I_G = m l^2/12) with joint torques "
+               "(values chosen; Nicoara 2016 §5 for its use in control through constraints)")
+    builder.add_point("O", 0.0, 0.0, fixed=True)
+    builder.add_point("P1", *p1)
+    builder.add_point("P2", *p2)
+    for name, i, j in (("upper", "O", "P1"), ("lower", "P1", "P2")):
+        builder.add_segment(name, i, j, mass=1.0, com=(0.5, 0.0), inertia=1.0 / 12.0, length=1.0)
+    builder.add_angle("theta1", segment="upper", initial=theta1)
+    builder.add_angle("theta2", from_segment="upper", to_segment="lower", initial=theta2)
+    builder.add_actuator("tau1", coordinate="theta1")
+    builder.add_actuator("tau2", coordinate="theta2")
+    model = builder.build()
+    return model.replace(parameters={"theta1": theta1, "theta2": theta2, "gravity": gravity})
+
+
+def two_link_arm_joint(theta1: float = -math.pi / 4, theta2: float = math.pi / 4, gravity: float = 9.81,
+                       tool: tuple[float, float] | None = None) -> Model:
+    """The two-link arm of :func:`two_link_arm` in joint angles θ1 (absolute), θ2 (relative): the
+    same links ``upper``, ``lower``, actuators, gravity and start, no constraints.  ``tool``
+    (ξ, η) in the lower link's frame, m, adds a named point ``tool`` there (none by default)."""
+    from cmbs.model.joints import JointModelBuilder
+
+    builder = JointModelBuilder(
+        "two-link-arm-joint", gravity=(0.0, -gravity),
+        description="fully actuated two-link arm (1 m, 1 kg rods) in joint angles theta1, theta2; torques tau1, tau2",
+        source="textbook compound double pendulum (uniform rods, I_G = m l^2/12) with joint torques "
+               "(values chosen; Nicoara 2016 §5 for its use in control through constraints)")
+    builder.add_link("upper", parent=None, coordinate="theta1", length=1.0, mass=1.0, com=(0.5, 0.0),
+                     inertia=1.0 / 12.0, q0=theta1)
+    builder.add_link("lower", parent="upper", coordinate="theta2", origin=(1.0, 0.0), length=1.0, mass=1.0,
+                     com=(0.5, 0.0), inertia=1.0 / 12.0, q0=theta2)
+    if tool is not None:
+        builder.add_point("tool", link="lower", local=tool)
+    builder.add_actuator("tau1", coordinate="theta1")
+    builder.add_actuator("tau2", coordinate="theta2")
+    model = builder.build()
+    return model.replace(parameters={"theta1": theta1, "theta2": theta2, "gravity": gravity, "tool": tool})
 
 
 def chaplygin_sleigh(mass: float = 1.0, inertia: float = 0.1, distance: float = 0.2, speed: float = 1.0,
