@@ -254,8 +254,7 @@ def _track(args: argparse.Namespace) -> int:
         raise _UsageError(f"model {driven.name!r} has no drivers: give the reference motion with --reference "
                           "or use a driven model")
     faults = [Fault.parse(text) for text in args.fault]
-    if args.initial_error:
-        faults.insert(0, Fault.parse(f"initial:{args.initial_error!r}"))
+    start_error = [Fault.parse(f"initial:{args.initial_error!r}")] if args.initial_error else []
     times = np.linspace(0.0, args.t_end, int(round(args.t_end / args.dt)) + 1)
     motion = cmbs.kinematic_analysis(driven, times)
     plant = driven.without_drivers()
@@ -268,14 +267,13 @@ def _track(args: argparse.Namespace) -> int:
 
         law = ZeroOrderHold(law, 1.0 / args.sample_rate)
     options = {"rtol": args.rtol, "atol": args.atol, "integrator": args.integrator}
-    if args.study:
-        common = [fault for fault in faults if fault.kind == "initial"]
-        cases = [fault for fault in faults if fault.kind != "initial"]
-        runs = robustness_study(plant, law, motion, coordinates, t_end=args.t_end, faults=cases, common=common,
+    if args.study:   # each --fault alone; --initial-error in every case
+        runs = robustness_study(plant, law, motion, coordinates, t_end=args.t_end, faults=faults, common=start_error,
                                 **options)
         print(format_table(runs, f"{plant.name}: {args.controller} robustness study"
-                                 + (f" (all cases: {', '.join(f.text for f in common)})" if common else "")))
+                                 + (f" (all cases: {start_error[0].text})" if start_error else "")))
         return 0 if all(run.succeeded for run in runs) else 1
+    faults = start_error + faults
     result = track(plant, law, motion, coordinates, t_end=args.t_end, faults=faults,
                    label=", ".join(f.text for f in faults) or "nominal", **options)
     run = result.run
