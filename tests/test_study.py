@@ -80,3 +80,35 @@ def test_cli_study_prints_the_table(capsys):
     assert status == 0
     assert "robustness study (all cases: initial:0.05)" in text
     assert text.count("success") == 3
+
+
+ARM_REFERENCE = "theta2 = -1.2 + 0.2*sin(t); theta3 = -0.9 + 0.1*t"
+
+
+def _track_nrmse(capsys, *options):
+    status = main(["track", "arm-on-slider", "--reference", ARM_REFERENCE, "--t-end", "1", "--initial-error", "0.02",
+                   *options])
+    text = capsys.readouterr().out
+    assert status == 0, text
+    return [float(v) for v in text.split("NRMSE ")[1].split(";")[0].split(",")]
+
+
+def test_cli_controllers_on_the_redundantly_actuated_arm(capsys):
+    """PIDC, Udwadia-Kalaba tracking and computed torque impose the same error dynamics
+    ë + K_d ė + K_p e = 0 with an exact model, so they track identically; the hybrid law adds
+    only a constraint force, which does not change the motion (it samples at 1 kHz)."""
+    pidc = _track_nrmse(capsys, "--controller", "pidc")
+    uk = _track_nrmse(capsys, "--controller", "udwadia-kalaba")
+    ctc = _track_nrmse(capsys, "--controller", "ctc")
+    hybrid = _track_nrmse(capsys, "--controller", "hybrid", "--force", "5", "--integrator", "rk4", "--dt", "0.001",
+                          "--sample-rate", "1000")
+    assert 1e-3 < pidc[0] < 0.05
+    np.testing.assert_allclose(uk, pidc, rtol=1e-3)
+    np.testing.assert_allclose(ctc, pidc, rtol=1e-3)
+    np.testing.assert_allclose(hybrid, pidc, rtol=2e-2)     # sampled at 1 kHz instead of continuous
+
+
+def test_cli_hybrid_force_mistake(capsys):
+    assert main(["track", "arm-on-slider", "--reference", ARM_REFERENCE, "--t-end", "1", "--controller", "hybrid",
+                 "--force", "five"]) == 2
+    assert "--force 'five'" in capsys.readouterr().err

@@ -241,7 +241,7 @@ def _reaction_series(reactions: dict) -> list[tuple[str, np.ndarray, str]]:
 
 
 def _track(args: argparse.Namespace) -> int:
-    from cmbs.control import PD, ComputedTorque, Reference
+    from cmbs.control import Reference
     from cmbs.control.study import Fault, format_table, robustness_study, track
     from cmbs.inverse.ida import driven_columns
 
@@ -260,8 +260,7 @@ def _track(args: argparse.Namespace) -> int:
     plant = driven.without_drivers()
     coordinates = [driven.coordinate_names[c] for c in driven_columns(driven)]
     reference = Reference(motion, coordinates)
-    controller = ComputedTorque if args.controller == "ctc" else PD
-    law = controller(plant, reference, kp=args.kp, kd=args.kd)
+    law = _controller(args, plant, reference)
     if args.sample_rate:
         from cmbs.control import ZeroOrderHold
 
@@ -288,6 +287,27 @@ def _track(args: argparse.Namespace) -> int:
 
         print(f"  figure -> {save_figure(plot_simulation(run, model=plant), args.plot)}")
     return 0 if result.succeeded else 1
+
+
+def _controller(args: argparse.Namespace, plant: cmbs.Model, reference):
+    """The control law named by --controller, on the nominal plant."""
+    from cmbs.control import PD, PIDC, ComputedTorque, CoordinateOutput, Hybrid, TrackingTask, UdwadiaKalabaTracking
+
+    if args.controller == "pd":
+        return PD(plant, reference, kp=args.kp, kd=args.kd)
+    if args.controller == "ctc":
+        return ComputedTorque(plant, reference, kp=args.kp, kd=args.kd)
+    if args.controller == "pidc":
+        return PIDC(plant, reference, kp=args.kp, kd=args.kd)
+    if args.controller == "hybrid":
+        try:
+            force = [float(value) for value in args.force.split(",")]
+        except ValueError:
+            raise _UsageError(f"--force {args.force!r}: expected numbers separated by commas") from None
+        return Hybrid(plant, reference, kp=args.kp, kd=args.kd, force_reference=np.array(force), kf=args.kf,
+                      ki=args.ki, period=1.0 / args.sample_rate if args.sample_rate else 1e-3)
+    task = TrackingTask(CoordinateOutput(plant, reference.coordinates), reference)
+    return UdwadiaKalabaTracking(plant, task, kp=args.kp, kd=args.kd)
 
 
 def _check_time_grid_and_outputs(args: argparse.Namespace) -> None:
@@ -376,7 +396,13 @@ def build_parser() -> argparse.ArgumentParser:
     inverse.set_defaults(run=_inverse)
 
     track = model_command("track", "closed-loop tracking of a driven model's motion by its actuators")
-    track.add_argument("--controller", choices=("pd", "ctc"), default="ctc", help="PD or computed torque")
+    track.add_argument("--controller", choices=("pd", "ctc", "pidc", "hybrid", "udwadia-kalaba"), default="ctc",
+                       help="PD, computed torque, projected inverse dynamics (PIDC), hybrid motion/force, or "
+                            "Udwadia-Kalaba tracking (docs/control.md)")
+    track.add_argument("--force", default="0",
+                       help="hybrid: desired constraint multipliers λ_d, one per constraint row (comma-separated)")
+    track.add_argument("--kf", type=float, default=0.5, help="hybrid: proportional force gain (0 <= kf < 1)")
+    track.add_argument("--ki", type=float, default=10.0, help="hybrid: integral force gain [1/s]")
     track.add_argument("--kp", type=float, default=100.0, help="proportional gain (ctc: s^-2; pd: force/unit)")
     track.add_argument("--kd", type=float, default=20.0, help="derivative gain (ctc: s^-1; pd: force s/unit)")
     track.add_argument("--reference", metavar="FILE|EXPR",
