@@ -63,3 +63,11 @@ def rms_norm(t: np.ndarray, u: np.ndarray) -> float:
 def peak_norm(u: np.ndarray) -> float:
     """Peak norm sup_t max_i |u_i(t)| (Aghili 2005, Table II)."""
     return float(np.max(np.abs(np.asarray(u, dtype=float)), initial=0.0))
+
+
+def constraint_force_error(t: np.ndarray, lam: np.ndarray, desired: np.ndarray) -> float:
+    """RMS norm of the constraint-force error, sqrt(1/T ∫ |λ - λ_d|² dt) (Aghili 2005 §VII-B:
+    the force loop regulates λ to λ_d); ``desired`` (k, m) or (m,) held constant."""
+    lam = np.asarray(lam, dtype=float).reshape(len(t), -1)
+    desired = np.broadcast_to(np.asarray(desired, dtype=float), lam.shape)
+    return rms_norm(t, lam - desired)
