@@ -2,14 +2,19 @@
 numba function, for natural- and joint-coordinate models.
 
 Used by :func:`cmbs.simulate` when the run allows it (integrator ``rk4``; formulation
-``lagrange``, ``baumgarte`` or ``projection`` with the standard inertia; constant inputs; no
-drift projection; no Python-callable time functions); otherwise the Python path runs, which
-gives the same results (tested to 1e-12), including where Lagrange and Baumgarte stop at a
-singular configuration (the rank of A is checked at every evaluation, as in Python).  The formulations are those of
+``lagrange``, ``baumgarte`` or ``projection`` with the standard inertia; constant inputs or a
+:class:`~cmbs.control.ComputedTorque` law, alone or in a :class:`~cmbs.control.ZeroOrderHold`
+sampled every step; no drift projection; no Python-callable time functions); otherwise the
+Python path runs, which gives the same results (tested to 1e-12, closed loops to 1e-10),
+including where Lagrange and Baumgarte stop at a singular configuration (the rank of A is
+checked at every evaluation, as in Python).  The formulations are those of
 :mod:`cmbs.dynamics` (same equations, same singularity check for Lagrange/Baumgarte)::
 
     lagrange/baumgarte   [M Aᵀ; A 0][q̈; λ] = [Q; γ - 2ξωΦ̇ - ω²Φ]
     projection           (M̂ + PM - M̂P) q̈ = PQ + M̂A⁺γ,   f_c = (I - P)(Mq̈ - Q),   λ = -(Aᵀ)⁺f_c
+
+The computed-torque law is evaluated on its own model (which may differ from the plant) as in
+:func:`computed_torque`.
 """
 
 from __future__ import annotations
@@ -19,6 +24,9 @@ import math
 import numba
 import numpy as np
 
+from cmbs.control.base import ZeroOrderHold
+from cmbs.control.computed_torque import ComputedTorque
+from cmbs.model.drivers import evaluate_piecewise
 from cmbs.model.joints import JointEquations, _evaluate_kernel as _joint_kernel
 from cmbs.model.model import Model
 from cmbs.model.natural import NaturalEquations, _evaluate as _natural_kernel
@@ -28,6 +36,8 @@ LAGRANGE, BAUMGARTE, PROJECTION = 0, 1, 2
 METHODS = {"lagrange": LAGRANGE, "baumgarte": BAUMGARTE, "projection": PROJECTION}
 # status codes of the loop
 OK, SINGULAR, NON_FINITE = 0, 1, 2
+# inputs of the loop: constant, a computed-torque law at every stage, or that law sampled and held
+CONSTANT, LAW, HELD = 0, 1, 2
 
 
 def supported(model: Model) -> int | None:
@@ -38,6 +48,55 @@ def supported(model: Model) -> int | None:
     if isinstance(equations, JointEquations) and not equations.python:
         return KIND_JOINT
     return None
+
+
+def kernel(model: Model) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(kind, ints, reals, buffer, mass) of a supported model: its kernel's data, a zeroed
+    :class:`~cmbs.model.model.Terms` buffer, and the constant M of a natural-coordinate model
+    (zeros for a joint model, whose M is in the buffer)."""
+    kind = supported(model)
+    equations = model.equations
+    terms = model.new_terms()
+    if kind == KIND_NATURAL:
+        return kind, equations.ints, equations.reals, terms.buffer, np.array(terms.M)
+    return kind, equations.ip, equations.rp, terms.buffer, np.zeros((model.n, model.n))
+
+
+def control(u: object, model: Model, dt: float) -> tuple[int, ComputedTorque | None] | None:
+    """(input mode, law) when the loop can compute the inputs ``u`` of a run of ``model`` with
+    step ``dt``, else None.
+
+    Constant inputs (an array or None) give CONSTANT; a :class:`ComputedTorque` gives LAW; a
+    :class:`ZeroOrderHold` of one with period ``dt`` exactly gives HELD.  The law's own model
+    must be supported and have the plant's coordinates and inputs counts.  Anything else (a
+    fault wrapper, another law, another period) is Python's."""
+    if not callable(u):
+        return CONSTANT, None
+    mode, law = (HELD, u.law) if type(u) is ZeroOrderHold and u.period == dt else (LAW, u)
+    if type(law) is not ComputedTorque or supported(law.model) is None or law.model.n != model.n \
+            or law.model.n_u != model.n_u:
+        return None
+    return mode, law
+
+
+def law_arrays(law: ComputedTorque | None, model: Model) -> tuple:
+    """The tuple :func:`computed_torque` reads for ``law`` (its model's kernel, workspace and
+    zero inputs; its coordinates, constraint rows and gains; the reference spline's breaks and
+    coefficients, one row per coordinate in the flattened layout of
+    :func:`~cmbs.model.drivers.evaluate_piecewise`; the inverse actuator gains).  For no law
+    (constant inputs) the same types, empty, on ``model``'s kernel: numba needs them typed."""
+    if law is None:
+        kind, ints, reals, buffer, mass = kernel(model)
+        empty = np.zeros(0)
+        return (kind, ints, reals, buffer, mass, model.m, np.zeros(model.n_u), np.zeros(0, dtype=np.int64),
+                np.zeros(0, dtype=np.int64), empty, empty, empty, np.zeros((0, 0)), np.zeros((model.n_u, 0)))
+    kind, ints, reals, buffer, mass = kernel(law.model)
+    spline = law.reference._spline
+    coefficients = np.transpose(spline.c, (2, 1, 0)).reshape(law.columns.size, -1)  # [j, 4i + r] = c[r, i, j]
+    return (kind, ints, reals, buffer, mass, law.model.m, np.zeros(law.model.n_u), law.columns.astype(np.int64),
+            law.solver.partition.rows.astype(np.int64), np.array(law.kp, dtype=float),
+            np.array(law.kd, dtype=float), np.ascontiguousarray(spline.x, dtype=float),
+            np.ascontiguousarray(coefficients, dtype=float), np.ascontiguousarray(law.inverse_gains, dtype=float))
 
 
 @numba.njit(cache=True)
@@ -163,10 +222,81 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
 
 
 @numba.njit(cache=True)
-def rk4(kind, method, parameters, q0, qd0, h, steps, every, u, ints, reals, buffer_size, mass, row_scale, m):
-    """Fixed-step RK4 for ``steps`` steps of size ``h`` from t = 0; records (t, q, q̇, q̈, λ, |Φ|max,
-    |Φ̇|max) every ``every`` steps.  Returns the records, the number recorded and a status code
-    with the time it refers to (for a failed run: where the formulation could not go on)."""
+def computed_torque(law, q, qd, t, K, rhs, u):
+    """The inputs of :class:`~cmbs.control.ComputedTorque` at (q, q̇, t) into ``u``; NaN when its
+    linear system is singular (the Python law raises there).
+
+    The law (thesis ch. 6) is τ_z = Rᵀ(M(R z̈_c + S) - Q₀), u = G τ_z, with M, Q₀ (Q at u = 0),
+    A, γ of the law's model, G its inverse actuator gains, and::
+
+        z̈_c = z̈_ref + K_d (ż_ref - ż) + K_p (z_ref - z)
+
+    where z_ref, ż_ref, z̈_ref come from the reference's cubic spline at t clamped to the spline's
+    span (as :meth:`~cmbs.control.Reference.__call__`).  Without forming R, with A_r the
+    partition's r constraint rows and E_z (n, k) the columns of the identity at the k independent
+    coordinates (r + k = n, A_d invertible)::
+
+        [M    A_rᵀ  -E_z] [q̈  ]   [Q₀ ]
+        [A_r  0     0   ] [λ  ] = [γ_r]
+        [E_zᵀ 0     0   ] [τ_z]   [z̈_c]
+
+    The last two rows give A_r q̈ = γ_r, q̈_z = z̈_c, i.e. q̈ = R z̈_c + S; premultiplying the
+    first by Rᵀ, with A_r R = 0 and E_zᵀ R = I, gives τ_z = Rᵀ(M q̈ - Q₀): the law's τ_z.
+
+    ``law`` is the tuple of :func:`law_arrays`; ``K`` (n+r+k, n+r+k) and ``rhs`` (n+r+k,) are
+    workspace.
+    """
+    kind, ints, reals, buffer, mass, m, no_input, columns, rows, kp, kd, breaks, coefficients, gains = law
+    n = q.shape[0]
+    r = rows.shape[0]
+    k = columns.shape[0]
+    _evaluate(kind, q, qd, t, no_input, ints, reals, buffer)
+    A = buffer[n + m:n + m + m * n].reshape((m, n))
+    gamma = buffer[n + m + m * n:n + 2 * m + m * n]
+    M = mass if kind == KIND_NATURAL else buffer[n + 3 * m + m * n:n + 3 * m + m * n + n * n].reshape((n, n))
+    K[:, :] = 0.0
+    for i in range(n):
+        for j in range(n):
+            K[i, j] = M[i, j]
+        rhs[i] = buffer[i]
+    for a in range(r):
+        for j in range(n):
+            K[n + a, j] = A[rows[a], j]
+            K[j, n + a] = A[rows[a], j]
+        rhs[n + a] = gamma[rows[a]]
+    clamped = min(max(t, breaks[0]), breaks[breaks.shape[0] - 1])
+    for b in range(k):
+        reference = evaluate_piecewise(breaks, coefficients[b], clamped)
+        c = columns[b]
+        K[c, n + r + b] = -1.0
+        K[n + r + b, c] = 1.0
+        rhs[n + r + b] = reference[2] + kd[b] * (reference[1] - qd[c]) + kp[b] * (reference[0] - q[c])
+    if not _solve_in_place(K, rhs):
+        u[:] = np.nan
+        return
+    for i in range(u.shape[0]):
+        total = 0.0
+        for b in range(k):
+            total += gains[i, b] * rhs[n + r + b]
+        u[i] = total
+
+
+@numba.njit(cache=True)
+def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buffer_size, mass, row_scale, m, mode,
+        law):
+    """Fixed-step RK4 for ``steps`` steps of size ``h`` from t = 0; records (t, q, q̇, q̈, λ, u,
+    |Φ|max, |Φ̇|max) every ``every`` steps.  Returns the records, the number recorded and a status
+    code with the time, state and inputs it refers to (for a failed run: where the formulation
+    could not go on).
+
+    The inputs (``mode``): CONSTANT keeps ``u0``; LAW evaluates :func:`computed_torque` (``law``
+    from :func:`law_arrays`) at every stage; HELD reproduces :class:`~cmbs.control.ZeroOrderHold`
+    with period h on the Python loop: the law is sampled at t = 0 and at every step's last stage
+    (at t_n + h, which is the next sample instant, with that stage's state y_n + h k₃: the hold
+    cannot tell that stage from the next step's start), and the value is held through the next
+    step's first three stages.  As :func:`cmbs.simulate` records a callable input, the recorded
+    u at t_n is the law at the recorded state (t_n, y_n), and q̈, λ there are evaluated with it.
+    """
     n = q0.shape[0]
     records = steps // every + 1
     T = np.zeros(records)
@@ -174,29 +304,43 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u, ints, reals, buff
     QDs = np.zeros((records, n))
     QDDs = np.zeros((records, n))
     LAMs = np.zeros((records, m))
+    Us = np.zeros((records, u0.shape[0]))
     PHI = np.zeros(records)
     PHID = np.zeros(records)
     buffer = np.zeros(buffer_size)
-    q, qd = q0.copy(), qd0.copy()
+    q, qd, u = q0.copy(), qd0.copy(), u0.copy()
     k1q, k1v, k2q, k2v, k3q, k3v, k4q, k4v = (np.empty(n), np.empty(n), np.empty(n), np.empty(n),
                                               np.empty(n), np.empty(n), np.empty(n), np.empty(n))
     lam = np.empty(m)
     stage_lam = np.empty(m)
     K = np.empty((n + m, n + m))
     rhs = np.empty(n + m)
+    size = n + law[7].shape[0] + law[8].shape[0]  # n + k independent coordinates + r constraint rows
+    law_K = np.empty((size, size))
+    law_rhs = np.empty(size)
+    sampled = np.empty(u0.shape[0])
     recorded = 0
     for step in range(steps + 1):
         t = step * h
+        if mode == LAW or (mode == HELD and step == 0):
+            computed_torque(law, q, qd, t, law_K, law_rhs, u)
         status = field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, k1v, lam, K, rhs,
                        True)
         if status != OK:
-            return T, Qs, QDs, QDDs, LAMs, PHI, PHID, recorded, status, t, q, qd
+            return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, recorded, status, t, q, qd, u
         if step % every == 0:
             T[recorded] = t
             Qs[recorded] = q
             QDs[recorded] = qd
-            QDDs[recorded] = k1v
-            LAMs[recorded] = lam
+            if mode == HELD and step > 0:  # the recorded input: the law at this state (same A: no new rank check)
+                computed_torque(law, q, qd, t, law_K, law_rhs, sampled)
+                field(kind, method, parameters, q, qd, t, sampled, ints, reals, buffer, mass, row_scale, QDDs[recorded],
+                      LAMs[recorded], K, rhs, False)
+                Us[recorded] = sampled
+            else:
+                QDDs[recorded] = k1v
+                LAMs[recorded] = lam
+                Us[recorded] = u
             phi = buffer[n:n + m]
             A = buffer[n + m:n + m + m * n].reshape((m, n))
             phid = A @ qd + buffer[n + 2 * m + m * n:n + 3 * m + m * n]
@@ -207,21 +351,27 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u, ints, reals, buff
             break
         k1q[:] = qd
         sq, sv, st = q + 0.5 * h * k1q, qd + 0.5 * h * k1v, t + 0.5 * h
+        if mode == LAW:
+            computed_torque(law, sq, sv, st, law_K, law_rhs, u)
         status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, k2v, stage_lam,
                        K, rhs, True)
         k2q[:] = qd + 0.5 * h * k1v
         if status == OK:
             sq, sv = q + 0.5 * h * k2q, qd + 0.5 * h * k2v
+            if mode == LAW:
+                computed_torque(law, sq, sv, st, law_K, law_rhs, u)
             status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, k3v,
                            stage_lam, K, rhs, True)
         k3q[:] = qd + 0.5 * h * k2v
         if status == OK:
             sq, sv, st = q + h * k3q, qd + h * k3v, t + h
+            if mode != CONSTANT:
+                computed_torque(law, sq, sv, st, law_K, law_rhs, u)
             status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, k4v,
                            stage_lam, K, rhs, True)
         k4q[:] = qd + h * k3v
         if status != OK:
-            return T, Qs, QDs, QDDs, LAMs, PHI, PHID, recorded, status, st, sq, sv
+            return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, recorded, status, st, sq, sv, u
         q = q + (h / 6.0) * (k1q + 2.0 * k2q + 2.0 * k3q + k4q)
         qd = qd + (h / 6.0) * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
-    return T, Qs, QDs, QDDs, LAMs, PHI, PHID, recorded, OK, steps * h, q, qd
+    return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, recorded, OK, steps * h, q, qd, u

@@ -123,8 +123,10 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
         Convergence of the implicit integrators' Newton iterations.
     compiled
         Run the whole loop compiled (:mod:`cmbs.fast`): None chooses it when the run allows it
-        (rk4; lagrange, baumgarte or standard projection; constant inputs; no projection; no
-        Python time functions), True requires it, False keeps the Python loop.
+        (rk4; lagrange, baumgarte or standard projection; constant inputs, or a
+        :class:`~cmbs.control.ComputedTorque` law alone or in a
+        :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; no projection; no Python time
+        functions), True requires it, False keeps the Python loop.
 
     Returns
     -------
@@ -169,11 +171,11 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
     if compiled and fast_plan is None:
         raise CmbsError(f"the compiled loop cannot run this simulation (it needs integrator rk4 with t_end a "
                         "multiple of dt, formulation lagrange, baumgarte or projection with the standard inertia, "
-                        f"constant inputs, no --project and no Python time functions; model {model.name!r})")
+                        "constant inputs or a ComputedTorque law (alone or in a ZeroOrderHold with period dt) on "
+                        f"a compiled model, no --project and no Python time functions; model {model.name!r})")
     if fast_plan is not None and compiled is not False:
-        return _run_compiled(model, solver, chosen, fast_plan, inputs(0.0, q_start, qd_start), q_start, qd_start,
-                             t_end, dt, started, {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol,
-                                                  "project": project})
+        return _run_compiled(model, solver, chosen, fast_plan, inputs, q_start, qd_start, t_end, dt, started,
+                             {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol, "project": project})
     bar = _Progress(t_end, progress)
     try:
         if integrator in EXPLICIT:
@@ -388,46 +390,48 @@ def _trajectory(model: Model, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd:
 
 def _compiled_plan(model: Model, chosen: Formulation, integrator: str, u: object, project: bool, t_end: float,
                    dt: float) -> tuple | None:
-    """(kernel kind, method, parameters) when :mod:`cmbs.fast` can run the simulation, else None."""
+    """(kernel kind, method, parameters, input mode, law) when :mod:`cmbs.fast` can run the
+    simulation, else None."""
     from cmbs import fast
     from cmbs.dynamics import Baumgarte, Lagrange, Projection
 
     kind = fast.supported(model)
+    inputs = fast.control(u, model, dt)
     steps = round(t_end / dt)
-    if integrator != "rk4" or project or callable(u) or kind is None or abs(steps * dt - t_end) > 1e-9 * t_end:
+    if integrator != "rk4" or project or inputs is None or kind is None or abs(steps * dt - t_end) > 1e-9 * t_end:
         return None
     if isinstance(chosen, (Lagrange, Baumgarte)) and not chosen.least_squares:
         method = fast.BAUMGARTE if isinstance(chosen, Baumgarte) else fast.LAGRANGE
         xi, omega = (chosen.xi, chosen.omega) if isinstance(chosen, Baumgarte) else (0.0, 0.0)
-        return kind, method, np.array([xi, omega, chosen.singular_tolerance, 0.0, 0.0])
+        return kind, method, np.array([xi, omega, chosen.singular_tolerance, 0.0, 0.0]), *inputs
     if isinstance(chosen, Projection) and chosen.inertia == "standard":
-        return kind, fast.PROJECTION, np.array([0.0, 0.0, chosen.threshold, 0.0, 0.0])
+        return kind, fast.PROJECTION, np.array([0.0, 0.0, chosen.threshold, 0.0, 0.0]), *inputs
     return None
 
 
-def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, u: np.ndarray, q0: np.ndarray,
+def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs: Inputs, q0: np.ndarray,
                   qd0: np.ndarray, t_end: float, dt: float, started: float, options: dict) -> Trajectory:
-    """The whole RK4 loop in :func:`cmbs.fast.rk4`; outputs at every step (dt is the step)."""
+    """The whole RK4 loop in :func:`cmbs.fast.rk4`; outputs at every step (dt is the step).  A
+    computed-torque law runs compiled (:func:`cmbs.fast.computed_torque`), recorded as
+    :func:`_record` records a callable input."""
     from cmbs import fast
 
-    kind, method, parameters = plan
+    kind, method, parameters, mode, law = plan
     steps = int(round(t_end / dt))
     if method == fast.PROJECTION:
         parameters[3] = solver.scale
         parameters[4] = 1.0 if solver.semi_definite else 0.0
-    terms = model.new_terms()
-    equations = model.equations
-    ints, reals = (equations.ints, equations.reals) if kind == fast.KIND_NATURAL else (equations.ip, equations.rp)
-    mass = np.ascontiguousarray(terms.M) if kind == fast.KIND_NATURAL else np.zeros((model.n, model.n))
+    _, ints, reals, buffer, mass = fast.kernel(model)
+    u0 = np.array(inputs(0.0, q0, qd0), dtype=float) if mode == fast.CONSTANT else np.zeros(model.n_u)
     loop_started = time.perf_counter()
-    T, Q, QD, QDD, LAM, PHI, PHID, recorded, status, t_fail, q_fail, qd_fail = fast.rk4(
-        kind, method, parameters, np.array(q0), np.array(qd0), dt, steps, 1, np.asarray(u, dtype=float), ints, reals,
-        terms.buffer.size, mass, np.ascontiguousarray(solver.row_scale), model.m)
+    T, Q, QD, QDD, LAM, U, PHI, PHID, recorded, status, t_fail, q_fail, qd_fail, u_fail = fast.rk4(
+        kind, method, parameters, np.array(q0), np.array(qd0), dt, steps, 1, u0, ints, reals, buffer.size, mass,
+        np.ascontiguousarray(solver.row_scale), model.m, mode, fast.law_arrays(law, model))
     loop_wall = time.perf_counter() - loop_started
     message = ""
     if status != fast.OK:  # let the Python solver explain the failure at the state where it happened
         try:
-            model.evaluate(q_fail, qd_fail, t_fail, u, out=terms)
+            terms = model.evaluate(q_fail, qd_fail, t_fail, u_fail)
             solver.accelerations(terms, q_fail, qd_fail, t_fail)
             message = f"non-finite accelerations at t={t_fail:.6g}"
         except CmbsError as error:
@@ -436,7 +440,6 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, u: np.
                  fast.OK else "failed", message, {"steps": steps if status == fast.OK else recorded,
                                                   "evaluations": 4 * (steps if status == fast.OK else recorded)})
     k = recorded
-    trajectory = _trajectory(model, T[:k], Q[:k], QD[:k], QDD[:k], LAM[:k], np.tile(u, (k, 1)), PHI[:k], PHID[:k],
-                             info)
+    trajectory = _trajectory(model, T[:k], Q[:k], QD[:k], QDD[:k], LAM[:k], U[:k], PHI[:k], PHID[:k], info)
     info["wall_time"] = time.perf_counter() - started
     return trajectory

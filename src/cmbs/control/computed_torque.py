@@ -7,7 +7,9 @@ generalized force on z that produces a chosen z̈_c is
     τ_z = Rᵀ (M (R z̈_c + S) - Q),      z̈_c = z̈_ref + K_d ė + K_p e,   e = z_ref - z,
 
 so that with an exact model the error obeys ë + K_d ė + K_p e = 0.  Q is the model's force with
-zero inputs; the inputs u realise τ_z through the model's actuators on z.
+zero inputs; the inputs u realise τ_z through the model's actuators on z.  z, τ_z and the gains
+follow the order of the reference's coordinates (R's columns are taken in that order).
+:func:`cmbs.simulate` runs this law compiled (:func:`cmbs.fast.computed_torque`) when it can.
 """
 
 from __future__ import annotations
@@ -32,6 +34,8 @@ class ComputedTorque:
         self.kp = gain_vector(kp, self.columns.size, "kp")
         self.kd = gain_vector(kd, self.columns.size, "kd")
         self.solver = MatrixR(independent=tuple(reference.coordinates)).bind(model)
+        # R's columns follow the partition's sorted independent coordinates; z̈_c, τ_z follow ``columns``
+        self.order = np.searchsorted(self.solver.partition.independent, self.columns)
         self.inverse_gains = input_map(model, reference.coordinates)
         self.terms = model.new_terms()
         self.no_input = np.zeros(model.n_u)
@@ -43,7 +47,7 @@ class ComputedTorque:
         zdd = zdd_ref + self.kd * error_rate + self.kp * error
         terms = self.model.evaluate(q, qd, t, self.no_input, out=self.terms)
         part = self.solver.partition
-        R = self.solver.velocity_matrix(terms)
+        R = self.solver.velocity_matrix(terms)[:, self.order]
         S = np.zeros(self.model.n)
         if part.dependent.size:
             S[part.dependent] = np.linalg.solve(terms.A[np.ix_(part.rows, part.dependent)], terms.gamma[part.rows])
