@@ -49,7 +49,13 @@ class Reference:
 
 
 class ZeroOrderHold:
-    """Sample ``law`` every ``period`` seconds and hold its value (a digital controller)."""
+    """Sample ``law`` every ``period`` seconds and hold its value (a digital controller).
+
+    The sample of instant t_k is taken at the first call with t ≥ t_k, with the state given in
+    that call.  Under RK4 with the step equal to the period that call is the last stage of the
+    step ending at t_k, so the sample uses the stage's predicted state rather than the state
+    the step reaches (a difference of order h⁴ in the state; 6e-5 rad over 2 s on the four-bar
+    at 1 kHz against a hold fed the reached state).  The compiled loop reproduces exactly this."""
 
     def __init__(self, law: Law, period: float):
         if not period > 0:
