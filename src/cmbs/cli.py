@@ -289,6 +289,34 @@ def _track(args: argparse.Namespace) -> int:
     return 0 if result.succeeded else 1
 
 
+def _gait_prepare(args: argparse.Namespace) -> int:
+    from cmbs.gait import INDEPENDENT, prepare_stride
+
+    _check_output(args.out, (".npz", ".csv"), "--out")
+    if args.plot:
+        _check_output(args.plot, (".png", ".pdf", ".svg"), "--plot")
+    prepared = prepare_stride(args.stride, cutoff=args.cutoff)
+    motion, stats, info = prepared.motion, prepared.statistics, prepared.motion.info
+    print(f"gait: {info['trial']}, right stride {args.stride}: {len(motion.t)} frames at {info['frame_rate']:g} Hz, "
+          f"stride time {info['stride_time']:.3f} s (heel strike at t = {info['trial_time_of_t0']:.2f} s)")
+    print(f"  model human ({info['model_parameters']['body_mass']:.1f} kg, {info['model_parameters']['height']:.3f} m);"
+          f" forward axis {info['forward_axis']}; {info['smoothing']}")
+    print(f"  max constraint residual: fit {stats.fit_constraint:.2g}, reference {stats.ref_constraint:.2g} "
+          f"({stats.iterations} SQP iterations at most)")
+    print(f"  {'point':<9}{'fit RMS mm':>11}{'fit max mm':>11}{'ref RMS mm':>11}{'ref max mm':>11}")
+    for j, point in enumerate(stats.points):
+        print(f"  {point:<9}{1e3 * stats.fit_rms[j]:>11.1f}{1e3 * stats.fit_max[j]:>11.1f}"
+              f"{1e3 * stats.ref_rms[j]:>11.1f}{1e3 * stats.ref_max[j]:>11.1f}")
+    print(f"  force plates: right foot on plate {info['plates']['r']}, left foot on plate {info['plates']['l']}")
+    print(f"  reference -> {motion.save(args.out)}")
+    if args.plot:
+        from cmbs.plotting import plot_trajectory, save_figure
+
+        figure = plot_trajectory(motion, model=prepared.model, coordinates=INDEPENDENT[2:])
+        print(f"  figure -> {save_figure(figure, args.plot)}")
+    return 0
+
+
 def _controller(args: argparse.Namespace, plant: cmbs.Model, reference):
     """The control law named by --controller, on the nominal plant."""
     from cmbs.control import PD, PIDC, ComputedTorque, CoordinateOutput, Hybrid, TrackingTask, UdwadiaKalabaTracking
@@ -431,6 +459,18 @@ def build_parser() -> argparse.ArgumentParser:
     compare.add_argument("--formulations", required=True, help="comma-separated names, the first is the reference")
     dynamics_options(compare)
     compare.set_defaults(run=_compare)
+
+    gait = commands.add_parser("gait", help="human gait on the public treadmill recording (docs/gait.md)",
+                               description="Human gait on the public treadmill recording (docs/gait.md).")
+    gait_commands = gait.add_subparsers(dest="gait_command", required=True, metavar="STEP")
+    prepare = gait_commands.add_parser("prepare", help="data -> kinematically consistent reference motion",
+                                       description="Fetch the trial, fit the human model to one right stride, "
+                                                   "smooth and differentiate, save the reference motion.")
+    prepare.add_argument("--stride", type=int, default=1, help="right stride, 1 = first heel strike to the second")
+    prepare.add_argument("--cutoff", type=float, default=6.0, help="smoothing-spline cut-off frequency [Hz]")
+    prepare.add_argument("--out", default="reference.npz", help="reference motion file (.npz or .csv)")
+    prepare.add_argument("--plot", help="figure of the independent coordinates (.png, .pdf or .svg)")
+    prepare.set_defaults(run=_gait_prepare)
     return parser
 
 
