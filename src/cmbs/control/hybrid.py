@@ -64,7 +64,7 @@ import numpy as np
 from cmbs.control.base import Reference, gain_vector, input_map
 from cmbs.dynamics.projection import Projection
 from cmbs.errors import CmbsError
-from cmbs.inverse.projected import _terms
+from cmbs.inverse.projected import projection_terms
 from cmbs.kinematics import accelerations
 from cmbs.model.model import Model
 
@@ -96,7 +96,7 @@ def split(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, t: float
           threshold: float = 1e-9) -> Split:
     """:class:`Split` at (q, q̇, t) for the consistent acceleration ``qdd`` (CmbsError if
     A q̈ ≠ γ); pseudo-inverse as :func:`~cmbs.inverse.projected.pidc_torque`."""
-    b, P, pinv = _terms(model, q, qd, qdd, t, threshold, None)
+    b, P, pinv = projection_terms(model, q, qd, qdd, t, threshold, None)
     return Split(b, model.jacobian(q, t), pinv, P)
 
 

@@ -40,8 +40,10 @@ class ControllabilityError(CmbsError):
     exit_status = 1
 
 
-def _terms(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, t: float, threshold: float,
-           weight: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def projection_terms(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, t: float, threshold: float,
+                     weight: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``b = M q̈ - Q_ext``, the projector ``P = I - A_W⁺A_W`` and ``A_W⁺`` (A_W = A W⁻¹, or A) at
+    the state, after checking that ``qdd`` satisfies A q̈ = γ."""
     terms = model.evaluate(np.asarray(q, float), np.asarray(qd, float), t)
     qdd = np.asarray(qdd, dtype=float)
     residual = terms.A @ qdd - terms.gamma
@@ -60,7 +62,7 @@ def pidc_torque(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, t:
                 weight: np.ndarray | None = None, threshold: float = 1e-9) -> np.ndarray:
     """Minimum-norm (or minimum |W⁻¹τ|) generalized force producing the consistent acceleration
     ``qdd`` at (q, q̇, t); Q_ext is the model's Q with zero inputs."""
-    b, P, _ = _terms(model, q, qd, qdd, t, threshold, weight)
+    b, P, _ = projection_terms(model, q, qd, qdd, t, threshold, weight)
     if weight is None:
         return P @ b
     weight = np.asarray(weight, dtype=float)
@@ -79,7 +81,7 @@ def passive_joint_torque(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.nd
         left free at this state (e.g. the equal-link slider-crank with joint B passive at its
         singular position), naming the coordinates and the residual.
     """
-    b, P, _ = _terms(model, q, qd, qdd, t, threshold, None)
+    b, P, _ = projection_terms(model, q, qd, qdd, t, threshold, None)
     tau = P @ b
     passive = np.ones(model.n)
     passive[model.coordinate_indices(list(actuated))] = 0.0
