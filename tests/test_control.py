@@ -56,6 +56,29 @@ def test_zero_order_hold_samples_and_holds():
     values = [held(t, None, None)[0] for t in (0.0, 0.05, 0.0999, 0.1, 0.17, 0.2)]
     assert values == [0.0, 0.0, 0.0, 0.1, 0.1, 0.2]
     assert len(calls) == 3
+    # going back in time (a retried step, the recording of the run) returns what was applied then
+    assert [held(t, None, None)[0] for t in (0.05, 0.15, 0.25)] == [0.0, 0.1, 0.2]
+    assert len(calls) == 3
+    assert held(0.31, None, None)[0] == 0.31 and len(calls) == 4   # a new sample, at its first call
+
+
+def test_recorded_inputs_of_a_held_law_are_the_applied_ones():
+    """Python RK4 with a 10 ms hold of a state-dependent law: run['u'] at t_k is the value the
+    law returned when sample k was taken (not the law re-evaluated at the recorded state)."""
+    model = cmbs.load("two-link-arm-joint")
+    taken = {}
+
+    def law(t, q, qd):
+        value = np.array([-2.0 * qd[0], -1.0 * qd[1]])
+        taken.setdefault(round(t / 0.01), value)
+        return value
+
+    run = cmbs.simulate(model, t_end=0.2, integrator="rk4", dt=0.01, u=ZeroOrderHold(law, 0.01), qd0=model.qd0 + 1.0,
+                        compiled=False)
+    applied = np.array([taken[k][0] for k in range(run.t.size)])
+    np.testing.assert_array_equal(run["u"][:, 0], applied)
+    fresh = np.array([law(t, q, qd)[0] for t, q, qd in zip(run.t, run.q, run.qd)])
+    assert np.abs(fresh - applied).max() > 1e-6      # the reached states differ from the sampled ones
 
 
 def test_controllers_need_actuators_on_the_reference_coordinates():

@@ -294,8 +294,9 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
     with period h on the Python loop: the law is sampled at t = 0 and at every step's last stage
     (at t_n + h, which is the next sample instant, with that stage's state y_n + h k₃: the hold
     cannot tell that stage from the next step's start), and the value is held through the next
-    step's first three stages.  As :func:`cmbs.simulate` records a callable input, the recorded
-    u at t_n is the law at the recorded state (t_n, y_n), and q̈, λ there are evaluated with it.
+    step's first three stages.  The recorded u at t_n is the input applied from t_n on (the
+    held value, as the hold returns it when :func:`cmbs.simulate` records the run), with q̈, λ
+    evaluated with it.
     """
     n = q0.shape[0]
     records = steps // every + 1
@@ -318,7 +319,6 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
     size = n + law[7].shape[0] + law[8].shape[0]  # n + k independent coordinates + r constraint rows
     law_K = np.empty((size, size))
     law_rhs = np.empty(size)
-    sampled = np.empty(u0.shape[0])
     recorded = 0
     for step in range(steps + 1):
         t = step * h
@@ -332,15 +332,9 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
             T[recorded] = t
             Qs[recorded] = q
             QDs[recorded] = qd
-            if mode == HELD and step > 0:  # the recorded input: the law at this state (same A: no new rank check)
-                computed_torque(law, q, qd, t, law_K, law_rhs, sampled)
-                field(kind, method, parameters, q, qd, t, sampled, ints, reals, buffer, mass, row_scale, QDDs[recorded],
-                      LAMs[recorded], K, rhs, False)
-                Us[recorded] = sampled
-            else:
-                QDDs[recorded] = k1v
-                LAMs[recorded] = lam
-                Us[recorded] = u
+            QDDs[recorded] = k1v
+            LAMs[recorded] = lam
+            Us[recorded] = u
             phi = buffer[n:n + m]
             A = buffer[n + m:n + m + m * n].reshape((m, n))
             phid = A @ qd + buffer[n + 2 * m + m * n:n + 3 * m + m * n]

@@ -11,6 +11,8 @@ between samples, not re-evaluated at Runge-Kutta stages.
 
 from __future__ import annotations
 
+import bisect
+
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -51,33 +53,40 @@ class Reference:
 class ZeroOrderHold:
     """Sample ``law`` every ``period`` seconds and hold its value (a digital controller).
 
-    The sample of instant t_k is taken at the first call with t ≥ t_k, with the state given in
-    that call.  Under RK4 with the step equal to the period that call is the last stage of the
-    step ending at t_k, so the sample uses the stage's predicted state rather than the state
-    the step reaches (a difference of order h⁴ in the state; 6e-5 rad over 2 s on the four-bar
-    at 1 kHz against a hold fed the reached state).  The compiled loop reproduces exactly this."""
+    The sample of instant t_k = k·period is taken at the first call with t ≥ t_k, with the state
+    given in that call, and kept: a later call at any time in [t_k, t_{k+1}) — another stage, a
+    retried step, or the recording of the run's inputs afterwards — returns that same value, so
+    the recorded inputs are the applied ones.  Under RK4 with the step equal to the period the
+    first call at t_k is the last stage of the step ending there, so the sample uses the stage's
+    predicted state rather than the state the step reaches (a difference of order h⁴ in the
+    state; 6e-5 rad over 2 s on the four-bar at 1 kHz against a hold fed the reached state).
+    The compiled loop reproduces exactly this."""
 
     def __init__(self, law: Law, period: float):
         if not period > 0:
             raise CmbsError(f"sample period must be > 0, got {period}")
         self.law = law
         self.period = period
-        self.sample_time = -np.inf
-        self.value: np.ndarray | None = None
+        self.samples: list[int] = []           # sample indices k taken so far, increasing
+        self.values: list[np.ndarray] = []
 
     def reset(self) -> None:
-        """Forget the held value (and reset the wrapped law if it keeps state), for a new run."""
-        self.sample_time = -np.inf
-        self.value = None
+        """Forget the samples (and reset the wrapped law if it keeps state), for a new run."""
+        self.samples, self.values = [], []
         if hasattr(self.law, "reset"):
             self.law.reset()
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        sample = np.floor(t / self.period + 1e-9) * self.period
-        if self.value is None or sample != self.sample_time:
-            self.sample_time = sample
-            self.value = np.array(self.law(t, q, qd), dtype=float)
-        return self.value
+        k = int(np.floor(t / self.period + 1e-9))
+        if not self.samples or k > self.samples[-1]:
+            self.samples.append(k)
+            self.values.append(np.array(self.law(t, q, qd), dtype=float))
+            return self.values[-1]
+        position = bisect.bisect_right(self.samples, k) - 1
+        if position < 0:      # before the first sample taken: a new run started without reset()
+            self.reset()
+            return self(t, q, qd)
+        return self.values[position]
 
 
 def actuator_map(model, coordinates: Sequence[str]) -> np.ndarray:
