@@ -127,44 +127,27 @@ class LinearOutput:
 
 
 class JointPointOutput:
-    """A point fixed on link ``link`` (index) at local ``(ξ, η)`` of a joint-coordinate model.
-
-    Position, Jacobian columns (S(r - O_j) revolute, e_j prismatic) and the bias acceleration
-    J̇ q̇ come from the model's own compiled kinematics (:mod:`cmbs.model.joints`, module
-    docstring), the code that evaluates the model's loop closures.
-    """
+    """A point fixed on link ``link`` (index) at local ``(ξ, η)`` of a joint-coordinate model:
+    position, Jacobian and bias acceleration J̇ q̇ from
+    :meth:`~cmbs.model.joints.JointEquations.point_kinematics`, the kinematics of the model's
+    own loop closures."""
 
     def __init__(self, names: Sequence[str], equations: joints.JointEquations, link: int,
                  local: tuple[float, float]):
         self.names = tuple(names)
-        self.ip, self.rp = equations.ip, equations.rp
-        self.n = equations.n
+        self.equations = equations
         self.link = link
         self.local = (float(local[0]), float(local[1]))
-        start = self.ip[joints.I_OCHAINSTART]
-        chain = self.ip[joints.I_OCHAIN]
-        self.path = [int(self.ip[chain + i]) for i in range(self.ip[start + link], self.ip[start + link + 1])]
-        self.work = np.zeros(joints._WORK_PER_LINK * self.n)
-
-    def _point(self, q: np.ndarray, qd: np.ndarray) -> tuple[float, float, float, float]:
-        joints._kinematics(self.ip, self.rp, np.asarray(q, float), np.asarray(qd, float), self.work, 0)
-        return joints._point(self.ip, self.link, self.local[0], self.local[1], self.work, 0)
+        self.at_rest = np.zeros(equations.n)
 
     def value(self, q: np.ndarray) -> np.ndarray:
-        x, z, _, _ = self._point(q, np.zeros(self.n))
-        return np.array([x, z])
+        return self.equations.point_kinematics(self.link, self.local, q, self.at_rest)[0]
 
     def jacobian(self, q: np.ndarray) -> np.ndarray:
-        x, z, _, _ = self._point(q, np.zeros(self.n))
-        J = np.zeros((2, self.n))
-        for j in self.path:
-            cx, cz, _ = joints._column(self.ip, j, x, z, self.work, 0)
-            J[:, j] = cx, cz
-        return J
+        return self.equations.point_kinematics(self.link, self.local, q, self.at_rest)[1]
 
     def bias(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        _, _, bx, bz = self._point(q, qd)
-        return np.array([bx, bz])
+        return self.equations.point_kinematics(self.link, self.local, q, qd)[2]
 
 
 class FunctionOutput:
@@ -267,9 +250,8 @@ def point_output(model: Model, point: str | None = None, *, segment: str | None 
     if isinstance(equations, joints.JointEquations):
         if point is not None:
             k = model.point_names.index(point)
-            link = int(equations.ip[equations.ip[joints.I_OPOINT] + k])
-            base = equations.ip[joints.R_OPOINT] + 2 * k
-            position = (float(equations.rp[base]), float(equations.rp[base + 1]))
+            layout = equations.layout()
+            link, position = int(layout.point_link[k]), tuple(float(v) for v in layout.point_local[k])
         else:
             if f"{segment}.origin" not in model.point_names:
                 links = [name[:-len(".origin")] for name in model.point_names if name.endswith(".origin")]

@@ -79,7 +79,6 @@ constraint cannot be steered by the inputs at a singular configuration) a
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -183,72 +182,20 @@ def _joint_point(model: Model, equations, segment: str, local: Sequence[float] |
     links = [name for name, _ in model.segment_masses]
     if segment not in links:
         raise CmbsError(f"model {model.name!r} has no link {segment!r}; links: {', '.join(links)}")
-    layout = equations.layout()
     k = links.index(segment)
-    point = np.array(_local(local, layout.com[k], segment))
-    path = [k]
-    while layout.parent[path[-1]] >= 0:
-        path.append(int(layout.parent[path[-1]]))
-    path.reverse()
-    chain = _Chain(layout, path, point, model.n)
-    return ServoOutput(_point_names(segment, local), chain.value, chain.jacobian, chain.bias)
+    point = _local(local, equations.layout().com[k], segment)
+    at_rest = np.zeros(model.n)
 
+    def value(q: np.ndarray) -> np.ndarray:
+        return equations.point_kinematics(k, point, q, at_rest)[0]
 
-class _Chain:
-    """Kinematics of one point on the path ``path`` (ground to link) of a joint-coordinate model
-    (the recursion of :mod:`cmbs.model.joints`, module docstring), in plain floats: the arrays
-    here are 2-vectors, where numpy's per-call overhead would dominate."""
+    def jacobian(q: np.ndarray) -> np.ndarray:
+        return equations.point_kinematics(k, point, q, at_rest)[1]
 
-    def __init__(self, layout, path: list[int], point: np.ndarray, n: int):
-        self.links = [(k, bool(layout.revolute[k]), float(layout.origin[k][0]), float(layout.origin[k][1]),
-                       float(layout.angle[k])) for k in path]
-        self.px, self.pz = float(point[0]), float(point[1])
-        self.n = n
+    def bias(q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        return equations.point_kinematics(k, point, q, qd)[2]
 
-    def _frames(self, q: np.ndarray, qd: np.ndarray | None) -> list[tuple[float, ...]]:
-        """Per link of the path: (θ, ω, O_x, O_z, bias of O x, z, e_x, e_z)."""
-        theta = omega = ox_ = oz_ = bx = bz = 0.0
-        frames = []
-        for k, revolute, ox, oz, angle in self.links:
-            c, s = math.cos(theta), math.sin(theta)
-            rx, rz = c * ox - s * oz, s * ox + c * oz
-            bx, bz = bx - omega * omega * rx, bz - omega * omega * rz
-            ox_, oz_ = ox_ + rx, oz_ + rz
-            rate = 0.0 if qd is None else float(qd[k])
-            if revolute:
-                theta += angle + q[k]
-                ex, ez = math.cos(theta), math.sin(theta)
-                frames.append((theta, omega + rate, ox_, oz_, bx, bz, ex, ez))
-                omega += rate
-            else:
-                theta += angle
-                ex, ez = math.cos(theta), math.sin(theta)
-                ox_, oz_ = ox_ + q[k] * ex, oz_ + q[k] * ez
-                bx += -2.0 * rate * omega * ez - q[k] * omega * omega * ex
-                bz += 2.0 * rate * omega * ex - q[k] * omega * omega * ez
-                frames.append((theta, omega, ox_, oz_, bx, bz, ex, ez))
-        return frames
-
-    def _position(self, frame: tuple[float, ...]) -> tuple[float, float]:
-        _, _, ox, oz, _, _, ex, ez = frame
-        return ox + ex * self.px - ez * self.pz, oz + ez * self.px + ex * self.pz
-
-    def value(self, q: np.ndarray) -> np.ndarray:
-        return np.array(self._position(self._frames(q, None)[-1]))
-
-    def jacobian(self, q: np.ndarray) -> np.ndarray:
-        frames = self._frames(q, None)
-        rx, rz = self._position(frames[-1])
-        C = np.zeros((2, self.n))
-        for (k, revolute, *_), (_, _, ox, oz, _, _, ex, ez) in zip(self.links, frames):
-            C[0, k], C[1, k] = (-(rz - oz), rx - ox) if revolute else (ex, ez)
-        return C
-
-    def bias(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        frame = self._frames(q, qd)[-1]
-        _, omega, ox, oz, bx, bz, _, _ = frame
-        rx, rz = self._position(frame)
-        return np.array([bx - omega * omega * (rx - ox), bz - omega * omega * (rz - oz)])
+    return ServoOutput(_point_names(segment, local), value, jacobian, bias)
 
 
 def coordinate_output(model: Model, names: Sequence[str]) -> ServoOutput:

@@ -248,6 +248,23 @@ def _evaluate_kernel(ip, rp, q, qd, t, u, buf):
 
 
 @numba.njit(cache=True)
+def _point_kinematics_kernel(ip, rp, q, qd, link, lx, lz, work, J):
+    """Position, bias acceleration J̇q̇ and Jacobian J (2, n) of the point (lx, lz) of ``link``."""
+    _kinematics(ip, rp, q, qd, work, 0)
+    px, pz, bx, bz = _point(ip, link, lx, lz, work, 0)
+    for i in range(J.shape[1]):
+        J[0, i] = 0.0
+        J[1, i] = 0.0
+    o_cs, o_chain = ip[I_OCHAINSTART], ip[I_OCHAIN]
+    for i in range(ip[o_cs + link], ip[o_cs + link + 1]):
+        j = ip[o_chain + i]
+        cx, cz, cw = _column(ip, j, px, pz, work, 0)
+        J[0, j] = cx
+        J[1, j] = cz
+    return px, pz, bx, bz
+
+
+@numba.njit(cache=True)
 def _energy_kernel(ip, rp, q, qd):
     """(T, V): T = ½ Σ m_k |J_Gk q̇|² + I_k θ̇_k², V = -Σ m_k g·r_Gk."""
     n = ip[I_N]
@@ -331,6 +348,18 @@ class JointEquations:
         """(n_points, 2): ``{link}.origin`` and ``{link}.end`` of every link, then the user points."""
         return _points_kernel(self.ip, self.rp, q)
 
+    def point_kinematics(self, link: int, local: tuple[float, float], q: np.ndarray,
+                         qd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Position r (2,), Jacobian J = ∂r/∂q (2, n) and bias acceleration J̇q̇ (2,) of the point
+        at ``local`` (x, z in the link frame) of link number ``link``: the kinematics the model's
+        loop closures use (module docstring)."""
+        work = np.zeros(_WORK_PER_LINK * self.n)
+        J = np.zeros((2, self.n))
+        px, pz, bx, bz = _point_kinematics_kernel(self.ip, self.rp, np.asarray(q, dtype=float),
+                                                  np.asarray(qd, dtype=float), link, float(local[0]),
+                                                  float(local[1]), work, J)
+        return np.array([px, pz]), J, np.array([bx, bz])
+
     def layout(self) -> "JointLayout":
         """The links, closures, drivers and actuators decoded from the packed arrays."""
         ip, rp, n = self.ip, self.rp, self.n
@@ -346,7 +375,9 @@ class JointEquations:
             com=links[:, 3:5], mass=links[:, 5], inertia=links[:, 6], closure_links=closure_links,
             closure_a=closure_reals[:, 0:2], closure_b=closure_reals[:, 2:4], closure_direction=closure_reals[:, 4:6],
             driver_coordinates=drivers, actuator_coordinates=np.asarray(ip[ip[I_OACT]:ip[I_OACT] + nu]),
-            actuator_gains=np.asarray(rp[ip[R_OGAIN]:ip[R_OGAIN] + nu]))
+            actuator_gains=np.asarray(rp[ip[R_OGAIN]:ip[R_OGAIN] + nu]),
+            point_link=np.asarray(ip[ip[I_OPOINT]:ip[I_OPOINT] + ip[I_NP]]),
+            point_local=np.asarray(rp[ip[R_OPOINT]:ip[R_OPOINT] + 2 * ip[I_NP]]).reshape(-1, 2))
 
 
 @dataclass(frozen=True)
@@ -359,7 +390,8 @@ class JointLayout:
     (-1: ground), their local coordinates (ground coordinates when the link is -1) and the
     ground-fixed direction n_r.  Driver rows follow the closure rows; ``driver_coordinates[d]``
     is the coordinate of driver d; actuator i adds ``actuator_gains[i] u_i`` to Q at
-    ``actuator_coordinates[i]``.
+    ``actuator_coordinates[i]``.  Point p of ``model.point_names`` is at ``point_local[p]`` on link
+    ``point_link[p]``.
     """
 
     gravity: np.ndarray
@@ -378,6 +410,8 @@ class JointLayout:
     driver_coordinates: np.ndarray
     actuator_coordinates: np.ndarray
     actuator_gains: np.ndarray
+    point_link: np.ndarray
+    point_local: np.ndarray
 
 
 # ------------------------------------------------------------------ the builder
