@@ -317,6 +317,59 @@ def _gait_prepare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _gait_inverse(args: argparse.Namespace) -> int:
+    import time
+
+    from cmbs.gait import prepare_stride
+    from cmbs.gait.inverse import JOINTS, compare_with_lab, inverse, residual_summary
+
+    if args.out:
+        _check_output(args.out, (".npz", ".csv"), "--out")
+    if args.plot:
+        _check_output(args.plot, (".png", ".pdf", ".svg"), "--plot")
+    prepared = prepare_stride(args.stride, cutoff=args.cutoff)
+    model, reference = prepared.model, prepared.motion
+    height = model.parameters["height"]
+    print(f"gait inverse dynamics: right stride {args.stride}, {len(reference.t)} frames, model human "
+          f"({model.total_mass:.2f} kg, {height:.3f} m, subject-specific trunk/leg lengths)")
+    results, comparisons, extras = {}, {}, {}
+    for mode, label in (("hip", "(a) contact wrench at the hip"), ("grf", "(b) measured GRF at the CoPs")):
+        started = time.perf_counter()
+        result = results[mode] = inverse(model, reference, mode)
+        elapsed = time.perf_counter() - started
+        summary = residual_summary(result, height)
+        comparison = comparisons[mode] = compare_with_lab(result, reference)
+        print(f"  {label}: {1e3 * elapsed:.1f} ms")
+        print(f"    hip residual     {'RMS':>8}{'peak':>9}{'RMS %':>8}{'peak %':>8}")
+        for j, (name, unit) in enumerate((("force x", "N"), ("force z", "N"), ("torque", "N m"))):
+            print(f"    {name:<8} [{unit:>3}]{summary.rms[j]:>8.1f}{summary.peak[j]:>9.1f}"
+                  f"{summary.rms_percent[j]:>8.2f}{summary.peak_percent[j]:>8.2f}")
+        print(f"    (% of body weight m g for forces, of m g x height for the torque)")
+        print(f"    vs lab moments   correlation  (lab low-passed {comparison.cutoff:g} Hz)  RMS diff [N m/kg]")
+        for joint, r, filtered, rms in zip(comparison.joints, comparison.correlation,
+                                           comparison.correlation_filtered, comparison.rms_difference):
+            print(f"    {joint:<16}{r:>12.3f}{filtered:>26.3f}{rms:>19.3f}")
+        extras[f"torques_{mode}"] = result.torques
+        extras[f"residual_{mode}"] = result.residual
+        extras[f"lab_convention_{mode}"] = comparison.model
+    peaks = np.max(np.abs(results["grf"].torques), axis=0)
+    print("  peak |joint torque| (b) [N m]: " + ", ".join(f"{j} {v:.1f}" for j, v in zip(JOINTS, peaks)))
+    if args.out:
+        info = {**reference.info, "analysis": "gait inverse dynamics (cmbs gait inverse)", "joints": list(JOINTS),
+                "residual": ["hip force x [N]", "hip force z [N]", "torque about the hip [N m]"],
+                "lab_convention": "leg torques in the lab's sign convention [N m/kg], order of lab_moments"}
+        saved = cmbs.Trajectory(reference.t, reference.q, reference.qd, reference.qdd, reference.names,
+                                {**reference.extras, **extras}, info)
+        print(f"  result -> {saved.save(args.out)}")
+    if args.plot:
+        from cmbs.gait.plots import plot_lab_comparison
+        from cmbs.plotting import save_figure
+
+        figure = plot_lab_comparison(reference, comparisons)
+        print(f"  figure -> {save_figure(figure, args.plot)}")
+    return 0
+
+
 def _controller(args: argparse.Namespace, plant: cmbs.Model, reference):
     """The control law named by --controller, on the nominal plant."""
     from cmbs.control import PD, PIDC, ComputedTorque, CoordinateOutput, Hybrid, TrackingTask, UdwadiaKalabaTracking
@@ -471,6 +524,16 @@ def build_parser() -> argparse.ArgumentParser:
     prepare.add_argument("--out", default="reference.npz", help="reference motion file (.npz or .csv)")
     prepare.add_argument("--plot", help="figure of the independent coordinates (.png, .pdf or .svg)")
     prepare.set_defaults(run=_gait_prepare)
+    inverse = gait_commands.add_parser("inverse", help="inverse dynamics of a stride, compared with the lab's moments",
+                                       description="Joint torques of one right stride with (a) the contact "
+                                                   "wrench at the hip and (b) the measured ground reaction "
+                                                   "forces at the centres of pressure; hip residuals; "
+                                                   "correlation with the lab's leg moments.")
+    inverse.add_argument("--stride", type=int, default=1, help="right stride, 1 = first heel strike to the second")
+    inverse.add_argument("--cutoff", type=float, default=6.0, help="smoothing-spline cut-off frequency [Hz]")
+    inverse.add_argument("--out", help="result file (.npz or .csv): reference plus torques and residuals")
+    inverse.add_argument("--plot", help="figure of the leg torques vs the lab's moments (.png, .pdf or .svg)")
+    inverse.set_defaults(run=_gait_inverse)
     return parser
 
 

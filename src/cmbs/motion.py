@@ -24,11 +24,11 @@ import numpy as np
 from cmbs.errors import CmbsError, ExpressionError
 from cmbs.inverse.ida import driven_columns
 from cmbs.model.drivers import Expression, Table, TimeFunction
-from cmbs.model.model import Model, Terms, assign_terms
+from cmbs.model.model import Model, Terms, WrappedEquations
 from cmbs.trajectory import Trajectory
 
 
-class _PrescribedEquations:
+class _PrescribedEquations(WrappedEquations):
     """The equations of an undriven model followed by one driver row per prescribed coordinate."""
 
     def __init__(self, inner, columns: np.ndarray, functions: Sequence[TimeFunction]):
@@ -62,14 +62,6 @@ class _PrescribedEquations:
             terms.gamma[k] = second
             terms.phi_t[k] = -first
 
-    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
-        return self.inner.kinetic_energy(q, qd)
-
-    def potential_energy(self, q: np.ndarray) -> float:
-        return self.inner.potential_energy(q)
-
-    def point_positions(self, q: np.ndarray) -> np.ndarray:
-        return self.inner.point_positions(q)
 
 
 def prescribe(model: Model, functions: Mapping[str, TimeFunction]) -> Model:

@@ -16,13 +16,13 @@ from typing import Callable, Sequence
 import numpy as np
 
 from cmbs.errors import CmbsError
-from cmbs.model.model import Model, Terms, assign_terms
+from cmbs.model.model import Model, Terms, WrappedEquations, assign_terms
 from cmbs.model.natural import NaturalEquations
 
 Law = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
 
 
-class _MassFaultEquations:
+class _MassFaultEquations(WrappedEquations):
     """Natural-coordinate equations with ΔM, ΔQ_gravity added from t0 on."""
 
     def __init__(self, inner: NaturalEquations, delta_mass: np.ndarray, delta_gravity: np.ndarray, t0: float):
@@ -42,14 +42,6 @@ class _MassFaultEquations:
             terms.M += self.delta_mass
             terms.Q += self.delta_gravity
 
-    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
-        return self.inner.kinetic_energy(q, qd)
-
-    def potential_energy(self, q: np.ndarray) -> float:
-        return self.inner.potential_energy(q)
-
-    def point_positions(self, q: np.ndarray) -> np.ndarray:
-        return self.inner.point_positions(q)
 
 
 def mass_fault(model: Model, segment: str, *, factor: float, t0: float = 0.0) -> Model:

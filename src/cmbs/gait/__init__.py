@@ -10,18 +10,23 @@ from __future__ import annotations
 from pathlib import Path
 
 from cmbs.gait.data import NORMATIVE, TRIAL, GaitDataError, fetch, read_normative, read_trial
-from cmbs.gait.reconstruct import INDEPENDENT, FitStatistics, Prepared, prepare
+from cmbs.gait.reconstruct import INDEPENDENT, FitStatistics, Prepared, prepare, subject_lengths
 
-__all__ = ["GaitDataError", "INDEPENDENT", "FitStatistics", "Prepared", "prepare", "prepare_stride"]
+__all__ = ["GaitDataError", "INDEPENDENT", "FitStatistics", "Prepared", "prepare", "prepare_stride",
+           "subject_lengths"]
 
 
-def prepare_stride(stride: int = 1, *, cutoff: float = 6.0, cache: Path | None = None) -> Prepared:
+def prepare_stride(stride: int = 1, *, cutoff: float = 6.0, cache: Path | None = None,
+                   subject_specific: bool = True) -> Prepared:
     """Reference motion of right stride ``stride`` of the treadmill trial, on the library's
-    ``human`` model scaled to the subject's recorded mass and height (fetches the data on first
-    use into ``cache``, default ``$CMBS_CACHE`` or ``~/.cache/cmbs``)."""
+    ``human`` model scaled to the subject's recorded mass and height, with the trunk, thigh,
+    shank and foot lengths measured on the subject (:func:`subject_lengths`) unless
+    ``subject_specific`` is false (fetches the data on first use into ``cache``, default
+    ``$CMBS_CACHE`` or ``~/.cache/cmbs``)."""
     from cmbs.library import load_library_model
 
     trial = read_trial(fetch(TRIAL, cache))
     curves = read_normative(fetch(NORMATIVE, cache))
-    model = load_library_model("human", body_mass=trial.body_mass, height=trial.height)
+    lengths = subject_lengths(trial) if subject_specific else None
+    model = load_library_model("human", body_mass=trial.body_mass, height=trial.height, lengths=lengths)
     return prepare(trial, curves, model, stride, cutoff=cutoff)

@@ -146,6 +146,32 @@ def segment_lengths(model: Model) -> dict[str, float]:
     return {name: float(np.linalg.norm(p[j] - p[i])) for name, (i, j) in pairs.items()}
 
 
+# measured segments: model segment -> the (proximal, distal) measured points of each side
+MEASURED_SEGMENTS = {"trunk": (("hip", "neck"),), "thigh": (("hip", "r_knee"), ("hip", "l_knee")),
+                     "shank": (("r_knee", "r_ankle"), ("l_knee", "l_ankle")),
+                     "foot": (("r_ankle", "r_toe"), ("l_ankle", "l_toe"))}
+
+
+def measured_lengths(centres: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Sagittal distances [m] between the measured joint centres bounding each segment of
+    :data:`MEASURED_SEGMENTS`: {segment: (k, sides)} (one column for the trunk, right and left
+    for the leg segments)."""
+    return {name: np.stack([np.linalg.norm(centres[j] - centres[i], axis=1) for i, j in pairs], axis=1)
+            for name, pairs in MEASURED_SEGMENTS.items()}
+
+
+def subject_lengths(trial: Trial) -> dict[str, float]:
+    """The subject's trunk, thigh, shank and foot lengths [m] for the planar model: the median
+    over every frame of the trial of the sagittal distance between the measured joint centres
+    (:func:`measured_lengths`), right and left medians averaged for the leg segments.
+
+    Sagittal, not 3-D: the model is fitted to the projected centres, and the hip point is the
+    midpoint of the two hip joint centres (the thigh's 3-D length includes half the hip width,
+    the foot's the toe-out)."""
+    lengths = measured_lengths(joint_centres(trial, sagittal_frame(trial)))
+    return {name: float(np.mean(np.median(values, axis=0))) for name, values in lengths.items()}
+
+
 def estimate(model: Model, centres: dict[str, np.ndarray], angles: dict[str, np.ndarray]) -> np.ndarray:
     """q̂ (k, n): measured points, angles of the measured segments, normative head/arm angles,
     and head, elbow and wrist positions placed from those angles with the model's lengths."""

@@ -12,7 +12,10 @@ restored, with the inertia column in 10⁻² kg m² (the only reading that gives
 point, along (x̄) and across (z̄, +90° from x̄).  De Leva (1996, J. Biomech. 29:1223) is the
 published table the values were checked against; where the thesis's reading is ambiguous (head
 and trunk COM), the thesis's printed value is kept.  ``body_mass`` and ``height`` scale the
-table linearly (masses by M/80.639, lengths by H/1.75, inertias by both).
+table linearly (masses by M/80.639, lengths by H/1.75, inertias by both).  ``lengths`` replaces
+the length of named segments (subject-specific, e.g. measured): a segment of length L' instead of
+the scaled L keeps its mass and its COM fractions (x̄/L, z̄/L) and its radius-of-gyration fraction
+k/L, so x̄' = x̄ L'/L, z̄' = z̄ L'/L and I' = m (k/L)² L'² = I (L'/L)² (I ∝ m L²).
 
 Angles (counter-clockwise positive, all 0 when standing straight except the ankles):
 ``trunk`` absolute from the x axis (π/2 upright); ``neck`` from trunk (hip→neck) to head;
@@ -48,18 +51,45 @@ REFERENCE_MASS = round(REFERENCE_MASS, 9)  # 80.639 kg
 ANKLE_HEIGHT = 0.07
 
 
-def human(body_mass: float = REFERENCE_MASS, height: float = REFERENCE_HEIGHT, fixed_hip: bool = False) -> Model:
+def _positive(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0
+
+
+def human(body_mass: float = REFERENCE_MASS, height: float = REFERENCE_HEIGHT, fixed_hip: bool = False,
+          lengths: dict[str, float] | None = None) -> Model:
     """Build the 14-DOF human model standing upright, at rest; ``fixed_hip`` adds constant drivers
-    holding the hip point where it stands (12 DOF left: the trunk and joint angles)."""
+    holding the hip point where it stands (12 DOF left: the trunk and joint angles).
+
+    ``lengths`` ({segment: L' [m]}, segments ``trunk, head, arm, forearm, thigh, shank, foot``;
+    bilateral ones set both sides) overrides the linearly scaled length L = L_table·H/1.75 of those
+    segments.  Each keeps its mass, its COM fractions and its radius-of-gyration fraction:
+    x̄' = x̄ L'/L, z̄' = z̄ L'/L, I_G' = I_G (L'/L)² (I = m k², k ∝ L; module docstring).  The
+    standing posture stacks the new lengths (the head's top is then not at ``height``).
+    """
     from cmbs.errors import ModelError
 
     for label, value in (("body_mass", body_mass), ("height", height)):
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or value <= 0:
+        if not _positive(value):
             raise ModelError(f"{label} must be a positive number, got {value!r}", entry="human")
     km, kl = body_mass / REFERENCE_MASS, height / REFERENCE_HEIGHT
     seg = {name: (l * kl, a * kl, c * kl, m * km, i * km * kl**2) for name, (l, a, c, m, i) in SEGMENTS.items()}
+    if lengths is not None:
+        if not isinstance(lengths, dict):
+            raise ModelError(f"lengths must be a dict {{segment: length}}, got {lengths!r}", entry="human")
+        for name, value in lengths.items():
+            if name not in SEGMENTS:
+                raise ModelError(f"lengths: unknown segment {name!r} (segments: {', '.join(SEGMENTS)})",
+                                 entry="human")
+            if not _positive(value):
+                raise ModelError(f"lengths[{name!r}] must be a positive number, got {value!r}", entry="human")
+            length, along, across, mass, inertia = seg[name]
+            r = value / length
+            seg[name] = (float(value), along * r, across * r, mass, inertia * r**2)
     foot_length = seg["foot"][0]
     ankle = ANKLE_HEIGHT * kl
+    if foot_length <= ankle:
+        raise ModelError(f"lengths['foot'] = {foot_length!r} m must exceed the standing ankle height "
+                         f"{ankle:.4g} m", entry="human")
     toe_x = (foot_length**2 - ankle**2) ** 0.5
     knee = ankle + seg["shank"][0]
     hip = knee + seg["thigh"][0]
@@ -67,7 +97,8 @@ def human(body_mass: float = REFERENCE_MASS, height: float = REFERENCE_HEIGHT, f
     elbow = neck - seg["arm"][0]
     builder = NaturalModelBuilder(
         "human",
-        description=f"12-segment 14-DOF planar human body ({body_mass:g} kg, {height:g} m), standing",
+        description=f"12-segment 14-DOF planar human body ({body_mass:g} kg, {height:g} m"
+                    f"{', subject-specific lengths' if lengths else ''}), standing",
         source="O. Pätkau, UPC thesis §3.2.2, Table 3.2 (80 kg, 1.75 m male; decoded), checked against "
                "de Leva 1996")
     builder.add_point("hip", 0.0, hip)
@@ -109,4 +140,7 @@ def human(body_mass: float = REFERENCE_MASS, height: float = REFERENCE_HEIGHT, f
                   "l_hip", "l_knee", "l_ankle", "l_shoulder", "l_elbow"):
         builder.add_actuator(f"tau_{joint}", coordinate=joint)
     model = builder.build()
-    return model.replace(parameters={"body_mass": body_mass, "height": height, "fixed_hip": fixed_hip})
+    parameters = {"body_mass": body_mass, "height": height, "fixed_hip": fixed_hip}
+    if lengths is not None:
+        parameters["lengths"] = {name: float(value) for name, value in lengths.items()}
+    return model.replace(parameters=parameters)

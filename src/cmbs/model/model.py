@@ -309,7 +309,23 @@ class Model:
         return self.equations.point_positions(np.asarray(q, dtype=float))
 
 
-class _RowSubset:
+class WrappedEquations:
+    """Base of equations built on other equations (``self.inner``) that change only some terms:
+    energies and drawn points are those of the inner mechanism."""
+
+    inner: ModelEquations
+
+    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        return self.inner.kinetic_energy(q, qd)
+
+    def potential_energy(self, q: np.ndarray) -> float:
+        return self.inner.potential_energy(q)
+
+    def point_positions(self, q: np.ndarray) -> np.ndarray:
+        return self.inner.point_positions(q)
+
+
+class _RowSubset(WrappedEquations):
     """Equations of a model restricted to some constraint rows (see :meth:`Model.without_drivers`)."""
 
     def __init__(self, equations: ModelEquations, rows: np.ndarray):
@@ -328,11 +344,3 @@ class _RowSubset:
         self.inner.evaluate(q, qd, t, u, self.inner_terms)
         assign_terms(terms, self.inner_terms, self.rows)
 
-    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
-        return self.inner.kinetic_energy(q, qd)
-
-    def potential_energy(self, q: np.ndarray) -> float:
-        return self.inner.potential_energy(q)
-
-    def point_positions(self, q: np.ndarray) -> np.ndarray:
-        return self.inner.point_positions(q)
