@@ -190,3 +190,14 @@ def test_builder_rejects_bad_entries():
     with pytest.raises(ModelError, match="no mass moves with point.*Z"):
         b.build()
 
+
+
+@pytest.mark.parametrize("name", ["four-bar", "human", "chain", "kitchen-sink (springs)", "slider-crank-joint"])
+def test_vectorised_energy_history_equals_the_energy_row_by_row(name):
+    model = kitchen_sink() if name.startswith("kitchen") else cmbs.load(name)
+    rng = np.random.default_rng(3)
+    q = model.q0 + 0.1 * rng.normal(size=(7, model.n))
+    qd = rng.normal(size=(7, model.n))
+    expected = [model.energy(a, b) for a, b in zip(q, qd)]
+    np.testing.assert_allclose(model.energy_history(q, qd), expected, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(model.without_drivers().energy_history(q, qd), expected, rtol=1e-12, atol=1e-12)

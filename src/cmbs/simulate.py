@@ -376,13 +376,11 @@ def _trajectory(model: Model, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd:
                 u: np.ndarray, position_error: np.ndarray, velocity_error: np.ndarray, info: dict) -> Trajectory:
     """The result, with the constraint forces -Aᵀλ and the energy evaluated at each output."""
     force = np.zeros_like(q)
-    energy = np.zeros(t.size)
     terms = model.new_terms()
-    for i in range(t.size):
-        if model.m:
-            model.evaluate(q[i], qd[i], t[i], u[i], out=terms)
-            force[i] = -terms.A.T @ lam[i]
-        energy[i] = model.energy(q[i], qd[i])
+    for i in range(t.size if model.m else 0):
+        model.evaluate(q[i], qd[i], t[i], u[i], out=terms)
+        force[i] = -terms.A.T @ lam[i]
+    energy = model.energy_history(q, qd)
     return Trajectory(t, q, qd, qdd, model.coordinate_names,
                       {"lam": lam, "constraint_force": force, "u": u, "energy": energy,
                        "constraint_error": position_error, "velocity_constraint_error": velocity_error}, info)

@@ -304,6 +304,15 @@ class Model:
         """Total mechanical energy T + V."""
         return self.kinetic_energy(q, qd) + self.potential_energy(q)
 
+    def energy_history(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """T + V at every row of q, q̇ (k, n): vectorised when the base equations can (constant
+        M, linear gravity potential: natural coordinates), else row by row."""
+        q, qd = np.asarray(q, dtype=float).reshape(-1, self.n), np.asarray(qd, dtype=float).reshape(-1, self.n)
+        base = base_equations(self)[0]      # wrappers keep the energies of their base equations
+        if hasattr(base, "energies"):
+            return base.energies(q, qd)
+        return np.array([self.energy(qi, qdi) for qi, qdi in zip(q, qd)])
+
     def point_positions(self, q: np.ndarray) -> np.ndarray:
         """(n_points, 2) positions (x, z) of :attr:`point_names`."""
         return self.equations.point_positions(np.asarray(q, dtype=float))

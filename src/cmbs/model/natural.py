@@ -648,6 +648,18 @@ class NaturalEquations:
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
         return 0.5 * float(qd @ self.mass @ qd)
 
+    def energies(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """T + V at every row of q, q̇ (k, n), vectorised: T = ½ q̇ᵀ M q̇ (M constant) and V as in
+        :meth:`potential_energy`."""
+        q_ext = np.concatenate([q, np.broadcast_to(self.constants, (q.shape[0], self.constants.size))], axis=1)
+        energy = 0.5 * np.einsum("ki,ij,kj->k", qd, self.mass, qd) - q_ext @ self.gravity_ext
+        rows, parameters = self.springs
+        if rows.size:
+            d = q_ext[:, rows[:, 2:4]] - q_ext[:, rows[:, 0:2]]
+            stretch = np.hypot(d[..., 0], d[..., 1]) - parameters[:, 2]
+            energy += 0.5 * np.sum(parameters[:, 0] * stretch**2, axis=1)
+        return energy
+
     def potential_energy(self, q: np.ndarray) -> float:
         """V = -Σ m g·r_G (linear in q: -Q_gravityᵀ q_ext) + Σ ½ k (ℓ - ℓ0)²."""
         q_ext = self._extended(q)
