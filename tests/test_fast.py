@@ -38,3 +38,21 @@ def test_compiled_loop_refuses_what_it_cannot_run():
         simulate(model, t_end=0.1, integrator="rk45", compiled=True)
     with pytest.raises(CmbsError, match="compiled loop cannot run"):
         simulate(model, t_end=0.1, integrator="rk4", formulation="penalty", compiled=True)
+
+
+def test_jacobi_extreme_eigenvalues_match_lapack():
+    """The rank check's small symmetric eigenvalue routine against numpy (LAPACK), including
+    nearly rank-deficient Gram matrices."""
+    from cmbs.fast import _gram_extremes
+
+    rng = np.random.default_rng(0)
+    for m in range(1, 13):
+        for _ in range(20):
+            A = rng.normal(size=(m, m + 2)) * rng.uniform(0.01, 10.0, size=(m, 1))
+            if m > 1 and rng.random() < 0.5:
+                A[-1] = 2.0 * A[0] + 1e-9 * rng.normal(size=m + 2)
+            G = A @ A.T
+            expected = np.linalg.eigvalsh(G)
+            low, high = _gram_extremes(G.copy())
+            assert abs(low - expected[0]) <= 1e-13 * expected[-1]
+            assert abs(high - expected[-1]) <= 1e-13 * expected[-1]

@@ -108,6 +108,44 @@ def _evaluate(kind, q, qd, t, u, ints, reals, buffer):
 
 
 @numba.njit(cache=True)
+def _gram_extremes(G):
+    """Smallest and largest eigenvalue of the small symmetric matrix ``G`` (overwritten) by
+    cyclic Jacobi rotations (Golub & Van Loan §8.5): for a few rows this avoids LAPACK's call
+    and workspace overhead, which is larger than the arithmetic."""
+    m = G.shape[0]
+    for sweep in range(60):
+        off = 0.0
+        scale = 0.0
+        for i in range(m):
+            scale += G[i, i] * G[i, i]
+            for j in range(i + 1, m):
+                off += G[i, j] * G[i, j]
+        if off <= 1e-32 * scale:
+            break
+        for p in range(m - 1):
+            for r in range(p + 1, m):
+                if G[p, r] == 0.0:
+                    continue
+                theta = (G[r, r] - G[p, p]) / (2.0 * G[p, r])
+                t = (1.0 if theta >= 0.0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                c = 1.0 / math.sqrt(t * t + 1.0)
+                s = t * c
+                for k in range(m):      # columns p, r
+                    gkp, gkr = G[k, p], G[k, r]
+                    G[k, p] = c * gkp - s * gkr
+                    G[k, r] = s * gkp + c * gkr
+                for k in range(m):      # rows p, r
+                    gpk, grk = G[p, k], G[r, k]
+                    G[p, k] = c * gpk - s * grk
+                    G[r, k] = s * gpk + c * grk
+    smallest, largest = G[0, 0], G[0, 0]
+    for i in range(1, m):
+        smallest = min(smallest, G[i, i])
+        largest = max(largest, G[i, i])
+    return smallest, largest
+
+
+@numba.njit(cache=True)
 def _singular(A, row_scale, tolerance):
     """True when σ_min/σ_max of the row-scaled A is below ``tolerance`` (as KKTSolver; the σ² are
     the eigenvalues of the small Gram matrix, cheaper than an SVD here)."""
@@ -116,9 +154,20 @@ def _singular(A, row_scale, tolerance):
         return False
     if m > A.shape[1]:
         return True
-    scaled = A * row_scale.reshape((m, 1))
-    eigenvalues = np.linalg.eigvalsh(scaled @ scaled.T)  # σ² of the scaled A, ascending
-    smallest, largest = math.sqrt(max(eigenvalues[0], 0.0)), math.sqrt(max(eigenvalues[m - 1], 0.0))
+    n = A.shape[1]
+    gram = np.empty((m, m))            # (S A)(S A)ᵀ, S = diag(row_scale), by loops: no BLAS call
+    for i in range(m):
+        for j in range(i, m):
+            value = 0.0
+            for k in range(n):
+                value += A[i, k] * A[j, k]
+            gram[i, j] = gram[j, i] = value * row_scale[i] * row_scale[j]
+    if m <= 12:
+        low, high = _gram_extremes(gram)
+    else:
+        eigenvalues = np.linalg.eigvalsh(gram)  # σ² of the scaled A, ascending
+        low, high = eigenvalues[0], eigenvalues[m - 1]
+    smallest, largest = math.sqrt(max(low, 0.0)), math.sqrt(max(high, 0.0))
     return smallest < tolerance * max(largest, 1.0)
 
 
