@@ -1043,7 +1043,7 @@ def main(argv: list[str] | None = None) -> int:
                      for name, integrator, extra_span, project in case.quick_extra]
         result["runs"] = runs
         what = "through the singular positions, " if case.singular else ""
-        projected = f"; +proj = project=True (coordinate and velocity projection after every step)" \
+        projected = "; +proj = project=True (coordinate and velocity projection after every step)" \
             if case.project else ""
         print(f"  cmbs.simulate {what}wall = info['wall_time'] (python path: the integration; compiled path: its loop "
               f"+ the recording), x real = span / wall, loop = info['loop_wall_time'] (compiled loop alone), "

@@ -36,7 +36,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 import timeit
 from dataclasses import dataclass, field
 from typing import Callable
@@ -181,7 +180,7 @@ class NumpyNatural:
         k_r, k_a, k_d = len(mech.segments), len(mech.angles), len(mech.drivers)
         self.constraint_names = ([f"rigid {s[0]}" for s in mech.segments] + [f"angle {a[0]}" for a in mech.angles]
                                  + [d[0] for d in mech.drivers])
-        m = self.m = k_r + k_a + k_d
+        self.m = k_r + k_a + k_d
         self.n_ext = n_ext
         self.zeros_static = np.zeros(k_r + k_a)
         self.has_angles = k_a > 0

@@ -1,6 +1,5 @@
 """The simulate and compare commands."""
 
-import numpy as np
 
 from cmbs.cli import main
 from cmbs.trajectory import Trajectory

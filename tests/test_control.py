@@ -1,7 +1,6 @@
 """Controllers: computed torque reproduces the designed error dynamics, PD with inverse-dynamics
 feed-forward recovers from a wrong initial state, zero-order hold samples and holds."""
 
-import math
 
 import numpy as np
 import pytest

@@ -11,8 +11,6 @@ from scipy.interpolate import BPoly
 
 from cmbs.cli import main
 from cmbs.errors import CmbsError
-from cmbs.gait import GaitDataError, prepare_stride
-from cmbs.gait.data import NORMATIVE, TRIAL, fetch
 from cmbs.gait.inverse import (INDEPENDENT, QuinticHermite, centre_of_mass, compare_with_lab, cop_local, inverse,
                                prescribed_model, replay)
 from cmbs.inverse.ida import inverse_dynamics
@@ -20,15 +18,6 @@ from cmbs.model.natural import point_map
 from cmbs.trajectory import Trajectory
 
 G = 9.81
-
-
-@pytest.fixture(scope="module")
-def prepared():
-    try:
-        fetch(TRIAL), fetch(NORMATIVE)
-    except GaitDataError as error:
-        pytest.skip(f"gait data not available: {error}")
-    return prepare_stride(1)
 
 
 @pytest.fixture(scope="module")

@@ -17,8 +17,6 @@ from helpers import check_constraint_derivatives, kitchen_sink
 def rigid_body_kinetic_energy(mass, length, com, inertia, ri, rj, vi, vj):
     """½ m |v_G|² + ½ I_G ω² from the two points' motion (independent of the element matrix)."""
     d, dv = rj - ri, vj - vi
-    e = d / length
-    n = np.array([-e[1], e[0]])
     omega = (d[0] * dv[1] - d[1] * dv[0]) / length**2
     de = dv / length
     dn = np.array([-de[1], de[0]])

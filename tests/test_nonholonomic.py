@@ -22,7 +22,6 @@ import cmbs
 from cmbs.dynamics import UdwadiaKalaba
 from cmbs.errors import ModelError
 from cmbs.model.equations import from_callables, from_sympy
-from cmbs.model.model import Model
 from cmbs.simulate import project_state, simulate
 
 from helpers import SmoothPath, first_derivative_fd

@@ -405,3 +405,22 @@ def test_user_mistakes_are_named(models):
         servo_inverse_dynamics(model, output, lambda t: np.zeros(2), times)
     with pytest.raises(CmbsError, match="line path: duration"):
         LinePath([0.0, 0.0], [1.0, 1.0], 0.0)
+
+
+def test_callable_output_derivatives_match_the_exact_point_output():
+    """A user's Ψ(q) (the link-3 centre of mass from the drawn points) with its derivatives by
+    differences against the exact segment_point of the joint-angle model."""
+    model = cmbs.load("passive-manipulator-joint")
+    exact = segment_point(model, "link3")
+
+    def centre(q):
+        points = model.point_positions(q)
+        return 0.5 * (points[4] + points[5])          # link3.origin and link3.end
+
+    user = callable_output(centre, ("x", "z"))
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        q, qd = rng.uniform(-2.0, 2.0, 3), rng.normal(size=3)
+        np.testing.assert_allclose(user.value(q), exact.value(q), atol=1e-12)
+        np.testing.assert_allclose(user.jacobian(q), exact.jacobian(q), atol=1e-9)
+        np.testing.assert_allclose(user.bias(q, qd), exact.bias(q, qd), atol=1e-6)

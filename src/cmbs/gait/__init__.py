@@ -3,6 +3,8 @@
 :mod:`cmbs.gait.data` fetches and reads the public treadmill trial and the normative curves;
 :mod:`cmbs.gait.reconstruct` turns one stride into a kinematically consistent reference motion
 of the library's 14-DOF ``human`` model.  :func:`prepare_stride` chains them.
+:mod:`cmbs.gait.inverse` computes the stride's inverse dynamics, :mod:`cmbs.gait.track` its
+forward dynamics (open-loop replay, PD and computed-torque tracking, robustness studies).
 """
 
 from __future__ import annotations

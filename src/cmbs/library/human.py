@@ -56,9 +56,17 @@ def _positive(value: object) -> bool:
 
 
 def human(body_mass: float = REFERENCE_MASS, height: float = REFERENCE_HEIGHT, fixed_hip: bool = False,
-          lengths: dict[str, float] | None = None) -> Model:
+          lengths: dict[str, float] | None = None, residual_actuators: bool = False,
+          point_forces: dict[str, tuple[str, object, object]] | None = None) -> Model:
     """Build the 14-DOF human model standing upright, at rest; ``fixed_hip`` adds constant drivers
     holding the hip point where it stands (12 DOF left: the trunk and joint angles).
+
+    ``residual_actuators`` adds, after the 11 joint actuators, ``f_hip_x``, ``f_hip_z`` (forces
+    on hip.x, hip.z) and ``tau_trunk`` (torque between ground and trunk on the absolute trunk
+    angle), so that all 14 DOF are actuated — OpenSim's residual actuators; the thesis drives the
+    model the same way (§4.2, ch. 6).  ``point_forces`` ({name: (point, fx, fz)}) adds known
+    forces in the ground frame at basic points, components numbers, expressions or tables of t
+    (:class:`cmbs.model.drivers.Table`; e.g. measured ground reaction forces).
 
     ``lengths`` ({segment: L' [m]}, segments ``trunk, head, arm, forearm, thigh, shank, foot``;
     bilateral ones set both sides) overrides the linearly scaled length L = L_table·H/1.75 of those
@@ -139,8 +147,24 @@ def human(body_mass: float = REFERENCE_MASS, height: float = REFERENCE_HEIGHT, f
     for joint in ("neck", "r_hip", "r_knee", "r_ankle", "r_shoulder", "r_elbow",
                   "l_hip", "l_knee", "l_ankle", "l_shoulder", "l_elbow"):
         builder.add_actuator(f"tau_{joint}", coordinate=joint)
+    if residual_actuators:
+        builder.add_actuator("f_hip_x", coordinate="hip.x")
+        builder.add_actuator("f_hip_z", coordinate="hip.z")
+        builder.add_actuator("tau_trunk", coordinate="trunk")
+    if point_forces is not None:
+        if not isinstance(point_forces, dict):
+            raise ModelError(f"point_forces must be a dict {{name: (point, fx, fz)}}, got {point_forces!r}",
+                             entry="human")
+        for name, spec in point_forces.items():
+            if not (isinstance(spec, tuple) and len(spec) == 3):
+                raise ModelError(f"point_forces[{name!r}] must be (point, fx, fz), got {spec!r}", entry="human")
+            builder.add_force(name, point=spec[0], fx=spec[1], fz=spec[2])
     model = builder.build()
     parameters = {"body_mass": body_mass, "height": height, "fixed_hip": fixed_hip}
+    if residual_actuators:
+        parameters["residual_actuators"] = True
+    if point_forces is not None:
+        parameters["point_forces"] = sorted(point_forces)
     if lengths is not None:
         parameters["lengths"] = {name: float(value) for name, value in lengths.items()}
     return model.replace(parameters=parameters)
