@@ -355,6 +355,19 @@ def test_numba_backend_agrees_with_python_backend(rheonomic, tmp_path, monkeypat
     assert list(tmp_path.glob("cmbs_equations_*.py"))
 
 
+def test_unusable_cache_directory_falls_back_to_a_temporary_folder(rheonomic, tmp_path, monkeypatch):
+    """The generated module is imported from a file, never exec-ed: with the cache directory
+    unusable (a file in its place) it goes to a temporary folder and gives the same numbers."""
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("")
+    monkeypatch.setenv("CMBS_CACHE_DIR", str(blocker / "sub"))
+    fallback = from_sympy("rheonomic", coordinates=[x, z], mass_matrix=sp.eye(2), forces=[0, 0],
+                          constraints=RHEONOMIC_PHI, q0=[0.0, 1.0], backend="numba")
+    for q, qd, s in random_states(3):
+        np.testing.assert_allclose(fallback.evaluate(q, qd, s).buffer, rheonomic.evaluate(q, qd, s).buffer,
+                                   rtol=1e-14, atol=1e-14)
+
+
 # ---------------------------------------------------------------- errors
 def sympy_error_cases():
     k = sp.Symbol("k")

@@ -61,13 +61,22 @@ def add_gait_commands(commands) -> None:
     follow.set_defaults(run=_gait_track)
 
 
-def _gait_prepare(args: argparse.Namespace) -> int:
-    from cmbs.gait import INDEPENDENT, prepare_stride
+def _prepared_stride(args: argparse.Namespace):
+    """The stride of ``--stride``/``--cutoff``, after checking ``--out`` and ``--plot`` (so that a
+    bad path fails before any work)."""
+    from cmbs.gait import prepare_stride
 
-    _check_output(args.out, (".npz", ".csv"), "--out")
+    if args.out:
+        _check_output(args.out, (".npz", ".csv"), "--out")
     if args.plot:
         _check_output(args.plot, (".png", ".pdf", ".svg"), "--plot")
-    prepared = prepare_stride(args.stride, cutoff=args.cutoff)
+    return prepare_stride(args.stride, cutoff=args.cutoff)
+
+
+def _gait_prepare(args: argparse.Namespace) -> int:
+    from cmbs.gait import INDEPENDENT
+
+    prepared = _prepared_stride(args)
     motion, stats, info = prepared.motion, prepared.statistics, prepared.motion.info
     print(f"gait: {info['trial']}, right stride {args.stride}: {len(motion.t)} frames at {info['frame_rate']:g} Hz, "
           f"stride time {info['stride_time']:.3f} s (heel strike at t = {info['trial_time_of_t0']:.2f} s)")
@@ -92,14 +101,9 @@ def _gait_prepare(args: argparse.Namespace) -> int:
 def _gait_inverse(args: argparse.Namespace) -> int:
     import time
 
-    from cmbs.gait import prepare_stride
     from cmbs.gait.inverse import JOINTS, compare_with_lab, inverse, residual_summary
 
-    if args.out:
-        _check_output(args.out, (".npz", ".csv"), "--out")
-    if args.plot:
-        _check_output(args.plot, (".png", ".pdf", ".svg"), "--plot")
-    prepared = prepare_stride(args.stride, cutoff=args.cutoff)
+    prepared = _prepared_stride(args)
     model, reference = prepared.model, prepared.motion
     height = model.parameters["height"]
     print(f"gait inverse dynamics: right stride {args.stride}, {len(reference.t)} frames, model human "
@@ -144,14 +148,10 @@ def _gait_inverse(args: argparse.Namespace) -> int:
 
 def _gait_track(args: argparse.Namespace) -> int:
     from cmbs.control.study import format_table
-    from cmbs.gait import INDEPENDENT, prepare_stride
+    from cmbs.gait import INDEPENDENT
     from cmbs.gait.track import open_loop, tracking_study
 
-    if args.out:
-        _check_output(args.out, (".npz", ".csv"), "--out")
-    if args.plot:
-        _check_output(args.plot, (".png", ".pdf", ".svg"), "--plot")
-    prepared = prepare_stride(args.stride, cutoff=args.cutoff)
+    prepared = _prepared_stride(args)
     model, reference = prepared.model, prepared.motion
     contact = {"grf": "measured GRF at the CoPs, residual actuators at the hip",
                "hip": "no ground: the hip/trunk actuators carry the contact wrench"}[args.contact]

@@ -27,11 +27,13 @@ fault.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib
 import importlib.util
 import os
 import sys
+import tempfile
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
@@ -101,19 +103,7 @@ class _Kernel:
             tail = [f"    out[{k}] = {text}" for k, text in enumerate(outputs)] + ["    return"]
         self.source = "\n".join([f"def _{label}({signature}):"] + unpack + body + tail) + "\n"
         imports = {module: sorted(names) for module, names in printer.module_imports.items()}
-        function = _numba_cached(label, self.source, imports) if backend == "numba" and cache else None
-        if function is None:
-            namespace: dict[str, object] = {}
-            for module, names in imports.items():
-                imported = importlib.import_module(module)
-                for name in names:
-                    namespace[name] = getattr(imported, name)
-            exec(compile(self.source, f"<cmbs.equations {label}>", "exec"), namespace)  # noqa: S102
-            function = namespace[f"_{label}"]
-            if backend == "numba":
-                import numba
-
-                function = numba.njit(function)
+        function = _generated_function(label, self.source, imports, numba=backend == "numba", cache=cache)
         self.function = function
 
 
@@ -132,35 +122,45 @@ def cache_directory() -> Path | None:
     return directory if os.access(directory, os.W_OK) else None
 
 
-def _numba_cached(label: str, source: str, imports: dict[str, list[str]]):
-    """Compile ``source`` with ``numba.njit(cache=True)`` from a file named by its hash, so that
-    numba's on-disk cache makes a rebuild of the same model (another process, a pickled copy)
-    skip compilation.  None if the cache directory is unusable."""
-    import numba
+def _generated_function(label: str, source: str, imports: dict[str, list[str]], *, numba: bool, cache: bool):
+    """The function ``_{label}`` of the generated ``source``, written as a module file named by
+    its hash and imported (never ``exec``-ed from a string).  The file goes to
+    :func:`cache_directory` — where, with ``numba`` and ``cache``, numba's on-disk cache lets a
+    rebuild of the same model (another process, a pickled copy) skip compilation — or, when that
+    is unusable, to a per-process temporary folder."""
+    import numba as numba_module
 
     directory = cache_directory()
+    cached = numba and cache and directory is not None
     if directory is None:
-        return None
+        directory = _scratch_directory()
+    decorator = "@numba.njit(cache=True)\n" if cached else "@numba.njit\n" if numba else ""
     header = "".join(f"from {module} import {', '.join(names)}\n" for module, names in imports.items())
-    text = f"import numba\n{header}\n\n@numba.njit(cache=True)\n{source}"
-    digest = hashlib.sha256(f"{numba.__version__}\n{text}".encode()).hexdigest()[:24]
+    text = f"import numba\n{header}\n\n{decorator}{source}"
+    digest = hashlib.sha256(f"{numba_module.__version__}\n{text}".encode()).hexdigest()[:24]
     module_name = f"cmbs_equations_{digest}"
     path = directory / f"{module_name}.py"
-    try:
+    module = sys.modules.get(module_name)
+    if module is None:
         if not path.exists():
             temporary = directory / f"{module_name}.{os.getpid()}.tmp"
             temporary.write_text(text, encoding="utf-8")
             os.replace(temporary, path)
-        module = sys.modules.get(module_name)
-        if module is None:
-            spec = importlib.util.spec_from_file_location(module_name, path)
-            module = importlib.util.module_from_spec(spec)
-            sys.modules[module_name] = module  # numba's cache re-imports the module by name
+        spec = importlib.util.spec_from_file_location(module_name, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[module_name] = module  # numba's cache re-imports the module by name
+        try:
             spec.loader.exec_module(module)
-    except (OSError, SyntaxError, ImportError):
-        sys.modules.pop(module_name, None)
-        return None
-    return getattr(module, f"_{label}", None)
+        except BaseException:
+            sys.modules.pop(module_name, None)
+            raise
+    return getattr(module, f"_{label}")
+
+
+@functools.cache
+def _scratch_directory() -> Path:
+    """A temporary folder for generated modules when the cache directory is not writable."""
+    return Path(tempfile.mkdtemp(prefix="cmbs-equations-"))
 
 
 def _cse(expressions: Sequence[sympy.Expr]) -> tuple[list, list]:
