@@ -16,6 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.animation as animation  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
 from PIL import Image  # noqa: E402  (a dependency of matplotlib)
 
 from cmbs.errors import CmbsError  # noqa: E402
@@ -27,33 +28,47 @@ from cmbs.trajectory import Trajectory  # noqa: E402
 MAX_FRAMES = 600
 #: Figure size in inches; the frames are ``int(FIGURE_SIZE * dpi)`` pixels.
 FIGURE_SIZE = (6.4, 4.8)
+#: Line styles of the moving figure's segments and of the reference ("ghost") figure under it.
+FIGURE_STYLE = {"color": "C0", "linewidth": 2.5, "solid_capstyle": "round"}
+GHOST_STYLE = {"color": "0.55", "alpha": 0.5, "linewidth": 5.0, "solid_capstyle": "round"}
 
 
-def frame_times(trajectory: Trajectory, *, fps: float = 30, speed: float = 1.0) -> tuple[np.ndarray, float]:
+def frame_times(trajectory: Trajectory, *, fps: float = 30, speed: float = 1.0,
+                reference: Trajectory | None = None) -> tuple[np.ndarray, float]:
     """The simulated times of the frames and the frame rate they are played at.
 
     ``count = min(MAX_FRAMES, round(fps * duration / speed) + 1)`` frames, evenly spaced from
     the first to the last time of the trajectory (both included; ``duration`` is their
-    difference).  When the cap applies, the returned frame rate is lowered to
+    difference) or, with a ``reference``, of the interval both cover (from the later start to
+    the earlier end).  When the cap applies, the returned frame rate is lowered to
     ``(count - 1) * speed / duration`` so that the playback still lasts ``duration / speed``.
+
+    Raises
+    ------
+    CmbsError
+        Non-positive ``fps``/``speed``, an empty trajectory or reference, times not finite and
+        increasing, or a reference that does not overlap the trajectory in time.
     """
     _check_positive(fps=fps, speed=speed)
-    t = np.asarray(trajectory.t, dtype=float)
-    if t.size == 0:
-        raise CmbsError("cannot animate an empty trajectory (no samples)")
-    duration = float(t[-1] - t[0])
-    if not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0):
-        raise CmbsError("cannot animate a trajectory whose times are not finite and increasing")
+    start, end = _time_span(trajectory, "trajectory")
+    if reference is not None:
+        reference_start, reference_end = _time_span(reference, "reference")
+        if reference_start > end or reference_end < start:
+            raise CmbsError(f"the reference ({reference_start:g} to {reference_end:g} s) does not overlap the "
+                            f"trajectory ({start:g} to {end:g} s) in time")
+        start, end = max(start, reference_start), min(end, reference_end)
+    duration = end - start
     if duration == 0:
-        return t[:1].copy(), float(fps)
+        return np.array([start]), float(fps)
     wanted = int(round(fps * duration / speed)) + 1
     count = min(MAX_FRAMES, wanted)
     rate = float(fps) if count == wanted else (count - 1) * speed / duration
-    return np.linspace(t[0], t[-1], count), rate
+    return np.linspace(start, end, count), rate
 
 
 def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fps: float = 30,
-            speed: float = 1.0, trail: str | None = None, dpi: float = 100) -> Path:
+            speed: float = 1.0, trail: str | None = None, dpi: float = 100,
+            reference: Trajectory | None = None) -> Path:
     """Draw ``model`` moving along ``trajectory`` into a ``.gif`` or ``.mp4`` file; returns its path.
 
     Each frame shows the model's segments (``model.lines`` between ``model.point_positions``),
@@ -62,10 +77,16 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
     ``model.point_names``), the path that point has traced so far.  The axis limits are fixed
     and cover every frame, with equal scales on x and z.
 
+    Reference
+        ``reference``, a second motion of the same model (e.g. the recorded motion a simulation
+        tracks), is drawn under the moving figure as a wide light-grey "ghost" stick figure at
+        the same frame times, with a legend "simulated" / "reference"; the frames then span
+        only the time both motions cover, and the axis limits cover both figures.
     Frames
         The coordinates are interpolated linearly between the trajectory's samples to the
         frame times of :func:`frame_times`: ``min(MAX_FRAMES, round(fps * duration / speed) + 1)``
-        frames (MAX_FRAMES = 600), the first at the first sample and the last at the last.
+        frames (MAX_FRAMES = 600), the first at the first sample and the last at the last
+        (of the common interval, with a reference).
         ``speed`` > 1 plays faster than real time.  Motions that would need more than 600
         frames are played at a lower frame rate instead (same playback length), so a long run
         still takes seconds to write.  A 5-s motion at 30 fps gives 151 frames.
@@ -89,8 +110,9 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
     ------
     CmbsError
         Bad extension, missing folder, mp4 without ffmpeg, non-positive ``fps``/``speed``/
-        ``dpi``, unknown ``trail`` point, a trajectory of another model or with non-finite
-        coordinates, or a failed write.
+        ``dpi``, unknown ``trail`` point, a trajectory or reference of another model or with
+        non-finite coordinates, a reference that does not overlap the trajectory in time, or a
+        failed write.
     """
     path = checked_output(path, (".gif", ".mp4"), "animation")
     _check_positive(fps=fps, speed=speed, dpi=dpi)
@@ -98,7 +120,8 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
     if mp4 and not animation.writers.is_available("ffmpeg"):
         raise CmbsError(f"{path}: writing .mp4 needs ffmpeg, which was not found; "
                         "install ffmpeg or write a .gif instead (always available)")
-    q = _coordinates_of(model, trajectory)
+    q = _coordinates_of(model, trajectory, "trajectory")
+    reference_q = _coordinates_of(model, reference, "reference") if reference is not None else None
     trail_index = None
     if trail is not None:
         if trail not in model.point_names:
@@ -106,36 +129,38 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
                             f"{', '.join(model.point_names) or 'none'}")
         trail_index = model.point_names.index(trail)
 
-    times, rate = frame_times(trajectory, fps=fps, speed=speed)
-    sample_times = np.asarray(trajectory.t, dtype=float)
-    frames_q = np.column_stack([np.interp(times, sample_times, q[:, k]) for k in range(q.shape[1])]) \
-        if q.shape[1] else np.zeros((times.size, 0))
-    points = np.array([np.asarray(model.point_positions(row), dtype=float).reshape(-1, 2) for row in frames_q])
-    if not np.all(np.isfinite(points)):
-        raise CmbsError(f"cannot animate model {model.name!r}: non-finite point positions along the trajectory")
+    times, rate = frame_times(trajectory, fps=fps, speed=speed, reference=reference)
+    points = _poses(model, times, trajectory.t, q, "trajectory")
+    ghost = _poses(model, times, reference.t, reference_q, "reference") if reference is not None else None
     spacing = float(times[1] - times[0]) if times.size > 1 else 1.0
     decimals = max(2, math.ceil(math.log10(2.0 / spacing))) if spacing > 0 else 2
 
     figure = plt.figure(figsize=FIGURE_SIZE, dpi=dpi)
     try:
         axis = figure.add_axes((0.1, 0.1, 0.85, 0.8))
-        _fixed_limits(axis, figure, points)
+        _fixed_limits(axis, figure, points if ghost is None else np.concatenate([points, ghost], axis=1))
         axis.set_xlabel("x")
         axis.set_ylabel("z")
         axis.grid(alpha=0.3)
         axis.set_title(model.name + (f" (trail of {trail})" if trail_index is not None else ""))
         trail_line = axis.plot([], [], "-", color="C1", linewidth=1.2)[0] if trail_index is not None else None
-        segments = [axis.plot([], [], "-", color="C0", linewidth=2.5, solid_capstyle="round")[0]
-                    for _ in model.lines]
+        ghosts = [] if ghost is None else [axis.plot([], [], "-", gid="reference", **GHOST_STYLE)[0]
+                                           for _ in model.lines]
+        segments = [axis.plot([], [], "-", gid="trajectory", **FIGURE_STYLE)[0] for _ in model.lines]
         dots = axis.plot([], [], "o", color="k", markersize=4, zorder=3)[0]
         label = axis.text(0.02, 0.96, "", transform=axis.transAxes, va="top", family="monospace")
+        if ghost is not None:
+            axis.legend([Line2D([], [], **FIGURE_STYLE), Line2D([], [], **GHOST_STYLE)], ["simulated", "reference"],
+                        loc="upper right")
 
-        moving = [artist for artist in (trail_line, *segments, dots, label) if artist is not None]
+        moving = [artist for artist in (trail_line, *ghosts, *segments, dots, label) if artist is not None]
 
         def pose(frame: int) -> None:
             here = points[frame]
             for line, (i, j) in zip(segments, model.lines):
                 line.set_data(here[[i, j], 0], here[[i, j], 1])
+            for line, (i, j) in zip(ghosts, model.lines):
+                line.set_data(ghost[frame][[i, j], 0], ghost[frame][[i, j], 1])
             dots.set_data(here[:, 0], here[:, 1])
             if trail_line is not None:
                 trail_line.set_data(points[:frame + 1, trail_index, 0], points[:frame + 1, trail_index, 1])
@@ -209,15 +234,37 @@ class _BlitFFMpegWriter(animation.FFMpegWriter):
         self._proc.stdin.write(bytes(canvas.buffer_rgba()))
 
 
-def _coordinates_of(model: Model, trajectory: Trajectory) -> np.ndarray:
-    """The trajectory's q with columns in the model's coordinate order."""
+def _coordinates_of(model: Model, trajectory: Trajectory, what: str) -> np.ndarray:
+    """The q of ``trajectory`` (called ``what`` in messages) with columns in the model's
+    coordinate order."""
     if set(trajectory.names) != set(model.coordinate_names) or len(trajectory.names) != model.n:
-        raise CmbsError(f"the trajectory's coordinates ({', '.join(trajectory.names)}) are not those of model "
+        raise CmbsError(f"the {what}'s coordinates ({', '.join(trajectory.names)}) are not those of model "
                         f"{model.name!r} ({', '.join(model.coordinate_names)})")
     q = np.asarray(trajectory.q, dtype=float)[:, [trajectory.names.index(name) for name in model.coordinate_names]]
     if not np.all(np.isfinite(q)):
-        raise CmbsError("cannot animate a trajectory with non-finite coordinates")
+        raise CmbsError(f"cannot animate a {what} with non-finite coordinates")
     return q
+
+
+def _time_span(trajectory: Trajectory, what: str) -> tuple[float, float]:
+    """First and last time of ``trajectory`` (called ``what`` in messages), checked."""
+    t = np.asarray(trajectory.t, dtype=float)
+    if t.size == 0:
+        raise CmbsError(f"cannot animate an empty {what} (no samples)")
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0):
+        raise CmbsError(f"cannot animate a {what} whose times are not finite and increasing")
+    return float(t[0]), float(t[-1])
+
+
+def _poses(model: Model, times: np.ndarray, sample_times: np.ndarray, q: np.ndarray, what: str) -> np.ndarray:
+    """(frames, points, 2) point positions at ``times``, the coordinates ``q`` (samples, n)
+    interpolated linearly between ``sample_times``."""
+    frames_q = np.column_stack([np.interp(times, sample_times, column) for column in q.T]) \
+        if q.shape[1] else np.zeros((times.size, 0))
+    points = np.array([np.asarray(model.point_positions(row), dtype=float).reshape(-1, 2) for row in frames_q])
+    if not np.all(np.isfinite(points)):
+        raise CmbsError(f"cannot animate model {model.name!r}: non-finite point positions along the {what}")
+    return points
 
 
 def _fixed_limits(axis: plt.Axes, figure: plt.Figure, points: np.ndarray) -> None:

@@ -1,6 +1,7 @@
 """The ``cmbs gait`` commands: ``prepare`` (data → reference motion), ``inverse`` (joint torques
 of a stride against the lab's moments) and ``track`` (open-loop replay, PD or computed-torque
-tracking with faults); see docs/gait.md."""
+tracking with faults), with stick-figure animations and OpenSim ``.mot``/``.sto`` export of their
+results; see docs/gait.md."""
 
 from __future__ import annotations
 
@@ -24,6 +25,8 @@ def add_gait_commands(commands) -> None:
     prepare.add_argument("--cutoff", type=float, default=6.0, help="smoothing-spline cut-off frequency [Hz]")
     prepare.add_argument("--out", default="reference.npz", help="reference motion file (.npz or .csv)")
     prepare.add_argument("--plot", help="figure of the independent coordinates (.png, .pdf or .svg)")
+    prepare.add_argument("--animate", help="stick-figure animation of the reconstructed walker (.gif or .mp4)")
+    prepare.add_argument("--opensim", help="reference kinematics in OpenSim coordinates (.mot or .sto)")
     prepare.set_defaults(run=_gait_prepare)
     inverse = gait_commands.add_parser("inverse", help="inverse dynamics of a stride, compared with the lab's moments",
                                        description="Joint torques of one right stride with (a) the contact "
@@ -34,6 +37,8 @@ def add_gait_commands(commands) -> None:
     inverse.add_argument("--cutoff", type=float, default=6.0, help="smoothing-spline cut-off frequency [Hz]")
     inverse.add_argument("--out", help="result file (.npz or .csv): reference plus torques and residuals")
     inverse.add_argument("--plot", help="figure of the leg torques vs the lab's moments (.png, .pdf or .svg)")
+    inverse.add_argument("--opensim", help="generalized forces of (b) as OpenSim inverse-dynamics output (.sto or "
+                                           ".mot)")
     inverse.set_defaults(run=_gait_inverse)
     follow = gait_commands.add_parser("track",
                                       help="forward dynamics: open-loop replay, PD or computed-torque tracking",
@@ -58,18 +63,23 @@ def add_gait_commands(commands) -> None:
     follow.add_argument("--step", type=float, default=1e-3, help="RK4 step [s]")
     follow.add_argument("--out", help="nominal run (.npz or .csv)")
     follow.add_argument("--plot", help="figure of the tracking errors (.png, .pdf or .svg)")
+    follow.add_argument("--animate", help="stick-figure animation of the nominal run over the reference (.gif or "
+                                          ".mp4)")
+    follow.add_argument("--opensim", help="nominal run in OpenSim coordinates (.mot or .sto)")
     follow.set_defaults(run=_gait_track)
 
 
 def _prepared_stride(args: argparse.Namespace):
-    """The stride of ``--stride``/``--cutoff``, after checking ``--out`` and ``--plot`` (so that a
-    bad path fails before any work)."""
+    """The stride of ``--stride``/``--cutoff``, after checking the output paths ``--out``,
+    ``--plot``, ``--animate`` and ``--opensim`` the command has (so that a bad path fails before
+    any work)."""
     from cmbs.gait import prepare_stride
+    from cmbs.opensim_files import SUFFIXES
 
-    if args.out:
-        _check_output(args.out, (".npz", ".csv"), "--out")
-    if args.plot:
-        _check_output(args.plot, (".png", ".pdf", ".svg"), "--plot")
+    for option, suffixes in (("out", (".npz", ".csv")), ("plot", (".png", ".pdf", ".svg")),
+                             ("animate", (".gif", ".mp4")), ("opensim", SUFFIXES)):
+        if getattr(args, option, None):
+            _check_output(getattr(args, option), suffixes, f"--{option}")
     return prepare_stride(args.stride, cutoff=args.cutoff)
 
 
@@ -95,6 +105,15 @@ def _gait_prepare(args: argparse.Namespace) -> int:
 
         figure = plot_trajectory(motion, model=prepared.model, coordinates=INDEPENDENT[2:])
         print(f"  figure -> {save_figure(figure, args.plot)}")
+    if args.opensim:
+        from cmbs.gait.opensim import ankle_neutral, write_kinematics
+
+        path = write_kinematics(args.opensim, prepared.model, motion, ankle=ankle_neutral(motion))
+        print(f"  OpenSim kinematics -> {path}")
+    if args.animate:
+        from cmbs.animate import animate
+
+        print(f"  animation -> {animate(prepared.model, motion, args.animate)}")
     return 0
 
 
@@ -143,6 +162,11 @@ def _gait_inverse(args: argparse.Namespace) -> int:
 
         figure = plot_lab_comparison(reference, comparisons)
         print(f"  figure -> {save_figure(figure, args.plot)}")
+    if args.opensim:
+        from cmbs.gait.opensim import write_moments
+
+        path = write_moments(args.opensim, model, reference, results["grf"].forces)
+        print(f"  OpenSim generalized forces of (b) -> {path}")
     return 0
 
 
@@ -188,4 +212,13 @@ def _gait_track(args: argparse.Namespace) -> int:
         from cmbs.plotting import save_figure
 
         print(f"  figure -> {save_figure(plot_tracking(runs, reference, INDEPENDENT), args.plot)}")
+    if args.opensim:
+        from cmbs.gait.opensim import ankle_neutral, write_kinematics
+
+        path = write_kinematics(args.opensim, model, run, ankle=ankle_neutral(reference))
+        print(f"  OpenSim kinematics -> {path}")
+    if args.animate:
+        from cmbs.animate import animate
+
+        print(f"  animation -> {animate(model, run, args.animate, reference=reference)}")
     return 0 if succeeded else 1
