@@ -181,6 +181,20 @@ def test_position_level_methods_keep_the_assembly_branch(slider_crank_runs):
     assert np.abs(run["energy"] - run["energy"][0]).max() / run["energy"][0] < 1e-4  # numerical damping ρ∞ = 0.9
 
 
+def test_matrix_r_keeps_its_number_of_dependent_coordinates_at_a_singular_position():
+    """At θ1 = 90° (C over O) the slider-crank's A loses rank; a re-partition there must still
+    choose the 5 dependent coordinates found at the start, not release a constraint."""
+    model = cmbs.load("slider-crank")
+    solver = formulation("matrix-r").bind(model)
+    assert solver.partition.dependent.size == 5
+    q = dict(zip(model.coordinate_names, model.q0))
+    q.update({"A.x": 0.0, "A.z": 1.0, "C.x": 0.0, "theta1": math.pi / 2, "theta2": -math.pi})
+    A = model.jacobian(np.array([q[name] for name in model.coordinate_names]), 0.0)
+    assert np.linalg.matrix_rank(A) == 4
+    solver.repartition(A)
+    assert solver.partition.dependent.size == 5 and solver.partition.rows.size == 5
+
+
 def test_plain_lagrange_stops_at_the_singular_position(slider_crank_runs):
     run = slider_crank_runs["lagrange"]
     assert run.info["status"] == "failed" and run.t[-1] < 10.0

@@ -56,3 +56,96 @@ def test_jacobi_extreme_eigenvalues_match_lapack():
             low, high = _gram_extremes(G.copy())
             assert abs(low - expected[0]) <= 1e-13 * expected[-1]
             assert abs(high - expected[-1]) <= 1e-13 * expected[-1]
+
+
+def test_compiled_loop_equals_python_loop_on_the_human_model():
+    """The human model has massless angle coordinates (zero rows of M): the compiled loop's
+    block elimination keeps them in the reduced system."""
+    model = cmbs.load("human").without_drivers()
+    runs = [simulate(model, t_end=0.05, integrator="rk4", dt=1e-3, formulation="lagrange", compiled=flag)
+            for flag in (True, False)]
+    assert runs[0].info["compiled"]
+    np.testing.assert_allclose(runs[0].q, runs[1].q, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(runs[0]["lam"], runs[1]["lam"], rtol=1e-9, atol=1e-8)
+
+
+def test_gram_bounds_enclose_the_extreme_eigenvalues():
+    """The cheap certificate of the rank check: trace G and 1/trace G⁻¹ bracket G's spectrum,
+    and a certified A is never one the SVD test calls singular."""
+    from cmbs.fast import _conditioning, _gram_bounds
+
+    rng = np.random.default_rng(1)
+    for m in (1, 3, 8, 20):
+        n = m + 4
+        for case in range(10):
+            A = rng.normal(size=(m, n)) * (rng.random(size=(m, n)) < 0.4)
+            A[np.arange(m), rng.integers(0, n, size=m)] += 1.0
+            if case % 3 == 0 and m > 1:
+                A[-1] = A[0] + 10.0 ** -rng.uniform(3, 9) * rng.normal(size=n)
+            scale = rng.uniform(0.5, 2.0, size=m)
+            gram, factor = np.empty((m, m)), np.empty((m, m))
+            rows_of, dense = np.empty((n, m), dtype=np.int64), np.zeros(m, dtype=np.int64)
+            low, high = _gram_bounds(A, scale, gram, factor, rows_of, dense)
+            scaled = A * scale[:, None]
+            np.testing.assert_allclose(gram, scaled @ scaled.T, rtol=1e-13, atol=1e-13)
+            eigenvalues = np.linalg.eigvalsh(scaled @ scaled.T)  # known to rounding, ~ε‖G‖
+            rounding = 1e-13 * eigenvalues[-1]
+            assert low <= eigenvalues[0] + rounding and eigenvalues[-1] <= high + rounding
+            sigma = np.linalg.svd(scaled, compute_uv=False)
+            for tolerance in (1e-4, 1e-2):
+                singular, certified = _conditioning(A, scale, tolerance, gram, factor, rows_of, dense)
+                assert singular == (sigma[-1] < tolerance * max(sigma[0], 1.0))
+                assert not (certified and singular)
+
+
+@pytest.mark.parametrize("kind", ["natural", "joint"])
+def test_schur_solve_equals_the_full_saddle_point_system(kind):
+    """Block elimination of the massive coordinates against numpy's solve of [M Aᵀ; A 0]."""
+    from cmbs.fast import KIND_JOINT, KIND_NATURAL, _schur_solve, schur_workspace
+
+    rng = np.random.default_rng(2)
+    n, m = 9, 5
+    root = rng.normal(size=(n, n))
+    M = root @ root.T + n * np.eye(n)
+    if kind == "natural":
+        massless = [2, 6]                   # e.g. angle coordinates: zero rows and columns of M
+        M[massless, :] = 0.0
+        M[:, massless] = 0.0
+    A = rng.normal(size=(m, n)) * (rng.random(size=(m, n)) < 0.6)
+    A[:, 2] += 1.0
+    A[:, 6] -= 0.5
+    Q, c = rng.normal(size=n), rng.normal(size=m)
+    expected = np.linalg.solve(np.block([[M, A.T], [A, np.zeros((m, m))]]), np.concatenate([Q, c]))
+    schur = schur_workspace(KIND_NATURAL if kind == "natural" else KIND_JOINT, M, m)
+    assert schur[1] == (1 if kind == "natural" else 0)
+    qdd, lam = np.empty(n), np.empty(m)
+    assert _schur_solve(M, Q, A, c, schur, qdd, lam)
+    np.testing.assert_allclose(qdd, expected[:n], rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(lam, expected[n:], rtol=1e-10, atol=1e-10)
+
+
+def test_schur_solve_declines_a_semi_definite_mass_block():
+    from cmbs.fast import KIND_NATURAL, _schur_solve, schur_workspace
+
+    M = np.diag([1.0, 1.0, 0.0])
+    M[0, 1] = M[1, 0] = 1.0                 # rows 0, 1 carry mass but their block is singular
+    A = np.array([[1.0, 0.0, 1.0]])
+    schur = schur_workspace(KIND_NATURAL, M, 1)
+    assert schur[1] == -1
+    assert not _schur_solve(M, np.ones(3), A, np.zeros(1), schur, np.empty(3), np.empty(1))
+
+
+def test_lu_solves_match_numpy():
+    from cmbs.fast import _lu_in_place, _lu_solve, _lu_solve_transposed
+
+    rng = np.random.default_rng(3)
+    for size in (1, 4, 11):
+        K = rng.normal(size=(size, size))
+        b = rng.normal(size=size)
+        factors, pivots = K.copy(), np.empty(size, dtype=np.int64)
+        assert _lu_in_place(factors, pivots)
+        x, y = b.copy(), b.copy()
+        _lu_solve(factors, pivots, x)
+        _lu_solve_transposed(factors, pivots, y)
+        np.testing.assert_allclose(x, np.linalg.solve(K, b), rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(y, np.linalg.solve(K.T, b), rtol=1e-10, atol=1e-12)

@@ -83,20 +83,23 @@ def law_arrays(law: ComputedTorque | None, model: Model) -> tuple:
     """The tuple :func:`computed_torque` reads for ``law`` (its model's kernel, workspace and
     zero inputs; its coordinates, constraint rows and gains; the reference spline's breaks and
     coefficients, one row per coordinate in the flattened layout of
-    :func:`~cmbs.model.drivers.evaluate_piecewise`; the inverse actuator gains).  For no law
+    :func:`~cmbs.model.drivers.evaluate_piecewise`; the inverse actuator gains; the dependent
+    coordinates of the partition).  For no law
     (constant inputs) the same types, empty, on ``model``'s kernel: numba needs them typed."""
     if law is None:
         kind, ints, reals, buffer, mass = kernel(model)
         empty = np.zeros(0)
         return (kind, ints, reals, buffer, mass, model.m, np.zeros(model.n_u), np.zeros(0, dtype=np.int64),
-                np.zeros(0, dtype=np.int64), empty, empty, empty, np.zeros((0, 0)), np.zeros((model.n_u, 0)))
+                np.zeros(0, dtype=np.int64), empty, empty, empty, np.zeros((0, 0)), np.zeros((model.n_u, 0)),
+                np.zeros(0, dtype=np.int64))
     kind, ints, reals, buffer, mass = kernel(law.model)
     spline = law.reference._spline
     coefficients = np.transpose(spline.c, (2, 1, 0)).reshape(law.columns.size, -1)  # [j, 4i + r] = c[r, i, j]
     return (kind, ints, reals, buffer, mass, law.model.m, np.zeros(law.model.n_u), law.columns.astype(np.int64),
             law.solver.partition.rows.astype(np.int64), np.array(law.kp, dtype=float),
             np.array(law.kd, dtype=float), np.ascontiguousarray(spline.x, dtype=float),
-            np.ascontiguousarray(coefficients, dtype=float), np.ascontiguousarray(law.inverse_gains, dtype=float))
+            np.ascontiguousarray(coefficients, dtype=float), np.ascontiguousarray(law.inverse_gains, dtype=float),
+            law.solver.partition.dependent.astype(np.int64))
 
 
 @numba.njit(cache=True)
@@ -146,29 +149,259 @@ def _gram_extremes(G):
 
 
 @numba.njit(cache=True)
-def _singular(A, row_scale, tolerance):
-    """True when σ_min/σ_max of the row-scaled A is below ``tolerance`` (as KKTSolver; the σ² are
-    the eigenvalues of the small Gram matrix, cheaper than an SVD here)."""
-    m = A.shape[0]
-    if m == 0:
-        return False
-    if m > A.shape[1]:
-        return True
-    n = A.shape[1]
-    gram = np.empty((m, m))            # (S A)(S A)ᵀ, S = diag(row_scale), by loops: no BLAS call
+def _cholesky_in_place(L, start):
+    """Lower Cholesky factor L Lᵀ = K of the symmetric positive definite K given in ``L``'s lower
+    triangle, in place (the upper triangle is not read).  ``start[i]`` is the first column of
+    row i that may be non-zero (the profile of K, which the factor keeps: George & Liu 1981
+    §4.2); zeros for a dense K.  Returns False when K is not numerically positive definite."""
+    size = L.shape[0]
+    for j in range(size):
+        pivot = L[j, j]
+        for k in range(start[j], j):
+            pivot -= L[j, k] * L[j, k]
+        if not pivot > 0.0:
+            return False
+        pivot = math.sqrt(pivot)
+        L[j, j] = pivot
+        for i in range(j + 1, size):
+            if start[i] > j:
+                continue
+            total = L[i, j]
+            for k in range(max(start[i], start[j]), j):
+                total -= L[i, k] * L[j, k]
+            L[i, j] = total / pivot
+    return True
+
+
+@numba.njit(cache=True)
+def _forward(L, start, b):
+    """Solve L x = b in place for the lower triangular L with row profile ``start``."""
+    for i in range(L.shape[0]):
+        total = b[i]
+        for k in range(start[i], i):
+            total -= L[i, k] * b[k]
+        b[i] = total / L[i, i]
+
+
+@numba.njit(cache=True)
+def _backward(L, start, b):
+    """Solve Lᵀ x = b in place for the lower triangular L with row profile ``start``."""
+    for i in range(L.shape[0] - 1, -1, -1):
+        b[i] /= L[i, i]
+        for k in range(start[i], i):
+            b[k] -= L[i, k] * b[i]
+
+
+@numba.njit(cache=True)
+def _gram(X, scale, gram, rows_of):
+    """G = (SX)(SX)ᵀ into ``gram`` (S = diag(scale)), column by column over the rows each column
+    touches (``rows_of`` is (columns, rows) integer workspace), so a sparse X costs
+    Σ_k nnz(column k)² instead of rows² x columns."""
+    m, n = X.shape
     for i in range(m):
-        for j in range(i, m):
-            value = 0.0
-            for k in range(n):
-                value += A[i, k] * A[j, k]
-            gram[i, j] = gram[j, i] = value * row_scale[i] * row_scale[j]
+        for j in range(m):
+            gram[i, j] = 0.0
+    for k in range(n):
+        count = 0
+        for i in range(m):
+            if X[i, k] != 0.0:
+                rows_of[k, count] = i
+                count += 1
+        for a in range(count):
+            i = rows_of[k, a]
+            xi = X[i, k] * scale[i]
+            for b in range(a + 1):
+                j = rows_of[k, b]
+                gram[i, j] += xi * X[j, k] * scale[j]
+    for i in range(m):
+        for j in range(i):
+            gram[j, i] = gram[i, j]
+
+
+@numba.njit(cache=True)
+def _gram_bounds(A, row_scale, gram, factor, rows_of, dense):
+    """Bounds (λ_low, λ_high) on the extreme eigenvalues of the Gram matrix G = (SA)(SA)ᵀ
+    (S = diag(row_scale)), left in ``gram``, with λ_low <= λ_min(G) and λ_max(G) <= λ_high:
+    λ_high = trace G and λ_low = 1 / trace G⁻¹ = 1 / ‖L⁻¹‖_F² from the Cholesky factor L of G
+    (in ``factor``), because the trace of a positive definite matrix lies between its largest
+    eigenvalue and m times it.  λ_low = 0 when G is not numerically positive definite."""
+    m = A.shape[0]
+    _gram(A, row_scale, gram, rows_of)
+    trace = 0.0
+    for i in range(m):
+        trace += gram[i, i]
+        for j in range(i + 1):
+            factor[i, j] = gram[i, j]
+    if not _cholesky_in_place(factor, dense):
+        return 0.0, trace
+    inverse_trace = 0.0
+    column = np.empty(m)
+    for j in range(m):                      # ‖L⁻¹ e_j‖², forward substitution from row j
+        column[j] = 1.0 / factor[j, j]
+        inverse_trace += column[j] * column[j]
+        for i in range(j + 1, m):
+            total = 0.0
+            for k in range(j, i):
+                total -= factor[i, k] * column[k]
+            column[i] = total / factor[i, i]
+            inverse_trace += column[i] * column[i]
+    return 1.0 / inverse_trace, trace
+
+
+@numba.njit(cache=True)
+def _conditioning(A, row_scale, tolerance, gram, factor, rows_of, dense):
+    """(singular, certified) for the constraint Jacobian A: ``singular`` when σ_min/σ_max of the
+    row-scaled SA is below ``tolerance`` (as KKTSolver's SVD test, with σ_max replaced by 1 when
+    smaller); ``certified`` when cheap bounds already prove it is not (:func:`_gram_bounds`).
+    Only uncertified cases pay for the eigenvalues: Jacobi rotations for up to 12 rows
+    (:func:`_gram_extremes`), LAPACK beyond."""
+    m, n = A.shape
+    if m == 0:
+        return False, True
+    if m > n:
+        return True, False
+    low, high = _gram_bounds(A, row_scale, gram, factor, rows_of, dense)
+    if low >= tolerance * tolerance * max(high, 1.0):
+        return False, True
     if m <= 12:
         low, high = _gram_extremes(gram)
     else:
         eigenvalues = np.linalg.eigvalsh(gram)  # σ² of the scaled A, ascending
         low, high = eigenvalues[0], eigenvalues[m - 1]
     smallest, largest = math.sqrt(max(low, 0.0)), math.sqrt(max(high, 0.0))
-    return smallest < tolerance * max(largest, 1.0)
+    return smallest < tolerance * max(largest, 1.0), False
+
+
+@numba.njit(cache=True)
+def _schur_solve(M, Q, A, c, schur, qdd, lam):
+    """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c] by block elimination of the coordinates p that carry
+    mass (the range-space method, Golub & Van Loan §4.2; Nocedal & Wright §16.2).  Split
+    q = (p, a) with a the massless coordinates (zero rows of M, e.g. a natural model's angle
+    coordinates), X = M_pp⁻¹A_pᵀ, y = M_pp⁻¹Q_p::
+
+        [A_p X  -A_a] [λ  ]   [A_p y - c]
+        [A_aᵀ    0  ] [q̈_a] = [Q_a      ],      q̈_p = y - Xλ
+
+    solved by Cholesky when a is empty (A_p X is then positive definite for a full-rank A),
+    else by Gaussian elimination with partial pivoting: m + n_a unknowns instead of n + m.  The
+    products with A use its non-zeros only (a natural model's rows have a few).
+
+    ``schur`` is the tuple of :func:`schur_workspace`.  Its flag 1: the first matrix is the
+    constant M_pp⁻¹ (natural coordinates: inverted once); 0: M is factored here by Cholesky
+    (joint coordinates); -1: M_pp is not positive definite (returns False: the caller solves
+    the full system).  Returns False when a factorisation meets a non-positive pivot or the
+    reduced system is singular."""
+    matrix, flag, X, K, y, columns, counts, massive, massless, z, dense = (
+        schur[0], schur[1], schur[2], schur[3], schur[4], schur[5], schur[6], schur[9], schur[10], schur[11],
+        schur[12])
+    n_p = massive.shape[0]
+    n_a = massless.shape[0]
+    m = c.shape[0]
+    if flag < 0:
+        return False
+    if flag == 0:
+        for i in range(n_p):
+            for j in range(i + 1):
+                matrix[i, j] = M[massive[i], massive[j]]
+        if not _cholesky_in_place(matrix, dense):
+            return False
+    for r in range(m):                      # non-zeros of A_p's rows; X's rows
+        count = 0
+        for i in range(n_p):
+            if A[r, massive[i]] != 0.0:
+                columns[r, count] = i
+                count += 1
+        counts[r] = count
+        if flag == 1:
+            for i in range(n_p):
+                total = 0.0
+                for t in range(count):
+                    total += matrix[i, columns[r, t]] * A[r, massive[columns[r, t]]]
+                X[r, i] = total
+        else:
+            for i in range(n_p):
+                X[r, i] = A[r, massive[i]]
+            _forward(matrix, dense, X[r])
+            _backward(matrix, dense, X[r])
+    if flag == 1:
+        for i in range(n_p):
+            total = 0.0
+            for j in range(n_p):
+                total += matrix[i, j] * Q[massive[j]]
+            y[i] = total
+    else:
+        for i in range(n_p):
+            y[i] = Q[massive[i]]
+        _forward(matrix, dense, y)
+        _backward(matrix, dense, y)
+    size = m + n_a
+    reduced = K[:size, :size]
+    for a in range(m):
+        total = -c[a]
+        for t in range(counts[a]):
+            total += A[a, massive[columns[a, t]]] * y[columns[a, t]]
+        z[a] = total
+        for b in range(a + 1):
+            value = 0.0
+            for t in range(counts[a]):
+                value += A[a, massive[columns[a, t]]] * X[b, columns[a, t]]
+            reduced[a, b] = reduced[b, a] = value
+        for j in range(n_a):
+            reduced[a, m + j] = -A[a, massless[j]]
+            reduced[m + j, a] = A[a, massless[j]]
+    for j in range(n_a):
+        z[m + j] = Q[massless[j]]
+        for i in range(n_a):
+            reduced[m + j, m + i] = 0.0
+    if n_a == 0:
+        if not _cholesky_in_place(reduced, dense):
+            return False
+        _forward(reduced, dense, z)
+        _backward(reduced, dense, z)
+    elif not _solve_in_place(reduced, z):
+        return False
+    for a in range(m):
+        lam[a] = z[a]
+    for j in range(n_a):
+        qdd[massless[j]] = z[m + j]
+    for i in range(n_p):
+        total = y[i]
+        for a in range(m):
+            total -= X[a, i] * lam[a]
+        qdd[massive[i]] = total
+    return True
+
+
+def schur_workspace(kind: int, mass: np.ndarray, m: int) -> tuple:
+    """The ``schur`` tuple of :func:`_schur_solve` and :func:`field` for a kernel of ``kind``
+    with ``m`` constraints and constant mass matrix ``mass`` (natural) or its shape (joint).
+
+    Natural coordinates: the coordinates with a zero row in M are massless (a), the others (p)
+    have the constant M_pp, inverted once here (flag 1; -1 when M_pp is not positive definite);
+    joint coordinates: all carry mass and M is factored at each call (flag 0).  Then
+    workspaces: X (m, n_p), the reduced matrix (m + n_a)², y (n_p,), A's row non-zeros (m, n)
+    and their counts (m,), two Gram matrices (m, m), the index arrays of p and a, a vector
+    (m + n_a,), the dense profile (zeros) of a matrix of max(n, m) rows and the Gram's column
+    lists (n, m)."""
+    n = mass.shape[0]
+    flag = 0
+    massive = np.arange(n)
+    matrix = np.zeros((n, n))
+    if kind == KIND_NATURAL:
+        massive = np.flatnonzero(np.any(mass != 0.0, axis=1))
+        block = mass[np.ix_(massive, massive)]
+        try:
+            np.linalg.cholesky(block)       # positive definite: the inverse is safe
+            matrix = np.linalg.inv(block)
+            flag = 1
+        except np.linalg.LinAlgError:
+            flag = -1
+    massless = np.setdiff1d(np.arange(n), massive)
+    size = m + massless.size
+    return (matrix, flag, np.zeros((m, massive.size)), np.zeros((size, size)), np.zeros(massive.size),
+            np.zeros((m, max(n, 1)), dtype=np.int64), np.zeros(m, dtype=np.int64), np.zeros((m, m)),
+            np.zeros((m, m)), massive.astype(np.int64), massless.astype(np.int64), np.zeros(size),
+            np.zeros(max(n, m), dtype=np.int64), np.zeros((max(n, 1), max(m, 1)), dtype=np.int64))
 
 
 @numba.njit(cache=True)
@@ -205,13 +438,16 @@ def _solve_in_place(K, rhs):
 
 @numba.njit(cache=True)
 def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, qdd, lam, K, rhs,
-          check_rank):
+          check_rank, schur):
     """q̈ and λ at (q, q̇, t, u) into ``qdd``, ``lam``; returns a status code.
 
     ``parameters`` = (ξ, ω, singularity tolerance or SVD threshold, mass-regularisation scale s,
     semi-definite flag); ``mass`` is the constant M (natural) or unused (joint: M from buffer);
-    ``K`` (n+m, n+m) and ``rhs`` (n+m,) are workspace.  Lagrange/Baumgarte check the rank of A
-    when ``check_rank``.
+    ``K`` (n+m, n+m) and ``rhs`` (n+m,) are workspace, ``schur`` that of :func:`schur_workspace`.
+    Lagrange/Baumgarte check the rank of A when ``check_rank`` (:func:`_conditioning`); when A
+    is certified well away from singular and M is positive definite they solve by the Schur
+    complement (:func:`_schur_solve`: O(nm²) with M's constant factor, against O((n+m)³) for the
+    full system), else the full system by Gaussian elimination with partial pivoting.
     """
     n = q.shape[0]
     m = lam.shape[0]
@@ -223,12 +459,9 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
     phi_t = buffer[n + 2 * m + m * n:n + 3 * m + m * n]
     M = mass if kind == KIND_NATURAL else buffer[n + 3 * m + m * n:n + 3 * m + m * n + n * n].reshape((n, n))
     if method == LAGRANGE or method == BAUMGARTE:
-        if check_rank and _singular(A, row_scale, parameters[2]):
+        singular, certified = _conditioning(A, row_scale, parameters[2], schur[7], schur[8], schur[13], schur[12])
+        if check_rank and singular:
             return SINGULAR
-        for i in range(n):
-            for j in range(n):
-                K[i, j] = M[i, j]
-            rhs[i] = Q[i]
         for r in range(m):
             value = gamma[r]
             if method == BAUMGARTE:
@@ -237,6 +470,16 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
                     rate += A[r, j] * qd[j]
                 value -= 2.0 * parameters[0] * parameters[1] * rate + parameters[1] * parameters[1] * phi[r]
             rhs[n + r] = value
+        if certified and _schur_solve(M, Q, A, rhs[n:n + m], schur, qdd, lam):
+            for k in range(n):
+                if not math.isfinite(qdd[k]):
+                    return NON_FINITE
+            return OK
+        for i in range(n):
+            for j in range(n):
+                K[i, j] = M[i, j]
+            rhs[i] = Q[i]
+        for r in range(m):
             for j in range(n):
                 K[n + r, j] = A[r, j]
                 K[j, n + r] = A[r, j]
@@ -271,6 +514,65 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
 
 
 @numba.njit(cache=True)
+def _lu_in_place(K, pivots):
+    """LU factorisation with partial pivoting of the square ``K`` in place (unit lower factor
+    below the diagonal); row swaps in ``pivots``.  Returns False for an exactly singular matrix."""
+    size = K.shape[0]
+    for column in range(size):
+        pivot = column
+        largest = abs(K[column, column])
+        for row in range(column + 1, size):
+            if abs(K[row, column]) > largest:
+                largest = abs(K[row, column])
+                pivot = row
+        pivots[column] = pivot
+        if largest == 0.0:
+            return False
+        if pivot != column:
+            for k in range(size):
+                K[column, k], K[pivot, k] = K[pivot, k], K[column, k]
+        for row in range(column + 1, size):
+            factor = K[row, column] / K[column, column]
+            K[row, column] = factor
+            if factor != 0.0:
+                for k in range(column + 1, size):
+                    K[row, k] -= factor * K[column, k]
+    return True
+
+
+@numba.njit(cache=True)
+def _lu_solve(K, pivots, b):
+    """Solve K x = b in place with the factors of :func:`_lu_in_place`."""
+    size = K.shape[0]
+    for i in range(size):
+        if pivots[i] != i:
+            b[i], b[pivots[i]] = b[pivots[i]], b[i]
+    for i in range(size):
+        for k in range(i):
+            b[i] -= K[i, k] * b[k]
+    for i in range(size - 1, -1, -1):
+        for k in range(i + 1, size):
+            b[i] -= K[i, k] * b[k]
+        b[i] /= K[i, i]
+
+
+@numba.njit(cache=True)
+def _lu_solve_transposed(K, pivots, b):
+    """Solve Kᵀ x = b in place with the factors of :func:`_lu_in_place` (K = Pᵀ L U)."""
+    size = K.shape[0]
+    for i in range(size):                   # Uᵀ y = b
+        for k in range(i):
+            b[i] -= K[k, i] * b[k]
+        b[i] /= K[i, i]
+    for i in range(size - 1, -1, -1):       # Lᵀ w = y
+        for k in range(i + 1, size):
+            b[i] -= K[k, i] * b[k]
+    for i in range(size - 1, -1, -1):       # x = Pᵀ w
+        if pivots[i] != i:
+            b[i], b[pivots[i]] = b[pivots[i]], b[i]
+
+
+@numba.njit(cache=True)
 def computed_torque(law, q, qd, t, K, rhs, u):
     """The inputs of :class:`~cmbs.control.ComputedTorque` at (q, q̇, t) into ``u``; NaN when its
     linear system is singular (the Python law raises there).
@@ -281,21 +583,18 @@ def computed_torque(law, q, qd, t, K, rhs, u):
         z̈_c = z̈_ref + K_d (ż_ref - ż) + K_p (z_ref - z)
 
     where z_ref, ż_ref, z̈_ref come from the reference's cubic spline at t clamped to the spline's
-    span (as :meth:`~cmbs.control.Reference.__call__`).  Without forming R, with A_r the
-    partition's r constraint rows and E_z (n, k) the columns of the identity at the k independent
-    coordinates (r + k = n, A_d invertible)::
+    span (as :meth:`~cmbs.control.Reference.__call__`).  With the partition's r constraint rows
+    A_r = [A_d A_z] split into its dependent (d) and independent (z) columns (r = n - k, A_d
+    invertible), R = [-A_d⁻¹A_z; I] and S = [A_d⁻¹γ_r; 0] (THEORY §5), so one LU factorisation
+    of A_d gives everything::
 
-        [M    A_rᵀ  -E_z] [q̈  ]   [Q₀ ]
-        [A_r  0     0   ] [λ  ] = [γ_r]
-        [E_zᵀ 0     0   ] [τ_z]   [z̈_c]
+        q̈_z = z̈_c,   q̈_d = A_d⁻¹(γ_r - A_z z̈_c),   f = M q̈ - Q₀,
+        τ_z = f_z + R_dᵀ f_d = f_z - A_zᵀ A_d⁻ᵀ f_d
 
-    The last two rows give A_r q̈ = γ_r, q̈_z = z̈_c, i.e. q̈ = R z̈_c + S; premultiplying the
-    first by Rᵀ, with A_r R = 0 and E_zᵀ R = I, gives τ_z = Rᵀ(M q̈ - Q₀): the law's τ_z.
-
-    ``law`` is the tuple of :func:`law_arrays`; ``K`` (n+r+k, n+r+k) and ``rhs`` (n+r+k,) are
-    workspace.
+    ``law`` is the tuple of :func:`law_arrays`; ``K`` (at least r x r) and ``rhs`` (at least
+    n + r) are workspace.
     """
-    kind, ints, reals, buffer, mass, m, no_input, columns, rows, kp, kd, breaks, coefficients, gains = law
+    kind, ints, reals, buffer, mass, m, no_input, columns, rows, kp, kd, breaks, coefficients, gains, dependent = law
     n = q.shape[0]
     r = rows.shape[0]
     k = columns.shape[0]
@@ -303,36 +602,52 @@ def computed_torque(law, q, qd, t, K, rhs, u):
     A = buffer[n + m:n + m + m * n].reshape((m, n))
     gamma = buffer[n + m + m * n:n + 2 * m + m * n]
     M = mass if kind == KIND_NATURAL else buffer[n + 3 * m + m * n:n + 3 * m + m * n + n * n].reshape((n, n))
-    K[:, :] = 0.0
-    for i in range(n):
-        for j in range(n):
-            K[i, j] = M[i, j]
-        rhs[i] = buffer[i]
-    for a in range(r):
-        for j in range(n):
-            K[n + a, j] = A[rows[a], j]
-            K[j, n + a] = A[rows[a], j]
-        rhs[n + a] = gamma[rows[a]]
+    qdd = rhs[:n]
+    side = rhs[n:n + r]
     clamped = min(max(t, breaks[0]), breaks[breaks.shape[0] - 1])
     for b in range(k):
         reference = evaluate_piecewise(breaks, coefficients[b], clamped)
         c = columns[b]
-        K[c, n + r + b] = -1.0
-        K[n + r + b, c] = 1.0
-        rhs[n + r + b] = reference[2] + kd[b] * (reference[1] - qd[c]) + kp[b] * (reference[0] - q[c])
-    if not _solve_in_place(K, rhs):
+        qdd[c] = reference[2] + kd[b] * (reference[1] - qd[c]) + kp[b] * (reference[0] - q[c])
+    Ad = K[:r, :r]
+    pivots = np.empty(r, dtype=np.int64)
+    for a in range(r):
+        row = rows[a]
+        total = gamma[row]
+        for b in range(k):
+            total -= A[row, columns[b]] * qdd[columns[b]]
+        side[a] = total
+        for j in range(r):
+            Ad[a, j] = A[row, dependent[j]]
+    if not _lu_in_place(Ad, pivots):
         u[:] = np.nan
         return
+    _lu_solve(Ad, pivots, side)
+    for j in range(r):
+        qdd[dependent[j]] = side[j]
+    for j in range(r):                      # f_d into side
+        c = dependent[j]
+        total = -buffer[c]
+        for i in range(n):
+            total += M[c, i] * qdd[i]
+        side[j] = total
+    _lu_solve_transposed(Ad, pivots, side)  # A_d⁻ᵀ f_d
     for i in range(u.shape[0]):
-        total = 0.0
-        for b in range(k):
-            total += gains[i, b] * rhs[n + r + b]
-        u[i] = total
+        u[i] = 0.0
+    for b in range(k):
+        c = columns[b]
+        force = -buffer[c]
+        for i in range(n):
+            force += M[c, i] * qdd[i]
+        for a in range(r):
+            force -= A[rows[a], c] * side[a]
+        for i in range(u.shape[0]):
+            u[i] += gains[i, b] * force
 
 
 @numba.njit(cache=True)
 def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buffer_size, mass, row_scale, m, mode,
-        law):
+        law, schur):
     """Fixed-step RK4 for ``steps`` steps of size ``h`` from t = 0; records (t, q, q̇, q̈, λ, u,
     |Φ|max, |Φ̇|max) every ``every`` steps.  Returns the records, the number recorded and a status
     code with the time, state and inputs it refers to (for a failed run: where the formulation
@@ -365,16 +680,16 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
     stage_lam = np.empty(m)
     K = np.empty((n + m, n + m))
     rhs = np.empty(n + m)
-    size = n + law[7].shape[0] + law[8].shape[0]  # n + k independent coordinates + r constraint rows
-    law_K = np.empty((size, size))
-    law_rhs = np.empty(size)
+    r = law[8].shape[0]                     # constraint rows of the law's partition
+    law_K = np.empty((r, r))
+    law_rhs = np.empty(n + r)
     recorded = 0
     for step in range(steps + 1):
         t = step * h
         if mode == LAW or (mode == HELD and step == 0):
             computed_torque(law, q, qd, t, law_K, law_rhs, u)
         status = field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, k1v, lam, K, rhs,
-                       True)
+                       True, schur)
         if status != OK:
             return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, recorded, status, t, q, qd, u
         if step % every == 0:
@@ -397,21 +712,21 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
         if mode == LAW:
             computed_torque(law, sq, sv, st, law_K, law_rhs, u)
         status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, k2v, stage_lam,
-                       K, rhs, True)
+                       K, rhs, True, schur)
         k2q[:] = qd + 0.5 * h * k1v
         if status == OK:
             sq, sv = q + 0.5 * h * k2q, qd + 0.5 * h * k2v
             if mode == LAW:
                 computed_torque(law, sq, sv, st, law_K, law_rhs, u)
             status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, k3v,
-                           stage_lam, K, rhs, True)
+                           stage_lam, K, rhs, True, schur)
         k3q[:] = qd + 0.5 * h * k2v
         if status == OK:
             sq, sv, st = q + h * k3q, qd + h * k3v, t + h
             if mode != CONSTANT:
                 computed_torque(law, sq, sv, st, law_K, law_rhs, u)
             status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, k4v,
-                           stage_lam, K, rhs, True)
+                           stage_lam, K, rhs, True, schur)
         k4q[:] = qd + h * k3v
         if status != OK:
             return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, recorded, status, st, sq, sv, u

@@ -204,7 +204,7 @@ def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.
     terms = model.new_terms()
 
     def field(t: float, y: np.ndarray) -> np.ndarray:
-        q, qd = y[:n], y[n:]
+        q, qd = solver.stage_state(y[:n], y[n:], t)
         model.evaluate(q, qd, t, inputs(t, q, qd), out=terms)
         return np.concatenate([qd, _solve(solver, model, terms, q, qd, t).qdd])
 
@@ -424,7 +424,8 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs
     loop_started = time.perf_counter()
     T, Q, QD, QDD, LAM, U, PHI, PHID, recorded, status, t_fail, q_fail, qd_fail, u_fail = fast.rk4(
         kind, method, parameters, np.array(q0), np.array(qd0), dt, steps, 1, u0, ints, reals, buffer.size, mass,
-        np.ascontiguousarray(solver.row_scale), model.m, mode, fast.law_arrays(law, model))
+        np.ascontiguousarray(solver.row_scale), model.m, mode, fast.law_arrays(law, model),
+        fast.schur_workspace(kind, mass, model.m))
     loop_wall = time.perf_counter() - loop_started
     message = ""
     if status != fast.OK:  # let the Python solver explain the failure at the state where it happened

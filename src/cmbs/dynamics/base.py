@@ -41,6 +41,10 @@ class Solver(Protocol):
     def after_step(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Adjust the state after an accepted integration step (identity for most formulations)."""
 
+    def stage_state(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """The state at which an integrator stage evaluates the accelerations (identity for most
+        formulations; matrix R recovers the dependent coordinates from the independent ones)."""
+
 
 class Formulation(Protocol):
     """Parameters of a formulation; ``name`` is its registry name (``"lagrange"``, ...)."""
@@ -60,6 +64,9 @@ class StatelessSolver:
         self.model = model
 
     def after_step(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        return q, qd
+
+    def stage_state(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
         return q, qd
 
 
