@@ -20,6 +20,7 @@ def test_compiled_loop_equals_python_loop(name, formulation):
     np.testing.assert_allclose(fast.qd, python.qd, rtol=0, atol=1e-11)
     np.testing.assert_allclose(fast.qdd, python.qdd, rtol=1e-10, atol=1e-9)
     np.testing.assert_allclose(fast["lam"], python["lam"], rtol=1e-9, atol=1e-8)
+    np.testing.assert_allclose(fast["constraint_force"], python["constraint_force"], rtol=1e-9, atol=1e-8)
     np.testing.assert_allclose(fast["energy"], python["energy"], rtol=0, atol=1e-10)
     # Φ itself is rounding noise here (|Φ| ~ 1e-12 for lengths of 10 m): agree to that level
     np.testing.assert_allclose(fast["constraint_error"], python["constraint_error"], rtol=1e-6, atol=1e-12)
@@ -149,3 +150,81 @@ def test_lu_solves_match_numpy():
         _lu_solve_transposed(factors, pivots, y)
         np.testing.assert_allclose(x, np.linalg.solve(K, b), rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(y, np.linalg.solve(K.T, b), rtol=1e-10, atol=1e-12)
+
+
+def _random_states(model, count, seed):
+    """States near the model's initial configuration (assembled, consistent velocities)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        q = cmbs.assemble(model, model.q0 + 0.05 * rng.normal(size=model.n), tolerance=1e-13)
+        yield q, cmbs.velocities(model, q, qd=rng.normal(size=model.n))
+
+
+@pytest.mark.parametrize("name", ["four-bar", "human", "slider-crank", "slider-crank-joint", "chain"])
+@pytest.mark.parametrize("formulation", ["lagrange", "baumgarte", "projection"])
+def test_compiled_dynamics_equals_the_python_solver(name, formulation):
+    """One compiled call (model terms + solve) against model.evaluate + the Python solver."""
+    from cmbs.fast import CompiledDynamics
+
+    model = cmbs.load(name, links=6, closed=True) if name == "chain" else cmbs.load(name)
+    model = model.without_drivers() if name == "four-bar" else model
+    compiled = CompiledDynamics(model, formulation)
+    solver = cmbs.formulation(formulation).bind(model)
+    for q, qd in _random_states(model, 4, seed=5):
+        u = np.linspace(-1.0, 1.0, model.n_u)
+        qdd, lam = compiled.accelerations(q, qd, 0.3, u)
+        expected = solver.accelerations(model.evaluate(q, qd, 0.3, u), q, qd, 0.3)
+        scale = max(1.0, np.abs(expected.qdd).max())
+        np.testing.assert_allclose(qdd, expected.qdd, rtol=0, atol=1e-10 * scale)
+        np.testing.assert_allclose(lam, expected.lam, rtol=0, atol=1e-10 * max(1.0, np.abs(expected.lam).max()))
+
+
+def test_projection_takes_the_svd_at_a_singular_position_and_the_schur_path_elsewhere():
+    """At θ1 = 90° the slider-crank's A loses rank: the certified Schur path must decline, the
+    SVD path gives the Python projection's answer; a regular state is taken by the Schur path."""
+    from cmbs.fast import CompiledDynamics, _projection_by_schur
+
+    model = cmbs.load("slider-crank")
+    compiled = CompiledDynamics(model, "projection")
+    values = dict(zip(model.coordinate_names, model.q0))
+    values.update({"A.x": 0.0, "A.z": 1.0, "C.x": 0.0, "theta1": np.pi / 2, "theta2": -np.pi})
+    singular = np.array([values[name] for name in model.coordinate_names])
+    regular = cmbs.assemble(model, model.q0, tolerance=1e-13)
+    for q, schur_expected in ((singular, False), (regular, True)):
+        qd = cmbs.velocities(model, q, qd=np.ones(model.n))
+        terms = model.evaluate(q, qd, 0.0)
+        qdd, lam = np.empty(model.n), np.empty(model.m)
+        taken = _projection_by_schur(terms.M, terms.Q, terms.A, terms.gamma, compiled._row_scale,
+                                     compiled.formulation.threshold, compiled._schur, qdd, lam)
+        assert taken == schur_expected
+        expected = compiled.solver.accelerations(terms, q, qd, 0.0)
+        got_qdd, got_lam = compiled.accelerations(q, qd, 0.0)
+        np.testing.assert_allclose(got_qdd, expected.qdd, rtol=0, atol=1e-9 * max(1.0, np.abs(expected.qdd).max()))
+        np.testing.assert_allclose(got_lam, expected.lam, rtol=0, atol=1e-9 * max(1.0, np.abs(expected.lam).max()))
+
+
+def test_compiled_dynamics_names_the_constraints_at_a_singular_position_and_checks_sizes():
+    from cmbs.errors import SingularSystemError
+    from cmbs.fast import CompiledDynamics
+
+    model = cmbs.load("slider-crank")
+    values = dict(zip(model.coordinate_names, model.q0))
+    values.update({"A.x": 0.0, "A.z": 1.0, "C.x": 0.0, "theta1": np.pi / 2, "theta2": -np.pi})
+    q = np.array([values[name] for name in model.coordinate_names])
+    with pytest.raises(SingularSystemError, match="dependent:"):
+        CompiledDynamics(model, "lagrange").accelerations(q, np.zeros(model.n))
+    with pytest.raises(CmbsError, match=r"qd must have shape \(6,\)"):
+        CompiledDynamics(model, "lagrange").accelerations(q, np.zeros(3))
+    with pytest.raises(CmbsError, match="non-finite"):
+        CompiledDynamics(model, "projection").accelerations(q * np.nan, np.zeros(model.n))
+    with pytest.raises(CmbsError, match="cannot run"):
+        CompiledDynamics(model, "penalty")
+
+
+def test_a_diverging_compiled_run_fails_with_a_message_not_an_exception():
+    """Projection without drift control at 1 ms leaves the slider-crank's branch and blows up:
+    the run stops with a failed status and says what to try (no LAPACK error on NaN)."""
+    model = cmbs.load("slider-crank")
+    run = simulate(model, t_end=10.0, integrator="rk4", dt=1e-3, formulation="projection", compiled=True)
+    assert run.info["status"] == "failed" and run.t[-1] < 10.0
+    assert "diverged" in run.info["message"] and np.all(np.isfinite(run.q))

@@ -26,6 +26,8 @@ import numpy as np
 
 from cmbs.control.base import ZeroOrderHold
 from cmbs.control.computed_torque import ComputedTorque
+from cmbs.dynamics import Baumgarte, Formulation, Lagrange, Projection
+from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.model.drivers import evaluate_piecewise
 from cmbs.model.joints import JointEquations, _evaluate_kernel as _joint_kernel
 from cmbs.model.model import Model
@@ -77,6 +79,107 @@ def control(u: object, model: Model, dt: float) -> tuple[int, ComputedTorque | N
             or law.model.n_u != model.n_u:
         return None
     return mode, law
+
+
+def method_of(chosen: Formulation) -> tuple[int, np.ndarray] | None:
+    """(method, parameters) of :func:`field` for the formulation ``chosen``, or None when the
+    compiled field does not run it (penalty, matrix R, Udwadia-Kalaba, least-squares Lagrange,
+    the symmetric and parameterised projection inertias).  The projection's regularisation
+    entries are filled in by :func:`bound_parameters`."""
+    if isinstance(chosen, (Lagrange, Baumgarte)) and not chosen.least_squares:
+        xi, omega = (chosen.xi, chosen.omega) if isinstance(chosen, Baumgarte) else (0.0, 0.0)
+        return (BAUMGARTE if isinstance(chosen, Baumgarte) else LAGRANGE,
+                np.array([xi, omega, chosen.singular_tolerance, 0.0, 0.0]))
+    if isinstance(chosen, Projection) and chosen.inertia == "standard":
+        return PROJECTION, np.array([0.0, 0.0, chosen.threshold, 0.0, 0.0])
+    return None
+
+
+def bound_parameters(method: int, parameters: np.ndarray, solver: object) -> np.ndarray:
+    """``parameters`` with the mass-regularisation scale and semi-definite flag of the bound
+    projection ``solver`` (unchanged for the other methods)."""
+    parameters = np.array(parameters, dtype=float)
+    if method == PROJECTION:
+        parameters[3] = solver.scale
+        parameters[4] = 1.0 if solver.semi_definite else 0.0
+    return parameters
+
+
+class CompiledDynamics:
+    """Forward dynamics of one model under one formulation at single states, in one compiled call
+    (model terms and solve: :func:`field`, the function the compiled RK4 loop runs at each stage).
+
+    For callers that evaluate q̈ at states of their own (an integrator of their own, a shooting
+    method, a benchmark).  Same results as ``formulation.bind(model).accelerations`` after
+    ``model.evaluate`` (tested to 1e-10); Lagrange and Baumgarte check the rank of A and raise
+    :class:`~cmbs.errors.SingularSystemError` naming the constraints, as the Python solver does.
+
+    Parameters
+    ----------
+    model
+        A natural- or joint-coordinate model without Python-callable time functions.
+    formulation
+        A name or a :class:`~cmbs.dynamics.Formulation`: ``lagrange``, ``baumgarte`` or
+        ``projection`` (standard inertia).
+    """
+
+    def __init__(self, model: Model, formulation: str | Formulation = "lagrange"):
+        from cmbs.dynamics import formulation as make_formulation
+
+        chosen = make_formulation(formulation) if isinstance(formulation, str) else formulation
+        kind = supported(model)
+        plan = method_of(chosen)
+        if kind is None or plan is None:
+            raise CmbsError(f"the compiled field cannot run model {model.name!r} with formulation {chosen.name!r}: "
+                            "it takes natural- or joint-coordinate models without Python time functions, with "
+                            "lagrange, baumgarte or projection (standard inertia)")
+        self.model, self.formulation = model, chosen
+        self.solver = chosen.bind(model)
+        self.method = plan[0]
+        self.parameters = bound_parameters(plan[0], plan[1], self.solver)
+        _, self._ints, self._reals, self._buffer, self._mass = kernel(model)
+        self._kind = kind
+        n, m = model.n, model.m
+        self._row_scale = np.ascontiguousarray(self.solver.row_scale, dtype=float)
+        self._K, self._rhs = np.empty((n + m, n + m)), np.empty(n + m)
+        self._schur = schur_workspace(kind, self._mass, m)
+        self._no_input = np.zeros(model.n_u)
+
+    def into(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray | None, qdd: np.ndarray,
+             lam: np.ndarray) -> int:
+        """q̈ (n,) and λ (m,) at (q, q̇, t, u) into ``qdd`` and ``lam``; returns the status code
+        (OK, SINGULAR or NON_FINITE).  Float64 contiguous arrays of the model's sizes; no
+        checks and no allocation (the fast path)."""
+        return field(self._kind, self.method, self.parameters, q, qd, t, self._no_input if u is None else u,
+                     self._ints, self._reals, self._buffer, self._mass, self._row_scale, qdd, lam, self._K, self._rhs,
+                     True, self._schur)
+
+    def accelerations(self, q: np.ndarray, qd: np.ndarray, t: float = 0.0,
+                      u: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(q̈, λ) at (q, q̇, t, u) as new arrays.
+
+        Raises
+        ------
+        CmbsError
+            Arrays of the wrong size; :class:`~cmbs.errors.SingularSystemError` at a singular
+            configuration (Lagrange, Baumgarte: the constraints are named); non-finite terms or
+            accelerations.
+        """
+        model = self.model
+        q, qd = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float)
+        u = self._no_input if u is None else np.ascontiguousarray(u, dtype=float)
+        for name, value, size in (("q", q, model.n), ("qd", qd, model.n), ("u", u, model.n_u)):
+            if value.shape != (size,):
+                raise CmbsError(f"model {model.name!r}: {name} must have shape ({size},), got {value.shape}")
+        qdd, lam = np.empty(model.n), np.empty(model.m)
+        status = self.into(q, qd, float(t), u, qdd, lam)
+        if status == SINGULAR:
+            terms = model.evaluate(q, qd, t, u)
+            self.solver.accelerations(terms, q, qd, t)   # raises, naming the dependent constraints
+            raise SingularSystemError(f"model {model.name!r} at t={t:.6g}: singular system")
+        if status != OK:
+            raise CmbsError(f"model {model.name!r} at t={t:.6g}: non-finite terms or accelerations")
+        return qdd, lam
 
 
 def law_arrays(law: ComputedTorque | None, model: Model) -> tuple:
@@ -436,6 +539,32 @@ def _solve_in_place(K, rhs):
     return True
 
 
+#: The projection formulation takes the Schur-complement path when the row-scaled A is certified
+#: to have σ_min >= this (times max(σ_max, 1)) and above the formulation's SVD threshold.
+PROJECTION_REGULAR = 1e-4
+
+
+@numba.njit(cache=True)
+def _projection_by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
+    """Aghili's standard projection solution at a regular configuration, by the augmented system.
+
+    When A has full row rank and no singular value of the row-scaled DA falls below the SVD
+    ``threshold``, the pseudo-inverse discards nothing, A⁺ = Aᵀ(AAᵀ)⁻¹ and P = I - A⁺A, and
+    (M̂ + PM - M̂P) q̈ = PQ + M̂A⁺γ holds exactly when P(Mq̈ - Q) = 0 and Aq̈ = γ (Aghili 2005,
+    §IV: the two projections of the equation), i.e. when Mq̈ + Aᵀλ = Q, Aq̈ = γ for some λ: the
+    Lagrange solution, unique here, with the same multipliers (λ = -(Aᵀ)⁺f_c and f_c = -Aᵀλ).
+    Taken only when the Gram-matrix bounds of :func:`_gram_bounds` certify σ_min(DA) >=
+    PROJECTION_REGULAR·max(σ_max, 1) and σ_min > ``threshold``; returns False otherwise (near
+    singular positions, redundant constraints), and the caller takes the SVD path."""
+    m = A.shape[0]
+    if m == 0 or m > A.shape[1]:
+        return False
+    low, high = _gram_bounds(A, row_scale, schur[7], schur[8], schur[13], schur[12])
+    if low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold:
+        return False
+    return _schur_solve(M, Q, A, gamma, schur, qdd, lam)
+
+
 @numba.njit(cache=True)
 def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, qdd, lam, K, rhs,
           check_rank, schur):
@@ -448,6 +577,9 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
     is certified well away from singular and M is positive definite they solve by the Schur
     complement (:func:`_schur_solve`: O(nm²) with M's constant factor, against O((n+m)³) for the
     full system), else the full system by Gaussian elimination with partial pivoting.
+    Projection takes the same Schur path where A is certified regular (the solutions coincide
+    there: :func:`_projection_by_schur`), else the SVD (:func:`_projection_by_svd`).  A state
+    whose terms are not finite returns NON_FINITE before any factorisation.
     """
     n = q.shape[0]
     m = lam.shape[0]
@@ -458,7 +590,14 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
     gamma = buffer[n + m + m * n:n + 2 * m + m * n]
     phi_t = buffer[n + 2 * m + m * n:n + 3 * m + m * n]
     M = mass if kind == KIND_NATURAL else buffer[n + 3 * m + m * n:n + 3 * m + m * n + n * n].reshape((n, n))
-    if method == LAGRANGE or method == BAUMGARTE:
+    for k in range(n + 3 * m + m * n if kind == KIND_NATURAL else n + 3 * m + m * n + n * n):
+        if not math.isfinite(buffer[k]):    # a state that has blown up: no factorisation sees it
+            return NON_FINITE
+    if method == PROJECTION:
+        if not _projection_by_schur(M, Q, A, gamma, row_scale, parameters[2], schur, qdd, lam) and \
+                not _projection_by_svd(M, Q, A, gamma, row_scale, parameters, qdd, lam):
+            return SINGULAR
+    else:
         singular, certified = _conditioning(A, row_scale, parameters[2], schur[7], schur[8], schur[13], schur[12])
         if check_rank and singular:
             return SINGULAR
@@ -489,28 +628,40 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
             return SINGULAR
         qdd[:] = rhs[:n]
         lam[:] = rhs[n:]
-    else:
-        pinv = np.zeros((n, m))
-        P = np.eye(n)
-        if m > 0:
-            scaled = A * row_scale.reshape((m, 1))
-            U, sigma, Vt = np.linalg.svd(scaled, full_matrices=False)
-            for k in range(sigma.shape[0]):
-                if sigma[k] > parameters[2]:
-                    v = Vt[k]
-                    P -= np.outer(v, v)
-                    pinv += np.outer(v / sigma[k], U[:, k] * row_scale)
-        I_P = np.eye(n) - P
-        M_hat = M + parameters[3] * I_P if parameters[4] > 0.0 else M.copy()
-        matrix = M_hat + P @ M - M_hat @ P
-        rhs = P @ Q + M_hat @ (pinv @ gamma)
-        qdd[:] = np.linalg.solve(matrix, rhs)
-        force = I_P @ (M @ qdd - Q)
-        lam[:] = -(pinv.T @ force)
     for k in range(n):
         if not math.isfinite(qdd[k]):
             return NON_FINITE
     return OK
+
+
+@numba.njit(cache=True)
+def _projection_by_svd(M, Q, A, gamma, row_scale, parameters, qdd, lam):
+    """Aghili's standard projection solution with the SVD pseudo-inverse of the row-scaled A,
+    singular values up to the threshold ``parameters[2]`` discarded (any rank of A); M̂ = M + s(I - P)
+    when ``parameters[4]`` flags a semi-definite M (s = ``parameters[3]``).  Returns False when
+    the constraint inertia matrix is exactly singular."""
+    n = M.shape[0]
+    m = A.shape[0]
+    pinv = np.zeros((n, m))
+    P = np.eye(n)
+    if m > 0:
+        scaled = A * row_scale.reshape((m, 1))
+        U, sigma, Vt = np.linalg.svd(scaled, full_matrices=False)
+        for k in range(sigma.shape[0]):
+            if sigma[k] > parameters[2]:
+                v = Vt[k]
+                P -= np.outer(v, v)
+                pinv += np.outer(v / sigma[k], U[:, k] * row_scale)
+    I_P = np.eye(n) - P
+    M_hat = M + parameters[3] * I_P if parameters[4] > 0.0 else M.copy()
+    matrix = M_hat + P @ M - M_hat @ P
+    solution = P @ Q + M_hat @ (pinv @ gamma)
+    if not _solve_in_place(matrix, solution):
+        return False
+    qdd[:] = solution
+    force = I_P @ (M @ qdd - Q)
+    lam[:] = -(pinv.T @ force)
+    return True
 
 
 @numba.njit(cache=True)
@@ -649,7 +800,7 @@ def computed_torque(law, q, qd, t, K, rhs, u):
 def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buffer_size, mass, row_scale, m, mode,
         law, schur):
     """Fixed-step RK4 for ``steps`` steps of size ``h`` from t = 0; records (t, q, q̇, q̈, λ, u,
-    |Φ|max, |Φ̇|max) every ``every`` steps.  Returns the records, the number recorded and a status
+    |Φ|max, |Φ̇|max, f_c = -Aᵀλ) every ``every`` steps.  Returns the records, the number recorded and a status
     code with the time, state and inputs it refers to (for a failed run: where the formulation
     could not go on).
 
@@ -672,6 +823,7 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
     Us = np.zeros((records, u0.shape[0]))
     PHI = np.zeros(records)
     PHID = np.zeros(records)
+    FORCE = np.zeros((records, n))
     buffer = np.zeros(buffer_size)
     q, qd, u = q0.copy(), qd0.copy(), u0.copy()
     k1q, k1v, k2q, k2v, k3q, k3v, k4q, k4v = (np.empty(n), np.empty(n), np.empty(n), np.empty(n),
@@ -691,7 +843,7 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
         status = field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, k1v, lam, K, rhs,
                        True, schur)
         if status != OK:
-            return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, recorded, status, t, q, qd, u
+            return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, status, t, q, qd, u
         if step % every == 0:
             T[recorded] = t
             Qs[recorded] = q
@@ -704,6 +856,11 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
             phid = A @ qd + buffer[n + 2 * m + m * n:n + 3 * m + m * n]
             PHI[recorded] = np.max(np.abs(phi)) if m else 0.0
             PHID[recorded] = np.max(np.abs(phid)) if m else 0.0
+            for j in range(n):
+                total = 0.0
+                for r_ in range(m):
+                    total -= A[r_, j] * lam[r_]
+                FORCE[recorded, j] = total
             recorded += 1
         if step == steps:
             break
@@ -729,7 +886,7 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
                            stage_lam, K, rhs, True, schur)
         k4q[:] = qd + h * k3v
         if status != OK:
-            return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, recorded, status, st, sq, sv, u
+            return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, status, st, sq, sv, u
         q = q + (h / 6.0) * (k1q + 2.0 * k2q + 2.0 * k3q + k4q)
         qd = qd + (h / 6.0) * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
-    return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, recorded, OK, steps * h, q, qd, u
+    return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, OK, steps * h, q, qd, u

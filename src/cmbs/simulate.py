@@ -125,7 +125,8 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
         Run the whole loop compiled (:mod:`cmbs.fast`): None chooses it when the run allows it
         (rk4; lagrange, baumgarte or standard projection; constant inputs, or a
         :class:`~cmbs.control.ComputedTorque` law alone or in a
-        :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; no projection; no Python time
+        :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; or matrix-r with constant inputs
+        on a holonomic model (:mod:`cmbs.fast_matrix_r`); no projection; no Python time
         functions), True requires it, False keeps the Python loop.
 
     Returns
@@ -167,15 +168,24 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
     steps = int(round(t_end / dt))
     times = np.linspace(0.0, steps * dt, steps + 1) if abs(steps * dt - t_end) < 1e-9 * t_end else \
         np.append(np.arange(0.0, t_end, dt), t_end)
+    from cmbs import fast_matrix_r
+
     fast_plan = _compiled_plan(model, chosen, integrator, u, project, t_end, dt)
-    if compiled and fast_plan is None:
+    velocity_loop = fast_plan is None and fast_matrix_r.runs(model, chosen, integrator, u, project,
+                                                             abs(steps * dt - t_end) <= 1e-9 * t_end)
+    if compiled and fast_plan is None and not velocity_loop:
         raise CmbsError(f"the compiled loop cannot run this simulation (it needs integrator rk4 with t_end a "
                         "multiple of dt, formulation lagrange, baumgarte or projection with the standard inertia, "
                         "constant inputs or a ComputedTorque law (alone or in a ZeroOrderHold with period dt) on "
-                        f"a compiled model, no --project and no Python time functions; model {model.name!r})")
+                        "a compiled model, or matrix-r with constant inputs on a holonomic compiled model; no "
+                        f"--project and no Python time functions; model {model.name!r})")
+    run_options = {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol, "project": project}
     if fast_plan is not None and compiled is not False:
         return _run_compiled(model, solver, chosen, fast_plan, inputs, q_start, qd_start, t_end, dt, started,
-                             {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol, "project": project})
+                             run_options)
+    if velocity_loop and compiled is not False:
+        return _run_compiled_matrix_r(model, solver, chosen, inputs, q_start, qd_start, steps, dt, started,
+                                      run_options)
     bar = _Progress(t_end, progress)
     try:
         if integrator in EXPLICIT:
@@ -373,13 +383,16 @@ def _info(model: Model, chosen: Formulation | None, options: dict, status: str, 
 
 
 def _trajectory(model: Model, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, lam: np.ndarray,
-                u: np.ndarray, position_error: np.ndarray, velocity_error: np.ndarray, info: dict) -> Trajectory:
-    """The result, with the constraint forces -Aᵀλ and the energy evaluated at each output."""
-    force = np.zeros_like(q)
-    terms = model.new_terms()
-    for i in range(t.size if model.m else 0):
-        model.evaluate(q[i], qd[i], t[i], u[i], out=terms)
-        force[i] = -terms.A.T @ lam[i]
+                u: np.ndarray, position_error: np.ndarray, velocity_error: np.ndarray, info: dict,
+                force: np.ndarray | None = None) -> Trajectory:
+    """The result, with the constraint forces -Aᵀλ (evaluated at each output unless given) and
+    the energy."""
+    if force is None:
+        force = np.zeros_like(q)
+        terms = model.new_terms()
+        for i in range(t.size if model.m else 0):
+            model.evaluate(q[i], qd[i], t[i], u[i], out=terms)
+            force[i] = -terms.A.T @ lam[i]
     energy = model.energy_history(q, qd)
     return Trajectory(t, q, qd, qdd, model.coordinate_names,
                       {"lam": lam, "constraint_force": force, "u": u, "energy": energy,
@@ -391,20 +404,14 @@ def _compiled_plan(model: Model, chosen: Formulation, integrator: str, u: object
     """(kernel kind, method, parameters, input mode, law) when :mod:`cmbs.fast` can run the
     simulation, else None."""
     from cmbs import fast
-    from cmbs.dynamics import Baumgarte, Lagrange, Projection
 
     kind = fast.supported(model)
     inputs = fast.control(u, model, dt)
     steps = round(t_end / dt)
     if integrator != "rk4" or project or inputs is None or kind is None or abs(steps * dt - t_end) > 1e-9 * t_end:
         return None
-    if isinstance(chosen, (Lagrange, Baumgarte)) and not chosen.least_squares:
-        method = fast.BAUMGARTE if isinstance(chosen, Baumgarte) else fast.LAGRANGE
-        xi, omega = (chosen.xi, chosen.omega) if isinstance(chosen, Baumgarte) else (0.0, 0.0)
-        return kind, method, np.array([xi, omega, chosen.singular_tolerance, 0.0, 0.0]), *inputs
-    if isinstance(chosen, Projection) and chosen.inertia == "standard":
-        return kind, fast.PROJECTION, np.array([0.0, 0.0, chosen.threshold, 0.0, 0.0]), *inputs
-    return None
+    method = fast.method_of(chosen)
+    return None if method is None else (kind, *method, *inputs)
 
 
 def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs: Inputs, q0: np.ndarray,
@@ -416,29 +423,50 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs
 
     kind, method, parameters, mode, law = plan
     steps = int(round(t_end / dt))
-    if method == fast.PROJECTION:
-        parameters[3] = solver.scale
-        parameters[4] = 1.0 if solver.semi_definite else 0.0
+    parameters = fast.bound_parameters(method, parameters, solver)
     _, ints, reals, buffer, mass = fast.kernel(model)
     u0 = np.array(inputs(0.0, q0, qd0), dtype=float) if mode == fast.CONSTANT else np.zeros(model.n_u)
     loop_started = time.perf_counter()
-    T, Q, QD, QDD, LAM, U, PHI, PHID, recorded, status, t_fail, q_fail, qd_fail, u_fail = fast.rk4(
+    T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, q_fail, qd_fail, u_fail = fast.rk4(
         kind, method, parameters, np.array(q0), np.array(qd0), dt, steps, 1, u0, ints, reals, buffer.size, mass,
         np.ascontiguousarray(solver.row_scale), model.m, mode, fast.law_arrays(law, model),
         fast.schur_workspace(kind, mass, model.m))
     loop_wall = time.perf_counter() - loop_started
     message = ""
-    if status != fast.OK:  # let the Python solver explain the failure at the state where it happened
+    if status == fast.SINGULAR:  # let the Python solver name the constraints where it happened
         try:
             terms = model.evaluate(q_fail, qd_fail, t_fail, u_fail)
             solver.accelerations(terms, q_fail, qd_fail, t_fail)
-            message = f"non-finite accelerations at t={t_fail:.6g}"
+            message = f"singular system at t={t_fail:.6g}"
         except CmbsError as error:
             message = str(error)
+    elif status != fast.OK:
+        message = (f"non-finite state or accelerations at t={t_fail:.6g}: the motion diverged; try a smaller "
+                   "step, drift projection (project=True) or another formulation")
     info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall}, "success" if status ==
                  fast.OK else "failed", message, {"steps": steps if status == fast.OK else recorded,
                                                   "evaluations": 4 * (steps if status == fast.OK else recorded)})
     k = recorded
-    trajectory = _trajectory(model, T[:k], Q[:k], QD[:k], QDD[:k], LAM[:k], U[:k], PHI[:k], PHID[:k], info)
+    trajectory = _trajectory(model, T[:k], Q[:k], QD[:k], QDD[:k], LAM[:k], U[:k], PHI[:k], PHID[:k], info,
+                             FORCE[:k])
+    info["wall_time"] = time.perf_counter() - started
+    return trajectory
+
+
+def _run_compiled_matrix_r(model: Model, solver, chosen: Formulation, inputs: Inputs, q0: np.ndarray,
+                           qd0: np.ndarray, steps: int, dt: float, started: float, options: dict) -> Trajectory:
+    """The matrix-R RK4 loop of :mod:`cmbs.fast_matrix_r`; outputs at every step."""
+    from cmbs import fast_matrix_r
+
+    u = np.array(inputs(0.0, q0, qd0), dtype=float)
+    loop_started = time.perf_counter()
+    records, recorded, message, repartitions = fast_matrix_r.run(model, solver, u, q0, qd0, dt, steps)
+    loop_wall = time.perf_counter() - loop_started
+    T, Q, QD, QDD, LAM, PHI, PHID, FORCE = (array[:recorded] for array in records)
+    status = "failed" if message else "success"
+    done = max(recorded - 1, 0)
+    info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall}, status, message,
+                 {"steps": done, "evaluations": 4 * done, "repartitions": repartitions})
+    trajectory = _trajectory(model, T, Q, QD, QDD, LAM, np.tile(u, (recorded, 1)), PHI, PHID, info, FORCE)
     info["wall_time"] = time.perf_counter() - started
     return trajectory

@@ -1,0 +1,291 @@
+"""Compiled fixed-step RK4 of the matrix-R formulation (velocity transformation, THEORY §3.4).
+
+The loop is that of :func:`cmbs.simulate` with ``integrator="rk4"``, ``formulation="matrix-r"``
+on the Python path (:class:`cmbs.dynamics.matrix_r.MatrixRSolver`), step for step: every stage
+evaluates the accelerations at the recovered state (dependent coordinates by Newton on Φ_r = 0
+with z held, started from the integrated values; dependent velocities from
+A_d ḋ = -A_z ż - Φ_t), with the independent accelerations of Rᵀ M R z̈ = Rᵀ(Q - M S)::
+
+    R = [-A_d⁻¹ A_z ; I],   S = [A_d⁻¹ γ_r ; 0]   (rows in the partition's order),
+    q̈ = R z̈ + S,           λ_r = -A_d⁻ᵀ (M q̈ - Q)_d,   λ = 0 on the rows not in the partition.
+
+After every step the state is recovered and cond(A_d) checked.  Choosing a new partition is
+Python's (:meth:`MatrixRSolver.update_partition`: pivoted QR and LU, rare): when cond(A_d) has
+grown by ``condition_growth`` (automatic partition) or passed 1e12 (any partition), the loop
+returns REPARTITION with the step reached, Python chooses again (or raises for a user partition)
+and the loop resumes from there.  Holonomic models with constant inputs only (a nonholonomic row
+makes some positions non-recoverable; see :meth:`MatrixRSolver.stage_state`).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from cmbs.dynamics.matrix_r import MatrixR, MatrixRSolver
+from cmbs.errors import CmbsError
+from cmbs.fast import NON_FINITE, OK, SINGULAR, _evaluate, _lu_in_place, _lu_solve, _lu_solve_transposed, \
+    _solve_in_place, kernel, supported
+from cmbs.model.model import Model
+
+#: status codes besides fast.OK, SINGULAR and NON_FINITE
+REPARTITION, NOT_CONVERGED = 3, 4
+#: cond(A_d) above which every partition is handed back to Python (which raises for a user's)
+SINGULAR_CONDITION = 1e12
+
+
+def runs(model: Model, chosen: object, integrator: str, u: object, project: bool, steps_exact: bool) -> bool:
+    """True when this loop can run the simulation: rk4 with t_end a multiple of dt, matrix R,
+    a compiled holonomic model, constant inputs, no drift projection (matrix R needs none)."""
+    return (integrator == "rk4" and isinstance(chosen, MatrixR) and supported(model) is not None
+            and not model.nonholonomic.any() and not callable(u) and not project and steps_exact)
+
+
+@numba.njit(cache=True)
+def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent, independent, tolerance,
+             iterations, Ad, pivots, side):
+    """Dependent coordinates (Newton, in place in ``q``) and velocities (in place in ``qd``);
+    leaves A at the recovered q in ``buffer``.  Returns OK, NOT_CONVERGED or NON_FINITE."""
+    r = rows.shape[0]
+    zeros = np.zeros(n)
+    converged = False
+    for _ in range(iterations):
+        _evaluate(kind, q, zeros, t, u_zero, ints, reals, buffer)
+        largest = 0.0
+        for a in range(r):
+            value = abs(buffer[n + rows[a]])
+            if not value < np.inf:
+                return NON_FINITE
+            largest = max(largest, value)
+        if largest < tolerance:
+            converged = True
+            break
+        A = buffer[n + m:n + m + m * n].reshape((m, n))
+        for a in range(r):
+            side[a] = buffer[n + rows[a]]
+            for j in range(r):
+                Ad[a, j] = A[rows[a], dependent[j]]
+        if not _lu_in_place(Ad, pivots):
+            return NON_FINITE
+        _lu_solve(Ad, pivots, side)
+        for j in range(r):
+            q[dependent[j]] -= side[j]
+    if not converged:
+        return NOT_CONVERGED
+    A = buffer[n + m:n + m + m * n].reshape((m, n))
+    phi_t = buffer[n + 2 * m + m * n:n + 3 * m + m * n]
+    for a in range(r):
+        total = -phi_t[rows[a]]
+        for j in range(independent.shape[0]):
+            total -= A[rows[a], independent[j]] * qd[independent[j]]
+        side[a] = total
+        for j in range(r):
+            Ad[a, j] = A[rows[a], dependent[j]]
+    if not _lu_in_place(Ad, pivots):
+        return NON_FINITE
+    _lu_solve(Ad, pivots, side)
+    for j in range(r):
+        qd[dependent[j]] = side[j]
+    return OK
+
+
+@numba.njit(cache=True)
+def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent, independent, tolerance,
+           iterations, qdd, lam, work):
+    """Recover (q, q̇) in place, then q̈ and λ by matrix R at the recovered state."""
+    Ad, pivots, side, R, reduced, zrhs, S = work
+    status = _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent, independent, tolerance,
+                      iterations, Ad, pivots, side)
+    if status != OK:
+        return status
+    _evaluate(kind, q, qd, t, u, ints, reals, buffer)
+    Q = buffer[:n]
+    A = buffer[n + m:n + m + m * n].reshape((m, n))
+    gamma = buffer[n + m + m * n:n + 2 * m + m * n]
+    M = mass if kind == 0 else buffer[n + 3 * m + m * n:n + 3 * m + m * n + n * n].reshape((n, n))
+    r, k = rows.shape[0], independent.shape[0]
+    for a in range(r):
+        for j in range(r):
+            Ad[a, j] = A[rows[a], dependent[j]]
+    if not _lu_in_place(Ad, pivots):
+        return SINGULAR
+    R[:, :] = 0.0
+    for b in range(k):                       # R's column b: e_z(b) - A_d⁻¹ A_z e_b on the dependent rows
+        R[independent[b], b] = 1.0
+        for a in range(r):
+            side[a] = A[rows[a], independent[b]]
+        _lu_solve(Ad, pivots, side)
+        for j in range(r):
+            R[dependent[j], b] = -side[j]
+    S[:] = 0.0
+    for a in range(r):
+        side[a] = gamma[rows[a]]
+    _lu_solve(Ad, pivots, side)
+    for j in range(r):
+        S[dependent[j]] = side[j]
+    for b in range(k):                       # Rᵀ M R and Rᵀ (Q - M S)
+        for c in range(k):
+            total = 0.0
+            for i in range(n):
+                row = 0.0
+                for j in range(n):
+                    row += M[i, j] * R[j, c]
+                total += R[i, b] * row
+            reduced[b, c] = total
+        total = 0.0
+        for i in range(n):
+            force = Q[i]
+            for j in range(n):
+                force -= M[i, j] * S[j]
+            total += R[i, b] * force
+        zrhs[b] = total
+    if not _solve_in_place(reduced, zrhs):
+        return SINGULAR
+    for i in range(n):
+        total = S[i]
+        for b in range(k):
+            total += R[i, b] * zrhs[b]
+        qdd[i] = total
+    for a in range(m):
+        lam[a] = 0.0
+    for j in range(r):                       # (M q̈ - Q)_d = -A_dᵀ λ_r
+        c = dependent[j]
+        total = -Q[c]
+        for i in range(n):
+            total += M[c, i] * qdd[i]
+        side[j] = -total
+    _lu_solve_transposed(Ad, pivots, side)
+    for a in range(r):
+        lam[rows[a]] = side[a]
+    for i in range(n):
+        if not (abs(qdd[i]) < np.inf):
+            return NON_FINITE
+    return OK
+
+
+@numba.njit(cache=True)
+def _condition(buffer, n, m, rows, dependent):
+    """cond₂(A_d) of the A in ``buffer`` (as ``numpy.linalg.cond``, the Python solver's test)."""
+    r = rows.shape[0]
+    if r == 0:
+        return 1.0
+    A = buffer[n + m:n + m + m * n].reshape((m, n))
+    block = np.empty((r, r))
+    for a in range(r):
+        for j in range(r):
+            block[a, j] = A[rows[a], dependent[j]]
+    return np.linalg.cond(block)
+
+
+@numba.njit(cache=True)
+def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, rows, dependent, independent,
+        tolerance, iterations, reference_condition, growth, automatic, T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE):
+    """RK4 steps ``first`` .. ``steps`` (t = step·h) from the state (q0, q̇0) at step ``first``,
+    recording every step into the given arrays (row = step; the row of ``first`` > 0 is already
+    there).  Returns (status, step reached, rows recorded, q, q̇ at the step reached): OK at
+    the end; REPARTITION when cond(A_d) at the step reached calls for a new partition; a
+    failure code where a stage of that step failed."""
+    n = q0.shape[0]
+    r, k = rows.shape[0], independent.shape[0]
+    buffer = np.zeros(buffer_size)
+    u_zero = np.zeros(u.shape[0])
+    work = (np.empty((max(r, 1), max(r, 1))), np.empty(max(r, 1), dtype=np.int64), np.empty(max(r, 1)),
+            np.empty((n, k)), np.empty((k, k)), np.empty(k), np.empty(n))
+    q, qd = q0.copy(), qd0.copy()
+    k1v, k2v, k3v, k4v = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    lam, stage_lam = np.empty(m), np.empty(m)
+    recorded = first + 1 if first > 0 else 0
+    for step in range(first, steps + 1):
+        t = step * h
+        status = _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent, independent,
+                        tolerance, iterations, k1v, lam, work)
+        if status != OK:
+            return status, step, recorded, q, qd
+        if step > first or first == 0:
+            A = buffer[n + m:n + m + m * n].reshape((m, n))
+            T[step] = t
+            Qs[step] = q
+            QDs[step] = qd
+            QDDs[step] = k1v
+            LAMs[step] = lam
+            largest, rate_largest = 0.0, 0.0
+            for a in range(m):
+                largest = max(largest, abs(buffer[n + a]))
+                rate = buffer[n + 2 * m + m * n + a]
+                for j in range(n):
+                    rate += A[a, j] * qd[j]
+                rate_largest = max(rate_largest, abs(rate))
+            PHI[step], PHID[step] = largest, rate_largest
+            for j in range(n):
+                total = 0.0
+                for a in range(m):
+                    total -= A[a, j] * lam[a]
+                FORCE[step, j] = total
+            recorded = step + 1
+            condition = _condition(buffer, n, m, rows, dependent)
+            if condition > SINGULAR_CONDITION or (automatic and condition > growth * reference_condition):
+                return REPARTITION, step, recorded, q, qd
+        if step == steps:
+            break
+        k1q = qd.copy()                      # the recovered velocities are dq/dt
+        sq, sv = q + 0.5 * h * k1q, qd + 0.5 * h * k1v
+        status = _stage(kind, sq, sv, t + 0.5 * h, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent,
+                        independent, tolerance, iterations, k2v, stage_lam, work)
+        if status != OK:
+            return status, step, recorded, q, qd
+        k2q = sv.copy()
+        sq, sv = q + 0.5 * h * k2q, qd + 0.5 * h * k2v
+        status = _stage(kind, sq, sv, t + 0.5 * h, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent,
+                        independent, tolerance, iterations, k3v, stage_lam, work)
+        if status != OK:
+            return status, step, recorded, q, qd
+        k3q = sv.copy()
+        sq, sv = q + h * k3q, qd + h * k3v
+        status = _stage(kind, sq, sv, t + h, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent,
+                        independent, tolerance, iterations, k4v, stage_lam, work)
+        if status != OK:
+            return status, step, recorded, q, qd
+        k4q = sv
+        q = q + h / 6.0 * (k1q + 2.0 * k2q + 2.0 * k3q + k4q)
+        qd = qd + h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+    return OK, steps, recorded, q, qd
+
+
+def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0: np.ndarray, dt: float,
+        steps: int) -> tuple[tuple[np.ndarray, ...], int, str, int]:
+    """Run :func:`rk4` over ``steps`` steps of ``dt`` from (q0, q̇0), handing every re-partition
+    to ``solver`` (which chooses the new partition or raises).  Returns the records
+    (t, q, q̇, q̈, λ, |Φ|max, |Φ̇|max, f_c), the number recorded, the failure message ("" on
+    success) and the number of re-partitions."""
+    kind, ints, reals, buffer, mass = kernel(model)
+    n, m = model.n, model.m
+    records = (np.zeros(steps + 1), np.zeros((steps + 1, n)), np.zeros((steps + 1, n)), np.zeros((steps + 1, n)),
+               np.zeros((steps + 1, m)), np.zeros(steps + 1), np.zeros(steps + 1), np.zeros((steps + 1, n)))
+    parameters = solver.p
+    q, qd, first = np.array(q0, dtype=float), np.array(qd0, dtype=float), 0
+    repartitions = 0
+    failures = {NOT_CONVERGED: f"matrix-r position recovery did not converge in {parameters.max_iterations} "
+                               "iterations", SINGULAR: "singular block A_d or reduced mass matrix Rᵀ M R",
+                NON_FINITE: "non-finite state or accelerations: the motion diverged"}
+    while True:
+        part = solver.partition
+        status, reached, recorded, q, qd = rk4(
+            kind, q, qd, np.ascontiguousarray(u, dtype=float), dt, first, steps, ints, reals, buffer.size, mass, m,
+            part.rows.astype(np.int64), part.dependent.astype(np.int64), part.independent.astype(np.int64),
+            parameters.position_tolerance, parameters.max_iterations, float(solver.reference_condition),
+            parameters.condition_growth, solver.user is None, *records)
+        t = reached * dt
+        if status == OK:
+            return records, recorded, "", repartitions
+        if status != REPARTITION:
+            return records, recorded, f"model {model.name!r} at t={t:.6g}: {failures[status]}", repartitions
+        before = solver.repartitions
+        try:
+            solver.update_partition(model.jacobian(q, t), t)
+        except CmbsError as error:
+            return records, recorded, str(error), repartitions
+        if solver.repartitions == before:    # numpy's cond(A_d) disagrees with the loop's: cannot go on
+            return records, recorded, (f"model {model.name!r} at t={t:.6g}: cond(A_d) calls for a new partition "
+                                       "but none was chosen"), repartitions
+        repartitions += 1
+        first = reached
