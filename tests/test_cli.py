@@ -3,6 +3,8 @@ writes a result file and a figure (run in-process and once as the installed cons
 
 import shutil
 import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,7 +14,7 @@ from cmbs.library import names
 from cmbs.trajectory import Trajectory
 
 
-@pytest.mark.parametrize("command", [[], ["models"], ["describe"], ["kinematics"]])
+@pytest.mark.parametrize("command", [[], ["models"], ["describe"], ["kinematics"], ["sweep"]])
 def test_help(command, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main([*command, "--help"])
@@ -55,8 +57,15 @@ def test_bad_options_exit_2_without_writing(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.skipif(shutil.which("cmbs") is None, reason="console script not installed on PATH")
+def _console_script() -> str | None:
+    """The ``cmbs`` script of this interpreter's environment (a venv's bin/, which need not be
+    on PATH), else the one on PATH."""
+    beside = Path(sys.executable).parent / "cmbs"
+    return str(beside) if beside.exists() else shutil.which("cmbs")
+
+
+@pytest.mark.skipif(_console_script() is None, reason="console script not installed")
 def test_console_script(tmp_path):
-    result = subprocess.run(["cmbs", "describe", "no-such-model"], capture_output=True, text=True)
+    result = subprocess.run([_console_script(), "describe", "no-such-model"], capture_output=True, text=True)
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr

@@ -23,6 +23,7 @@ from cmbs.model.drivers import Constant, Expression, PythonFunction, Table
 from cmbs.model.model import Model, Terms
 from cmbs.model.natural import NaturalModelBuilder
 from cmbs.simulate import simulate
+from cmbs.sweep import SweepResult, Variant, grid, sweep
 from cmbs.trajectory import Trajectory
 
 __version__ = "0.1.0"
@@ -54,5 +55,5 @@ __all__ = [
     "singular_configurations", "velocities", "Constant", "Expression", "PythonFunction", "Table",
     "Model", "Terms", "NaturalModelBuilder", "Trajectory", "load", "simulate", "SampledInput", "formulation",
     "Lagrange", "Baumgarte", "Penalty", "MatrixR", "Projection", "UdwadiaKalaba", "InverseDynamics",
-    "inverse_dynamics",
+    "inverse_dynamics", "sweep", "Variant", "grid", "SweepResult",
 ]

@@ -433,7 +433,9 @@ def build_parser() -> argparse.ArgumentParser:
     compare.set_defaults(run=_compare)
 
     from cmbs.gait.commands import add_gait_commands
+    from cmbs.sweep_cli import add_sweep_command
 
+    add_sweep_command(commands, model_command, dynamics_options)
     add_gait_commands(commands)
     return parser
 

@@ -42,6 +42,17 @@ def runs(model: Model, chosen: object, integrator: str, u: object, project: bool
 
 
 @numba.njit(cache=True)
+def _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
+    """LU factors (in ``Ad``, ``pivots``) of the dependent block A_d of the A in ``buffer``:
+    the partition's constraint rows and dependent columns.  False when exactly singular."""
+    A = buffer[n + m:n + m + m * n].reshape((m, n))
+    for a in range(rows.shape[0]):
+        for j in range(rows.shape[0]):
+            Ad[a, j] = A[rows[a], dependent[j]]
+    return _lu_in_place(Ad, pivots)
+
+
+@numba.njit(cache=True)
 def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent, independent, tolerance,
              iterations, Ad, pivots, side):
     """Dependent coordinates (Newton, in place in ``q``) and velocities (in place in ``qd``);
@@ -60,12 +71,9 @@ def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent,
         if largest < tolerance:
             converged = True
             break
-        A = buffer[n + m:n + m + m * n].reshape((m, n))
         for a in range(r):
             side[a] = buffer[n + rows[a]]
-            for j in range(r):
-                Ad[a, j] = A[rows[a], dependent[j]]
-        if not _lu_in_place(Ad, pivots):
+        if not _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
             return NON_FINITE
         _lu_solve(Ad, pivots, side)
         for j in range(r):
@@ -79,9 +87,7 @@ def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent,
         for j in range(independent.shape[0]):
             total -= A[rows[a], independent[j]] * qd[independent[j]]
         side[a] = total
-        for j in range(r):
-            Ad[a, j] = A[rows[a], dependent[j]]
-    if not _lu_in_place(Ad, pivots):
+    if not _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
         return NON_FINITE
     _lu_solve(Ad, pivots, side)
     for j in range(r):
@@ -104,10 +110,7 @@ def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dep
     gamma = buffer[n + m + m * n:n + 2 * m + m * n]
     M = mass if kind == 0 else buffer[n + 3 * m + m * n:n + 3 * m + m * n + n * n].reshape((n, n))
     r, k = rows.shape[0], independent.shape[0]
-    for a in range(r):
-        for j in range(r):
-            Ad[a, j] = A[rows[a], dependent[j]]
-    if not _lu_in_place(Ad, pivots):
+    if not _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
         return SINGULAR
     R[:, :] = 0.0
     for b in range(k):                       # R's column b: e_z(b) - A_d⁻¹ A_z e_b on the dependent rows

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import matplotlib
 
@@ -16,6 +16,9 @@ from cmbs.errors import CmbsError  # noqa: E402
 from cmbs.files_io import atomic_path, checked_output  # noqa: E402
 from cmbs.model.model import Model  # noqa: E402
 from cmbs.trajectory import Trajectory  # noqa: E402
+
+if TYPE_CHECKING:
+    from cmbs.sweep import SweepResult
 
 
 def plot_trajectory(trajectory: Trajectory, *, model: Model | None = None,
@@ -217,4 +220,28 @@ def plot_driver_forces(trajectory: Trajectory, driven: Sequence[str]) -> plt.Fig
         axis.grid(alpha=0.3)
         axis.legend(fontsize="small")
     figure.suptitle(f"{trajectory.info.get('model', '')} ({trajectory.info.get('method', '')})")
+    return figure
+
+
+def plot_sweep(result: "SweepResult", coordinate: str) -> plt.Figure:
+    """The runs of a sweep: ``coordinate`` against time for every variant, and each variant's
+    energy change E(t) - E(0) (failed variants dashed, up to their last output)."""
+    series = result.coordinate(coordinate)
+    figure, (upper, lower) = plt.subplots(2, 1, figsize=(8, 7), sharex=True, layout="constrained")
+    labelled = len(result) <= 12
+    for v, variant in enumerate(result.variants):
+        style = "-" if result.status[v] == "success" else "--"
+        upper.plot(result.t, series[v], style, linewidth=1.0, label=variant["label"] if labelled else None)
+        lower.plot(result.t, result.energy[v] - result.energy[v, 0], style, linewidth=1.0)
+    failed = int(np.count_nonzero(result.status != "success"))
+    upper.set_title(f"{coordinate} in {len(result)} variants ({result.info.get('mode')}; {failed} failed)",
+                    fontsize="medium")
+    upper.set_ylabel(coordinate)
+    if labelled:
+        upper.legend(fontsize="small")
+    lower.set_xlabel("t [s]")
+    lower.set_ylabel("E(t) - E(0) [J]")
+    lower.set_title("energy change of each variant", fontsize="medium")
+    for axis in (upper, lower):
+        axis.grid(alpha=0.3)
     return figure

@@ -44,10 +44,26 @@ class _MassFaultEquations(WrappedEquations):
 
 
 
+def mass_fault_energy(model: Model, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """The energy the mass faults of ``model`` add to its nominal energy at the rows of q, q̇
+    (k, n), for times after the faults' t0: ½ q̇ᵀ ΔM q̇ - ΔQ_g·q (natural coordinates: M is
+    constant and gravity a constant generalized force, so its potential is -Q_g·q).  Zeros for
+    a model without mass faults."""
+    q, qd = np.atleast_2d(np.asarray(q, dtype=float)), np.atleast_2d(np.asarray(qd, dtype=float))
+    added = np.zeros(q.shape[0])
+    equations = model.equations
+    while isinstance(equations, WrappedEquations):
+        if isinstance(equations, _MassFaultEquations):
+            added += 0.5 * np.einsum("ki,ij,kj->k", qd, equations.delta_mass, qd) - q @ equations.delta_gravity
+        equations = equations.inner
+    return added
+
+
 def mass_fault(model: Model, segment: str, *, factor: float, t0: float = 0.0) -> Model:
     """``model`` whose segment ``segment`` has ``factor`` times its mass and inertia from ``t0``
     (e.g. factor 1.025 for the thesis's 2.5 % fault).  Natural-coordinate models only.
-    Energies are reported with the nominal masses."""
+    Energies are reported with the nominal masses; :func:`mass_fault_energy` gives what the
+    faulty masses add."""
     equations = model.equations
     if not isinstance(equations, NaturalEquations):
         raise CmbsError(f"mass faults need a natural-coordinate model; {model.name!r} is not one")

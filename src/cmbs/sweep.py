@@ -1,0 +1,386 @@
+"""Many runs of one mechanism: parameter, mass-fault, initial-state and input studies.
+
+:func:`sweep` runs N variants of one simulation and returns one :class:`SweepResult` (arrays
+with a leading variant dimension, on one common time grid).  It chooses how to run them:
+
+``batched``
+    Variants that differ only in the initial state and constant inputs, on a run the compiled
+    loop takes (:mod:`cmbs.fast`: rk4; lagrange, baumgarte or standard projection), run as one
+    compiled call parallel over the variants (:func:`cmbs.fast.rk4_batch`, numba threads).
+``processes``
+    Anything else (library-model parameters, mass faults, other formulations and integrators)
+    runs :func:`cmbs.simulate` once per variant, in a local pool of worker processes
+    (``workers``; 1 runs them in this process).
+``dask``
+    The same per-variant runs as tasks on a Dask cluster when ``scheduler`` gives its address
+    (``tcp://host:port``).  A task lost with a worker that dies is run again by the scheduler
+    (Dask's own retry of lost tasks), so no result is lost; the results do not depend on which
+    worker ran a variant.
+
+Every path gives the same numbers for the same variant (tested: batched vs per-variant
+:func:`cmbs.simulate`, processes vs serial, Dask vs serial).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from itertools import product
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from cmbs.errors import CmbsError
+from cmbs.files_io import atomic_path, checked_output
+from cmbs.model.model import Model
+
+#: Layout version of the sweep ``.npz`` file.
+FILE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One run of a sweep: what differs from the nominal simulation.
+
+    Parameters
+    ----------
+    parameters
+        Keyword parameters of a library model (``cmbs.load(name, **parameters)``); the sweep's
+        model must then be given by name.
+    masses
+        Segment name → mass factor (``cmbs.control.mass_fault`` from t = 0; natural-coordinate
+        models); the sweep's energy is that of the changed mechanism.
+    q0, qd0
+        Initial coordinates and velocities (default: the model's).
+    u
+        Constant inputs (default: zeros).
+    label
+        A name for the variant (default: made from the other fields).
+    """
+
+    parameters: Mapping[str, object] = field(default_factory=dict)
+    masses: Mapping[str, float] = field(default_factory=dict)
+    q0: Sequence[float] | None = None
+    qd0: Sequence[float] | None = None
+    u: Sequence[float] | None = None
+    label: str = ""
+
+    def describe(self) -> dict:
+        """The variant as plain JSON data."""
+        return {"label": self.name(), "parameters": dict(self.parameters), "masses": dict(self.masses),
+                **{key: None if value is None else [float(x) for x in value]
+                   for key, value in (("q0", self.q0), ("qd0", self.qd0), ("u", self.u))}}
+
+    def name(self) -> str:
+        if self.label:
+            return self.label
+        parts = [f"{key}={value}" for key, value in self.parameters.items()]
+        parts += [f"mass[{key}]x{value:g}" for key, value in self.masses.items()]
+        parts += [key for key in ("q0", "qd0", "u") if getattr(self, key) is not None]
+        return ",".join(parts) or "nominal"
+
+    @property
+    def state_only(self) -> bool:
+        """True when only the initial state and the inputs differ from the nominal run."""
+        return not self.parameters and not self.masses
+
+
+def grid(**axes: Sequence[object]) -> list[Variant]:
+    """The full factorial of library-model parameter values: ``grid(gravity=[0, 9.81],
+    crank_speed=[1, 2, 3])`` gives 6 variants."""
+    names = list(axes)
+    return [Variant(parameters=dict(zip(names, values))) for values in product(*(axes[name] for name in names))]
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """What every variant shares: the :func:`cmbs.simulate` options and the output interval
+    (every ``every``-th multiple of ``dt``)."""
+
+    t_end: float
+    formulation: str = "lagrange"
+    formulation_options: Mapping[str, object] = field(default_factory=dict)
+    integrator: str = "rk4"
+    dt: float = 1e-3
+    rtol: float = 1e-6
+    atol: float = 1e-9
+    project: bool = False
+    every: int = 1
+
+    def output_times(self) -> np.ndarray:
+        steps = int(round(self.t_end / self.dt))
+        return np.arange(0, steps + 1, self.every) * self.dt
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """The runs of a sweep on one time grid.
+
+    Attributes
+    ----------
+    t
+        (k,) output times.
+    q, qd
+        (N, k, n) coordinates and velocities of the N variants.
+    energy, constraint_error
+        (N, k) total energy and max |Φ|.
+    status, message
+        (N,) ``"success"`` or ``"failed"`` and the reason; a failed variant's entries after
+        its last output (``recorded[v]`` of them are valid) are NaN.
+    recorded
+        (N,) number of valid outputs of each variant.
+    names
+        The n coordinate names.
+    variants
+        The variants (as :meth:`Variant.describe` gives them).
+    info
+        Settings, the mode (batched, processes, dask), workers, wall time.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    energy: np.ndarray
+    constraint_error: np.ndarray
+    status: np.ndarray
+    message: np.ndarray
+    recorded: np.ndarray
+    names: tuple[str, ...]
+    variants: tuple[dict, ...]
+    info: dict
+
+    def __len__(self) -> int:
+        return len(self.variants)
+
+    def coordinate(self, name: str) -> np.ndarray:
+        """(N, k) history of coordinate ``name`` over all variants."""
+        if name not in self.names:
+            raise CmbsError(f"no coordinate {name!r}; coordinates: {', '.join(self.names)}")
+        return self.q[:, :, self.names.index(name)]
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the sweep as ``.npz`` atomically; arrays ``t``, ``q``, ``qd``, ``energy``,
+        ``constraint_error``, ``status``, ``message``, ``recorded``, ``names``, and JSON strings
+        ``variants`` and ``info`` (layout version ``FILE_VERSION`` in ``info``)."""
+        path = checked_output(path, (".npz",), "sweep result")
+        with atomic_path(path) as temporary, open(temporary, "wb") as stream:
+            np.savez(stream, t=self.t, q=self.q, qd=self.qd, energy=self.energy,
+                     constraint_error=self.constraint_error, status=self.status, message=self.message,
+                     recorded=self.recorded, names=np.array(self.names),
+                     variants=np.array(json.dumps(list(self.variants))),
+                     info=np.array(json.dumps({**self.info, "file_version": FILE_VERSION}, default=str)))
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "SweepResult":
+        """Read a file written by :meth:`save`."""
+        path = Path(path)
+        if not path.is_file():
+            raise CmbsError(f"{path}: no such file")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                return cls(data["t"], data["q"], data["qd"], data["energy"], data["constraint_error"],
+                           data["status"], data["message"], data["recorded"],
+                           tuple(str(name) for name in data["names"]), tuple(json.loads(str(data["variants"]))),
+                           json.loads(str(data["info"])))
+        except (ValueError, KeyError, OSError) as error:
+            raise CmbsError(f"{path}: not a cmbs sweep file ({error})") from None
+
+
+def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, formulation: str = "lagrange",
+          formulation_options: Mapping[str, object] | None = None, integrator: str = "rk4", dt: float = 1e-3,
+          rtol: float = 1e-6, atol: float = 1e-9, project: bool = False, every: int = 1, workers: int | None = None,
+          scheduler: str | None = None, batched: bool | None = None) -> SweepResult:
+    """Run ``variants`` of the simulation of ``model`` (a :class:`~cmbs.Model`, or a library name
+    or model file path, which parameter variants need); options as :func:`cmbs.simulate`.
+
+    Outputs every ``every`` steps of ``dt``.  ``batched`` None chooses the batched compiled path
+    when every variant is state-only and the run allows it (False forbids it, True requires
+    it); otherwise ``scheduler`` (a Dask address) or a local pool of ``workers`` processes
+    (default: the machine's CPUs; 1 runs in this process).
+    """
+    variants = list(variants)
+    if not variants:
+        raise CmbsError("sweep: no variants given")
+    settings = RunSettings(t_end=float(t_end), formulation=formulation,
+                           formulation_options=dict(formulation_options or {}), integrator=integrator, dt=float(dt),
+                           rtol=rtol, atol=atol, project=project, every=int(every))
+    if settings.t_end <= 0 or settings.dt <= 0 or settings.every < 1:
+        raise CmbsError(f"sweep: t_end and dt must be positive and every >= 1 (got t_end={t_end}, dt={dt}, "
+                        f"every={every})")
+    if isinstance(model, Model) and any(variant.parameters for variant in variants):
+        raise CmbsError("sweep: parameter variants need the model by library name (e.g. 'slider-crank'), "
+                        "not a built Model")
+    nominal = _build(model, Variant())
+    for variant in variants:
+        _check(nominal, variant)
+    started = time.perf_counter()
+    plan = _batch_plan(nominal, settings, variants) if batched is not False else None
+    if batched and plan is None:
+        raise CmbsError("sweep: the batched path needs state-only variants (q0, qd0, u) and a run the compiled "
+                        "loop takes (rk4; lagrange, baumgarte or standard projection; no project)")
+    if plan is not None:
+        outputs, mode, used = _run_batched(nominal, settings, variants, plan), "batched", _threads()
+    elif scheduler:
+        outputs, mode, used = _run_dask(model, settings, variants, scheduler), "dask", scheduler
+    else:
+        used = workers or os.cpu_count() or 1
+        outputs, mode = _run_processes(model, settings, variants, used), "processes"
+    info = {"model": nominal.name, "mode": mode, "workers": used, "variants": len(variants),
+            "settings": {**settings.__dict__, "formulation_options": dict(settings.formulation_options)},
+            "wall_time": time.perf_counter() - started}
+    return _assemble(nominal, settings, variants, outputs, info)
+
+
+# ---------------------------------------------------------------------------------- one variant
+def _build(model: str | Model, variant: Variant) -> Model:
+    """The model of ``variant``: the library model or file with its parameters, mass faults."""
+    from cmbs import load
+    from cmbs.control.faults import mass_fault
+
+    built = model if isinstance(model, Model) else load(model, **dict(variant.parameters))
+    for segment, factor in variant.masses.items():
+        built = mass_fault(built, segment, factor=float(factor))
+    return built
+
+
+def _check(nominal: Model, variant: Variant) -> None:
+    for key, size in (("q0", nominal.n), ("qd0", nominal.n), ("u", nominal.n_u)):
+        value = getattr(variant, key)
+        if value is not None and np.shape(value) != (size,):
+            raise CmbsError(f"sweep variant {variant.name()!r}: {key} must have {size} values, got "
+                            f"{np.shape(value)}")
+        if value is not None and not np.all(np.isfinite(np.asarray(value, dtype=float))):
+            raise CmbsError(f"sweep variant {variant.name()!r}: {key} has non-finite values")
+
+
+def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> dict:
+    """One variant through :func:`cmbs.simulate`, sampled on the sweep's output grid (a task of
+    the process and Dask paths; a module-level function so that it pickles)."""
+    from cmbs.simulate import simulate
+
+    built = _build(model, variant)
+    times = settings.output_times()
+    n = built.n
+    u = None if variant.u is None else np.asarray(variant.u, dtype=float)
+    try:
+        run = simulate(built, t_end=settings.t_end, formulation=settings.formulation,
+                       formulation_options=settings.formulation_options, integrator=settings.integrator,
+                       dt=settings.dt, rtol=settings.rtol, atol=settings.atol, project=settings.project,
+                       q0=None if variant.q0 is None else np.asarray(variant.q0, dtype=float),
+                       qd0=None if variant.qd0 is None else np.asarray(variant.qd0, dtype=float), u=u)
+        status, message = run.info["status"], run.info.get("message", "")
+    except CmbsError as error:
+        empty = np.zeros((0, n))
+        return {"q": empty, "qd": empty, "energy": np.zeros(0), "phi": np.zeros(0), "status": "failed",
+                "message": str(error)}
+    energy = run["energy"]
+    if variant.masses:                      # the energy of the heavier or lighter mechanism
+        from cmbs.control.faults import mass_fault_energy
+
+        energy = energy + mass_fault_energy(built, run.q, run.qd)
+    index = np.searchsorted(run.t, times - 1e-9 * settings.dt)
+    valid = index < run.t.size
+    valid[valid] = np.abs(run.t[index[valid]] - times[valid]) <= 1e-9 * max(1.0, settings.t_end)
+    count = int(np.argmin(valid)) if not valid.all() else times.size
+    picked = index[:count]
+    return {"q": run.q[picked], "qd": run.qd[picked], "energy": energy[picked],
+            "phi": run["constraint_error"][picked], "status": status, "message": message}
+
+
+def _run_processes(model: str | Model, settings: RunSettings, variants: list[Variant], workers: int) -> list[dict]:
+    if workers <= 1 or len(variants) == 1:
+        return [run_variant(model, settings, variant) for variant in variants]
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        return list(pool.map(run_variant, [model] * len(variants), [settings] * len(variants), variants,
+                             chunksize=max(1, len(variants) // (4 * workers))))
+
+
+def _run_dask(model: str | Model, settings: RunSettings, variants: list[Variant], scheduler: str) -> list[dict]:
+    try:
+        from distributed import Client
+    except ImportError:
+        raise CmbsError("sweep: --scheduler needs dask's distributed package (pip install 'cmbs[dask]')") from None
+    try:
+        client = Client(scheduler, timeout=10)
+    except (OSError, TimeoutError) as error:
+        raise CmbsError(f"sweep: cannot reach the Dask scheduler at {scheduler!r} ({error})") from None
+    with client:
+        futures = client.map(run_variant, [model] * len(variants), [settings] * len(variants), variants,
+                             pure=False, retries=2)
+        return client.gather(futures)
+
+
+# ---------------------------------------------------------------------------------- batched path
+def _batch_plan(model: Model, settings: RunSettings, variants: list[Variant]) -> tuple | None:
+    from cmbs import fast
+    from cmbs.dynamics import formulation as make_formulation
+
+    if not all(variant.state_only for variant in variants) or settings.integrator != "rk4" or settings.project:
+        return None
+    steps = round(settings.t_end / settings.dt)
+    if abs(steps * settings.dt - settings.t_end) > 1e-9 * settings.t_end or fast.supported(model) is None:
+        return None
+    chosen = make_formulation(settings.formulation, **settings.formulation_options)
+    method = fast.method_of(chosen)
+    if method is None:
+        return None
+    solver = chosen.bind(model)
+    return method[0], fast.bound_parameters(method[0], method[1], solver), solver, steps
+
+
+def _threads() -> int:
+    import numba
+
+    return numba.get_num_threads()
+
+
+def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], plan: tuple) -> list[dict]:
+    from cmbs import fast
+
+    method, parameters, solver, steps = plan
+    kind, ints, reals, buffer, mass = fast.kernel(model)
+    count = len(variants)
+    Q0 = np.array([model.q0 if v.q0 is None else v.q0 for v in variants], dtype=float).reshape(count, model.n)
+    QD0 = np.array([model.qd0 if v.qd0 is None else v.qd0 for v in variants], dtype=float).reshape(count, model.n)
+    U0 = np.array([np.zeros(model.n_u) if v.u is None else v.u for v in variants], dtype=float).reshape(count,
+                                                                                                       model.n_u)
+    records = steps // settings.every + 1
+    Qs, QDs = np.full((count, records, model.n), np.nan), np.full((count, records, model.n), np.nan)
+    PHIs = np.full((count, records), np.nan)
+    statuses, recorded = np.zeros(count, dtype=np.int64), np.zeros(count, dtype=np.int64)
+    fast.rk4_batch(kind, method, parameters, Q0, QD0, U0, settings.dt, steps, settings.every, ints, reals,
+                   buffer.size, mass, np.ascontiguousarray(solver.row_scale), model.m, fast.law_arrays(None, model),
+                   fast.schur_workspace(kind, mass, model.m), Qs, QDs, PHIs, statuses, recorded)
+    outputs = []
+    for v in range(count):
+        k = int(recorded[v])
+        failed = statuses[v] != fast.OK or k < records
+        reason = {fast.SINGULAR: "singular system (rank of A)", fast.NON_FINITE: "the motion diverged"}
+        outputs.append({"q": Qs[v, :k], "qd": QDs[v, :k], "energy": model.energy_history(Qs[v, :k], QDs[v, :k]),
+                        "phi": PHIs[v, :k], "status": "failed" if failed else "success",
+                        "message": (f"{reason.get(int(statuses[v]), 'failed')} at t={k * settings.every * settings.dt:.6g}"
+                                    if failed else "")})
+    return outputs
+
+
+# ---------------------------------------------------------------------------------- assembly
+def _assemble(model: Model, settings: RunSettings, variants: list[Variant], outputs: list[dict],
+              info: dict) -> SweepResult:
+    times = settings.output_times()
+    count, k, n = len(variants), times.size, model.n
+    q, qd = np.full((count, k, n), np.nan), np.full((count, k, n), np.nan)
+    energy, phi = np.full((count, k), np.nan), np.full((count, k), np.nan)
+    recorded = np.zeros(count, dtype=np.int64)
+    for v, output in enumerate(outputs):
+        size = output["q"].shape[0]
+        q[v, :size], qd[v, :size] = output["q"], output["qd"]
+        energy[v, :size], phi[v, :size] = output["energy"], output["phi"]
+        recorded[v] = size
+    return SweepResult(times, q, qd, energy, phi, np.array([output["status"] for output in outputs]),
+                       np.array([output["message"] for output in outputs]), recorded, model.coordinate_names,
+                       tuple(variant.describe() for variant in variants), info)

@@ -1,0 +1,146 @@
+"""The ``cmbs sweep`` command: a grid of library-model parameters, segment masses and initial
+speeds, run by :func:`cmbs.sweep.sweep` (batched, local processes or a Dask cluster)."""
+
+from __future__ import annotations
+
+import argparse
+from itertools import product
+from typing import Callable
+
+import numpy as np
+
+from cmbs.errors import CmbsError
+
+
+class SweepUsageError(CmbsError):
+    """A bad ``cmbs sweep`` option."""
+
+
+def add_sweep_command(commands, model_command: Callable, dynamics_options: Callable) -> None:
+    """Register ``cmbs sweep`` on the ``commands`` sub-parsers."""
+    command = model_command("sweep", "many runs of one model: a grid of parameters, segment masses and initial "
+                                     "speeds, batched, in local processes or on a Dask cluster")
+    command.add_argument("--formulation", default="lagrange", help="formulation of every run (default lagrange)")
+    dynamics_options(command)
+    command.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...",
+                         help="library-model parameter values to sweep (repeatable: the grid of all of them)")
+    command.add_argument("--mass", action="append", default=[], metavar="SEGMENT=F1,F2,...",
+                         help="mass factors of a segment (natural coordinates; repeatable, part of the grid)")
+    command.add_argument("--speed", metavar="COORDINATE=V1,V2,...",
+                         help="initial velocity of one coordinate, the others made consistent (part of the grid)")
+    command.add_argument("--every", type=int, default=1, help="record every N-th step of --dt (default 1)")
+    command.add_argument("--workers", type=int, help="local worker processes (default: the CPUs; 1: this process)")
+    command.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run on this Dask scheduler")
+    command.add_argument("--coordinate", help="coordinate of the figure (default: the first)")
+    command.add_argument("--out", help="sweep result (.npz)")
+    command.add_argument("--plot", help="figure: the coordinate in every variant, energy changes (.png, .pdf, .svg)")
+    command.set_defaults(run=_sweep)
+
+
+def _values(text: str, option: str) -> tuple[str, list]:
+    key, sep, raw = text.partition("=")
+    if not sep or not key or not raw:
+        raise SweepUsageError(f"{option} expects NAME=V1,V2,..., got {text!r}")
+    values = []
+    for item in raw.split(","):
+        lowered = item.strip().lower()
+        if lowered in ("true", "false"):
+            values.append(lowered == "true")
+            continue
+        try:
+            values.append(int(item) if item.strip().lstrip("-").isdigit() else float(item))
+        except ValueError:
+            values.append(item.strip())
+    return key, values
+
+
+def _numbers(key: str, values: list, option: str) -> list[float]:
+    if not all(isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+               for value in values):
+        raise SweepUsageError(f"{option} {key}: expected numbers, got {values}")
+    return [float(value) for value in values]
+
+
+def variants_from(args: argparse.Namespace, model) -> list:
+    """The grid of ``--vary``, ``--mass`` and ``--speed`` as :class:`~cmbs.sweep.Variant` s."""
+    from cmbs.kinematics import velocities
+    from cmbs.sweep import Variant
+
+    fixed = dict(_fixed(text) for text in args.param)
+    axes = [("parameter", *_values(text, "--vary")) for text in args.vary]
+    axes += [("mass", key, _numbers(key, values, "--mass")) for key, values in
+             (_values(text, "--mass") for text in args.mass)]
+    if args.speed:
+        key, values = _values(args.speed, "--speed")
+        if key not in model.coordinate_names:
+            raise SweepUsageError(f"--speed: model {model.name!r} has no coordinate {key!r}; coordinates: "
+                                  f"{', '.join(model.coordinate_names)}")
+        axes.append(("speed", key, _numbers(key, values, "--speed")))
+    if not axes:
+        raise SweepUsageError("cmbs sweep needs at least one of --vary, --mass or --speed")
+    variants = []
+    for choice in product(*(axis[2] for axis in axes)):
+        parameters, masses, qd0, label = dict(fixed), {}, None, []
+        for (kind, key, _), value in zip(axes, choice):
+            label.append(f"{key}={value}")
+            if kind == "parameter":
+                parameters[key] = value
+            elif kind == "mass":
+                masses[key] = value
+            else:
+                guess = np.zeros(model.n)
+                guess[model.coordinate_names.index(key)] = value
+                qd0 = velocities(model, model.q0, qd=guess, fixed=[key])
+        variants.append(Variant(parameters=parameters, masses=masses, qd0=qd0, label=", ".join(label)))
+    return variants
+
+
+def _fixed(text: str) -> tuple[str, object]:
+    key, values = _values(text, "--param")
+    if len(values) != 1:
+        raise SweepUsageError(f"--param takes one value (use --vary for several), got {text!r}")
+    return key, values[0]
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from cmbs import load
+    from cmbs.files_io import checked_output
+    from cmbs.sweep import sweep
+
+    for path, suffixes, option in ((args.out, (".npz",), "--out"), (args.plot, (".png", ".pdf", ".svg"), "--plot")):
+        if path:
+            checked_output(path, suffixes, option)
+    if args.t_end <= 0 or args.dt <= 0 or args.every < 1 or (args.workers is not None and args.workers < 1):
+        raise SweepUsageError(f"--t-end and --dt must be > 0, --every and --workers >= 1 (got {args.t_end}, "
+                              f"{args.dt}, {args.every}, {args.workers})")
+    parameters = dict(_fixed(text) for text in args.param)
+    nominal = load(args.model, **parameters)
+    nominal = nominal.without_drivers() if args.undriven else nominal
+    variants = variants_from(args, nominal)
+    target = nominal if not args.vary and not args.undriven else args.model
+    if args.undriven and args.vary:
+        raise SweepUsageError("--undriven cannot be combined with --vary (the varied model is rebuilt by name)")
+    if args.coordinate and args.coordinate not in nominal.coordinate_names:
+        raise SweepUsageError(f"--coordinate: no coordinate {args.coordinate!r}; coordinates: "
+                              f"{', '.join(nominal.coordinate_names)}")
+    result = sweep(target, variants, t_end=args.t_end, formulation=args.formulation, integrator=args.integrator,
+                   dt=args.dt, rtol=args.rtol, atol=args.atol, project=args.project, every=args.every,
+                   workers=args.workers, scheduler=args.scheduler)
+    failed = int(np.count_nonzero(result.status != "success"))
+    print(f"{nominal.name}: {len(result)} variants, {result.info['mode']} ({result.info['workers']} "
+          f"{'scheduler' if result.info['mode'] == 'dask' else 'workers'}), {result.info['wall_time']:.3g} s wall, "
+          f"{failed} failed")
+    for v, variant in enumerate(result.variants):
+        energy = result.energy[v, :result.recorded[v]]
+        drift = float(np.abs(energy - energy[0]).max()) if energy.size else float("nan")
+        note = "" if result.status[v] == "success" else f"  FAILED: {result.message[v]}"
+        print(f"  {variant['label']:<40} max|Φ| {np.nanmax(result.constraint_error[v]):9.2e}  max|E - E0| "
+              f"{drift:9.3g} J{note}")
+    if args.out:
+        print(f"  result -> {result.save(args.out)}")
+    if args.plot:
+        from cmbs.plotting import plot_sweep, save_figure
+
+        figure = plot_sweep(result, args.coordinate or nominal.coordinate_names[0])
+        print(f"  figure -> {save_figure(figure, args.plot)}")
+    return 1 if failed else 0

@@ -1,0 +1,234 @@
+"""cmbs.sweep: batched, process-pool and Dask runs give the numbers of single simulations."""
+
+import numpy as np
+import pytest
+
+import cmbs
+from cmbs.errors import CmbsError
+from cmbs.simulate import simulate
+from cmbs.sweep import SweepResult, Variant, grid, sweep
+
+
+@pytest.fixture(scope="module")
+def four_bar():
+    return cmbs.load("four-bar").without_drivers()
+
+
+def _initial_states(model, count):
+    """Consistent start states: the crank released at several speeds."""
+    variants = []
+    for k, speed in enumerate(np.linspace(-1.0, 1.0, count)):
+        qd = cmbs.velocities(model, model.q0, qd=np.eye(model.n)[-1] * speed + 1e-3 * k)
+        variants.append(Variant(qd0=qd, label=f"speed {speed:+.2f}"))
+    return variants
+
+
+def test_batched_sweep_equals_single_simulations(four_bar):
+    variants = _initial_states(four_bar, 5)
+    result = sweep(four_bar, variants, t_end=0.5, dt=1e-3, every=10, formulation="baumgarte")
+    assert result.info["mode"] == "batched" and len(result) == 5
+    assert result.t.shape == (51,) and result.q.shape == (5, 51, four_bar.n)
+    for v, variant in enumerate(variants):
+        run = simulate(four_bar, t_end=0.5, dt=1e-3, integrator="rk4", formulation="baumgarte",
+                       qd0=np.asarray(variant.qd0))
+        np.testing.assert_allclose(result.q[v], run.q[::10], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(result.qd[v], run.qd[::10], rtol=0, atol=1e-11)
+        np.testing.assert_allclose(result.energy[v], run["energy"][::10], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(result.constraint_error[v], run["constraint_error"][::10], rtol=1e-6, atol=1e-12)
+    assert set(result.status) == {"success"}
+
+
+def test_process_pool_equals_serial_and_the_batched_path(four_bar):
+    variants = _initial_states(four_bar, 4)
+    batched = sweep(four_bar, variants, t_end=0.3, dt=1e-3, every=5)
+    serial = sweep(four_bar, variants, t_end=0.3, dt=1e-3, every=5, batched=False, workers=1)
+    pooled = sweep(four_bar, variants, t_end=0.3, dt=1e-3, every=5, batched=False, workers=2)
+    assert (serial.info["mode"], pooled.info["mode"]) == ("processes", "processes")
+    np.testing.assert_array_equal(pooled.q, serial.q)
+    np.testing.assert_allclose(batched.q, serial.q, rtol=0, atol=1e-12)
+
+
+def test_parameter_grid_and_mass_faults_run_through_simulate():
+    """The slider-crank's crank speed and gravity on a grid; a heavier crank changes the motion
+    exactly as mass_fault + simulate does."""
+    variants = grid(crank_speed=[1.0, 2.0], gravity=[0.0, 9.81])
+    result = sweep("slider-crank", variants, t_end=0.2, dt=1e-3, every=20, formulation="matrix-r", workers=1)
+    assert result.info["mode"] == "processes" and len(result) == 4
+    for v, variant in enumerate(variants):
+        run = simulate(cmbs.load("slider-crank", **variant.parameters), t_end=0.2, dt=1e-3, integrator="rk4",
+                       formulation="matrix-r")
+        np.testing.assert_allclose(result.q[v], run.q[::20], rtol=0, atol=1e-12)
+    # energy of a conservative variant is conserved; twice the crank speed turns it about 0.2 rad
+    # further in 0.2 s (variants 0 and 2: 1 and 2 rad/s without gravity)
+    assert np.abs(result.energy[0] - result.energy[0, 0]).max() < 1e-8
+    assert 0.15 < result.coordinate("theta1")[2, -1] - result.coordinate("theta1")[0, -1] < 0.25
+    heavier = sweep("slider-crank", [Variant(), Variant(masses={"crank": 1.5})], t_end=0.2, dt=1e-3,
+                    formulation="matrix-r", workers=1)
+    from cmbs.control import mass_fault
+    expected = simulate(mass_fault(cmbs.load("slider-crank"), "crank", factor=1.5), t_end=0.2, dt=1e-3,
+                        integrator="rk4", formulation="matrix-r")
+    np.testing.assert_allclose(heavier.q[1], expected.q, rtol=0, atol=1e-12)
+    # the heavier mechanism's own energy is conserved (the nominal-mass energy is not)
+    assert np.abs(heavier.energy[1] - heavier.energy[1, 0]).max() < 1e-8
+    assert np.abs(expected["energy"] - expected["energy"][0]).max() > 1e-3
+
+
+def test_failed_variants_are_marked_and_the_file_round_trips(tmp_path):
+    """Plain Lagrange stops at the slider-crank's singular position (t ≈ 0.83 s): that variant is
+    'failed' with its message, NaN after its last output; the others run on."""
+    model = cmbs.load("slider-crank", gravity=9.81)
+    variants = [Variant(label="at rest", qd0=np.zeros(model.n)), Variant(label="turning")]
+    result = sweep(model, variants, t_end=1.0, dt=1e-3, every=10)
+    assert list(result.status) == ["success", "failed"]
+    assert "rank" in result.message[1] or "singular" in result.message[1]
+    assert result.recorded[1] < result.t.size and np.isnan(result.q[1, result.recorded[1]:]).all()
+    assert np.isfinite(result.q[1, :result.recorded[1]]).all()
+    path = result.save(tmp_path / "sweep.npz")
+    loaded = SweepResult.load(path)
+    np.testing.assert_array_equal(loaded.q, result.q)
+    assert list(loaded.status) == list(result.status) and loaded.variants[0]["label"] == "at rest"
+    assert loaded.info["mode"] == "batched" and loaded.names == result.names
+
+
+def test_sweep_refuses_bad_variants(four_bar):
+    with pytest.raises(CmbsError, match="q0 must have 5 values"):
+        sweep(four_bar, [Variant(q0=[0.0, 1.0])], t_end=0.1)
+    with pytest.raises(CmbsError, match="by library name"):
+        sweep(four_bar, [Variant(parameters={"gravity": 1.0})], t_end=0.1)
+    with pytest.raises(CmbsError, match="no variants"):
+        sweep(four_bar, [], t_end=0.1)
+    with pytest.raises(CmbsError, match="batched path needs"):
+        sweep(four_bar, [Variant()], t_end=0.1, formulation="penalty", batched=True)
+    with pytest.raises(CmbsError, match="no parameter"):
+        sweep("slider-crank", [Variant(parameters={"colour": 1})], t_end=0.1)
+
+
+# ---------------------------------------------------------------------------------- Dask
+distributed = pytest.importorskip("distributed", reason="dask's distributed package is not installed")
+
+
+def _start(arguments, log):
+    import subprocess
+    import sys
+
+    return subprocess.Popen([sys.executable, "-m", *arguments], stdout=log, stderr=subprocess.STDOUT)
+
+
+@pytest.fixture
+def cluster(tmp_path):
+    """A Dask scheduler and two single-threaded worker processes (no nanny, so a killed worker
+    stays dead) on 127.0.0.1, started and stopped by the test."""
+    import json
+    import time
+
+    scheduler_file = tmp_path / "scheduler.json"
+    log = open(tmp_path / "cluster.log", "w")
+    processes = [_start(["distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0",
+                         "--no-dashboard", "--scheduler-file", str(scheduler_file)], log)]
+    try:
+        deadline = time.monotonic() + 60
+        while not scheduler_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        address = json.loads(scheduler_file.read_text())["address"]
+        workers = [_start(["distributed.cli.dask_worker", address, "--nthreads", "1", "--no-nanny",
+                           "--no-dashboard", "--host", "127.0.0.1"], log) for _ in range(2)]
+        processes += workers
+        with distributed.Client(address, timeout=30) as client:
+            client.wait_for_workers(2, timeout=60)
+        yield address, workers
+    finally:
+        for process in reversed(processes):
+            process.kill()
+            process.wait()
+        log.close()
+
+
+def test_dask_sweep_equals_the_serial_run_and_survives_a_killed_worker(cluster):
+    """Eight penalty runs (Python loop, a fraction of a second each) on two workers; one worker
+    is killed once tasks are running: its tasks run again on the other, nothing is lost, and
+    every variant equals the serial run."""
+    import os
+    import threading
+    import time
+
+    address, workers = cluster
+    model = cmbs.load("four-bar").without_drivers()
+    variants = _initial_states(model, 8)
+    options = dict(t_end=0.4, dt=1e-3, every=20, formulation="penalty")
+    serial = sweep(model, variants, workers=1, **options)
+    done = {}
+    thread = threading.Thread(target=lambda: done.setdefault("result", sweep(model, variants, scheduler=address,
+                                                                             **options)))
+    thread.start()
+    with distributed.Client(address, timeout=30) as client:
+        pids = client.run(os.getpid)        # worker address -> process id
+        deadline = time.monotonic() + 60
+        busy = []
+        while not busy and time.monotonic() < deadline:
+            busy = [worker for worker, tasks in client.processing().items() if tasks]
+            time.sleep(0.02)
+        assert busy, "no task started on the cluster"
+        victim = next(process for process in workers if process.pid == pids[busy[0]])
+        victim.kill()                       # the worker dies with its task(s) in hand
+        victim.wait()
+        thread.join(timeout=300)
+        assert len(client.scheduler_info()["workers"]) == 1
+    assert not thread.is_alive()
+    result = done["result"]
+    assert result.info["mode"] == "dask" and list(result.status) == ["success"] * 8
+    np.testing.assert_array_equal(result.q, serial.q)
+    np.testing.assert_array_equal(result.energy, serial.energy)
+
+
+def test_dask_sweep_names_an_unreachable_scheduler(four_bar):
+    with pytest.raises(CmbsError, match="cannot reach the Dask scheduler"):
+        sweep(four_bar, [Variant()], t_end=0.01, formulation="penalty", scheduler="tcp://127.0.0.1:9")
+
+
+# ---------------------------------------------------------------------------------- command line
+def test_sweep_command_runs_the_grid_and_writes_result_and_figure(tmp_path, capsys):
+    from cmbs.cli import main
+
+    out, figure = tmp_path / "sweep.npz", tmp_path / "sweep.png"
+    assert main(["sweep", "slider-crank", "--vary", "crank_speed=1,2", "--mass", "crank=1,1.2", "--t-end", "0.2",
+                 "--dt", "1e-3", "--integrator", "rk4", "--formulation", "matrix-r", "--every", "10",
+                 "--workers", "1", "--out", str(out), "--plot", str(figure), "--coordinate", "theta1"]) == 0
+    printed = capsys.readouterr().out
+    assert "4 variants, processes" in printed and "crank_speed=2, crank=1.2" in printed
+    result = SweepResult.load(out)
+    assert result.q.shape == (4, 21, 6) and figure.stat().st_size > 0
+    expected = simulate(cmbs.load("slider-crank", crank_speed=2), t_end=0.2, dt=1e-3, integrator="rk4",
+                        formulation="matrix-r")
+    np.testing.assert_allclose(result.q[2], expected.q[::10], rtol=0, atol=1e-12)
+
+
+def test_sweep_command_initial_speeds_are_consistent_and_batched(tmp_path, capsys):
+    from cmbs.cli import main
+
+    out = tmp_path / "speeds.npz"
+    assert main(["sweep", "four-bar", "--undriven", "--speed", "alpha=0,0.5,1", "--t-end", "0.1", "--dt", "1e-3",
+                 "--integrator", "rk4", "--out", str(out)]) == 0
+    result = SweepResult.load(out)
+    assert result.info["mode"] == "batched"
+    model = cmbs.load("four-bar").without_drivers()
+    column = model.coordinate_names.index("alpha")
+    np.testing.assert_allclose(result.qd[:, 0, column], [0.0, 0.5, 1.0], atol=1e-12)
+    for v in range(3):                       # consistent: A q̇ = 0 at the start
+        A = model.jacobian(result.q[v, 0], 0.0)
+        assert np.abs(A @ result.qd[v, 0]).max() < 1e-12
+
+
+def test_sweep_command_mistakes_exit_2_with_one_line(tmp_path, capsys):
+    from cmbs.cli import main
+
+    cases = [(["--vary", "crank_speed"], "--vary expects NAME=V1,V2"),
+             (["--vary", "colour=1,2"], "no parameter"),
+             (["--speed", "nope=1,2"], "has no coordinate 'nope'"),
+             (["--mass", "crank=a,b"], "expected numbers"),
+             ([], "needs at least one of"),
+             (["--vary", "crank_speed=1,2", "--out", str(tmp_path / "x.csv")], "must end in .npz")]
+    for extra, message in cases:
+        assert main(["sweep", "slider-crank", "--t-end", "0.1", *extra]) == 2
+        error = capsys.readouterr().err
+        assert message in error and error.count("\n") == 1, (extra, error)
+    assert not (tmp_path / "x.csv").exists()
