@@ -228,3 +228,19 @@ def test_a_diverging_compiled_run_fails_with_a_message_not_an_exception():
     run = simulate(model, t_end=10.0, integrator="rk4", dt=1e-3, formulation="projection", compiled=True)
     assert run.info["status"] == "failed" and run.t[-1] < 10.0
     assert "diverged" in run.info["message"] and np.all(np.isfinite(run.q))
+
+
+def test_runs_on_the_python_loop_say_why():
+    model = cmbs.load("four-bar").without_drivers()
+    notes = {
+        "penalty": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, formulation="penalty").info["note"],
+        "callable": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3,
+                             u=lambda t, q, qd: np.zeros(model.n_u)).info["note"],
+        "project": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, project=True).info["note"],
+        "off": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, compiled=False).info["note"],
+    }
+    assert "'penalty' has no compiled loop" in notes["penalty"]
+    assert "Python callable" in notes["callable"] and "project=True" in notes["project"]
+    assert notes["off"] == "Python loop: compiled=False"
+    compiled = simulate(model, t_end=0.01, integrator="rk4", dt=1e-3)
+    assert compiled.info["compiled"] and "note" not in compiled.info

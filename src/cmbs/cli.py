@@ -141,6 +141,8 @@ def _simulate(args: argparse.Namespace) -> int:
     print(f"  max constraint error {error.max(initial=0.0):.3g}, max velocity constraint error "
           f"{run['velocity_constraint_error'].max(initial=0.0):.3g}, max |E - E0| "
           f"{np.abs(energy - energy[0]).max(initial=0.0):.3g} J")
+    if info.get("note"):
+        print(f"  note: {info['note']}")
     if args.out:
         print(f"  result -> {run.save(args.out)}")
     if args.plot:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 
-import numba
+from cmbs.jit import njit, prange
 import numpy as np
 
 from cmbs.control.base import ZeroOrderHold
@@ -205,7 +205,7 @@ def law_arrays(law: ComputedTorque | None, model: Model) -> tuple:
             law.solver.partition.dependent.astype(np.int64))
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _evaluate(kind, q, qd, t, u, ints, reals, buffer):
     if kind == KIND_NATURAL:
         _natural_kernel(q, qd, t, u, ints, reals, buffer)
@@ -213,7 +213,7 @@ def _evaluate(kind, q, qd, t, u, ints, reals, buffer):
         _joint_kernel(ints, reals, q, qd, t, u, buffer)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _gram_extremes(G):
     """Smallest and largest eigenvalue of the small symmetric matrix ``G`` (overwritten) by
     cyclic Jacobi rotations (Golub & Van Loan §8.5): for a few rows this avoids LAPACK's call
@@ -251,7 +251,7 @@ def _gram_extremes(G):
     return smallest, largest
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _cholesky_in_place(L, start):
     """Lower Cholesky factor L Lᵀ = K of the symmetric positive definite K given in ``L``'s lower
     triangle, in place (the upper triangle is not read).  ``start[i]`` is the first column of
@@ -276,7 +276,7 @@ def _cholesky_in_place(L, start):
     return True
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _forward(L, start, b):
     """Solve L x = b in place for the lower triangular L with row profile ``start``."""
     for i in range(L.shape[0]):
@@ -286,7 +286,7 @@ def _forward(L, start, b):
         b[i] = total / L[i, i]
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _backward(L, start, b):
     """Solve Lᵀ x = b in place for the lower triangular L with row profile ``start``."""
     for i in range(L.shape[0] - 1, -1, -1):
@@ -295,7 +295,7 @@ def _backward(L, start, b):
             b[k] -= L[i, k] * b[i]
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _gram(X, scale, gram, rows_of):
     """G = (SX)(SX)ᵀ into ``gram`` (S = diag(scale)), column by column over the rows each column
     touches (``rows_of`` is (columns, rows) integer workspace), so a sparse X costs
@@ -321,7 +321,7 @@ def _gram(X, scale, gram, rows_of):
             gram[j, i] = gram[i, j]
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _gram_bounds(A, row_scale, gram, factor, rows_of, dense):
     """Bounds (λ_low, λ_high) on the extreme eigenvalues of the Gram matrix G = (SA)(SA)ᵀ
     (S = diag(row_scale)), left in ``gram``, with λ_low <= λ_min(G) and λ_max(G) <= λ_high:
@@ -352,7 +352,7 @@ def _gram_bounds(A, row_scale, gram, factor, rows_of, dense):
     return 1.0 / inverse_trace, trace
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _conditioning(A, row_scale, tolerance, gram, factor, rows_of, dense):
     """(singular, certified) for the constraint Jacobian A: ``singular`` when σ_min/σ_max of the
     row-scaled SA is below ``tolerance`` (as KKTSolver's SVD test, with σ_max replaced by 1 when
@@ -376,7 +376,7 @@ def _conditioning(A, row_scale, tolerance, gram, factor, rows_of, dense):
     return smallest < tolerance * max(largest, 1.0), False
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _schur_solve(M, Q, A, c, schur, qdd, lam):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c] by block elimination of the coordinates p that carry
     mass (the range-space method, Golub & Van Loan §4.2; Nocedal & Wright §16.2).  Split
@@ -508,7 +508,7 @@ def schur_workspace(kind: int, mass: np.ndarray, m: int) -> tuple:
             np.zeros(max(n, m), dtype=np.int64), np.zeros((max(n, 1), max(m, 1)), dtype=np.int64))
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _solve_in_place(K, rhs):
     """Gaussian elimination with partial pivoting on a small dense system; the solution
     overwrites ``rhs``.  Returns False for an exactly singular matrix.  (The pivot search is
@@ -547,7 +547,7 @@ def _solve_in_place(K, rhs):
 PROJECTION_REGULAR = 1e-4
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _projection_by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     """Aghili's standard projection solution at a regular configuration, by the augmented system.
 
@@ -568,7 +568,7 @@ def _projection_by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     return _schur_solve(M, Q, A, gamma, schur, qdd, lam)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, qdd, lam, K, rhs,
           check_rank, schur):
     """q̈ and λ at (q, q̇, t, u) into ``qdd``, ``lam``; returns a status code.
@@ -637,7 +637,7 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
     return OK
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _projection_by_svd(M, Q, A, gamma, row_scale, parameters, qdd, lam):
     """Aghili's standard projection solution with the SVD pseudo-inverse of the row-scaled A,
     singular values up to the threshold ``parameters[2]`` discarded (any rank of A); M̂ = M + s(I - P)
@@ -667,7 +667,7 @@ def _projection_by_svd(M, Q, A, gamma, row_scale, parameters, qdd, lam):
     return True
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _lu_in_place(K, pivots):
     """LU factorisation with partial pivoting of the square ``K`` in place (unit lower factor
     below the diagonal); row swaps in ``pivots``.  Returns False for an exactly singular matrix."""
@@ -694,7 +694,7 @@ def _lu_in_place(K, pivots):
     return True
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _lu_solve(K, pivots, b):
     """Solve K x = b in place with the factors of :func:`_lu_in_place`."""
     size = K.shape[0]
@@ -710,7 +710,7 @@ def _lu_solve(K, pivots, b):
         b[i] /= K[i, i]
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _lu_solve_transposed(K, pivots, b):
     """Solve Kᵀ x = b in place with the factors of :func:`_lu_in_place` (K = Pᵀ L U)."""
     size = K.shape[0]
@@ -726,7 +726,7 @@ def _lu_solve_transposed(K, pivots, b):
             b[i], b[pivots[i]] = b[pivots[i]], b[i]
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def computed_torque(law, q, qd, t, K, rhs, u):
     """The inputs of :class:`~cmbs.control.ComputedTorque` at (q, q̇, t) into ``u``; NaN when its
     linear system is singular (the Python law raises there).
@@ -799,7 +799,7 @@ def computed_torque(law, q, qd, t, K, rhs, u):
             u[i] += gains[i, b] * force
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _private_copy(schur):
     """The :func:`schur_workspace` tuple with fresh copies of its scratch arrays (the constant
     M_pp⁻¹, its flag and the index arrays are shared), so that loops running at the same time
@@ -809,14 +809,14 @@ def _private_copy(schur):
             schur[10], schur[11].copy(), schur[12], schur[13].copy())
 
 
-@numba.njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True)
 def rk4_batch(kind, method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, buffer_size, mass, row_scale, m,
               law, schur, Qs, QDs, PHIs, statuses, recorded):
     """:func:`rk4` with constant inputs for N variants of the initial state and the inputs (rows
     of Q0, QD0, U0), in parallel over the variants (numba threads).  Writes each variant's
     recorded q, q̇ and |Φ|max into Qs (N, records, n), QDs and PHIs (N, records), its status
     and the number of records it reached."""
-    for v in numba.prange(Q0.shape[0]):
+    for v in prange(Q0.shape[0]):
         result = rk4(kind, method, parameters, Q0[v], QD0[v], h, steps, every, U0[v], ints, reals, buffer_size, mass,
                      row_scale, m, CONSTANT, law, schur)
         count = result[9]
@@ -827,7 +827,7 @@ def rk4_batch(kind, method, parameters, Q0, QD0, U0, h, steps, every, ints, real
         recorded[v] = count
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buffer_size, mass, row_scale, m, mode,
         law, schur):
     """Fixed-step RK4 for ``steps`` steps of size ``h`` from t = 0; records (t, q, q̇, q̈, λ, u,

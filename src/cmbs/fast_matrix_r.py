@@ -19,7 +19,7 @@ makes some positions non-recoverable; see :meth:`MatrixRSolver.stage_state`).
 
 from __future__ import annotations
 
-import numba
+from cmbs.jit import njit
 import numpy as np
 
 from cmbs.dynamics.matrix_r import MatrixR, MatrixRSolver
@@ -41,7 +41,7 @@ def runs(model: Model, chosen: object, integrator: str, u: object, project: bool
             and not model.nonholonomic.any() and not callable(u) and not project and steps_exact)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
     """LU factors (in ``Ad``, ``pivots``) of the dependent block A_d of the A in ``buffer``:
     the partition's constraint rows and dependent columns.  False when exactly singular."""
@@ -52,7 +52,7 @@ def _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
     return _lu_in_place(Ad, pivots)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent, independent, tolerance,
              iterations, Ad, pivots, side):
     """Dependent coordinates (Newton, in place in ``q``) and velocities (in place in ``qd``);
@@ -95,7 +95,7 @@ def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent,
     return OK
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent, independent, tolerance,
            iterations, qdd, lam, work):
     """Recover (q, q̇) in place, then q̈ and λ by matrix R at the recovered state."""
@@ -166,7 +166,7 @@ def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dep
     return OK
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _condition(buffer, n, m, rows, dependent):
     """cond₂(A_d) of the A in ``buffer`` (as ``numpy.linalg.cond``, the Python solver's test)."""
     r = rows.shape[0]
@@ -180,7 +180,7 @@ def _condition(buffer, n, m, rows, dependent):
     return np.linalg.cond(block)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, rows, dependent, independent,
         tolerance, iterations, reference_condition, growth, automatic, T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE):
     """RK4 steps ``first`` .. ``steps`` (t = step·h) from the state (q0, q̇0) at step ``first``,

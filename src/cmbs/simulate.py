@@ -204,7 +204,30 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
                          else None, {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol,
                                      "project": project, "loop_wall_time": loop_wall})
     trajectory.info["wall_time"] = time.perf_counter() - started
+    if integrator == "rk4":
+        trajectory.info["note"] = _python_loop_note(model, chosen, u, project, compiled)
     return trajectory
+
+
+def _python_loop_note(model: Model, chosen: Formulation, u: object, project: bool, compiled: bool | None) -> str:
+    """Why an rk4 run took the Python loop (tens of µs per step more than the compiled one)."""
+    from cmbs import fast, jit
+
+    if compiled is False:
+        reason = "compiled=False"
+    elif not jit.COMPILED:
+        reason = "numba is not installed, the kernels run as Python"
+    elif fast.supported(model) is None:
+        reason = f"model {model.name!r} has Python-callable terms or time functions"
+    elif project:
+        reason = "drift projection (project=True) runs in Python"
+    elif callable(u):
+        reason = "the inputs are a Python callable (only a plain ComputedTorque law is compiled)"
+    elif fast.method_of(chosen) is None and chosen.name != "matrix-r":
+        reason = f"formulation {chosen.name!r} has no compiled loop (lagrange, baumgarte, projection, matrix-r have)"
+    else:
+        reason = "t_end is not a multiple of dt, or the model has nonholonomic rows (matrix-r)"
+    return f"Python loop: {reason}"
 
 
 def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, times: np.ndarray,

@@ -334,9 +334,9 @@ def _batch_plan(model: Model, settings: RunSettings, variants: list[Variant]) ->
 
 
 def _threads() -> int:
-    import numba
+    from cmbs.jit import threads
 
-    return numba.get_num_threads()
+    return threads()
 
 
 def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], plan: tuple) -> list[dict]:

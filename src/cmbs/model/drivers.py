@@ -21,7 +21,7 @@ import abc
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
-import numba
+from cmbs.jit import njit
 import numpy as np
 from scipy.interpolate import CubicSpline
 
@@ -150,7 +150,7 @@ def as_time_function(value: object) -> TimeFunction:
     raise ModelError(f"expected a number, expression or function of t, got {value!r}")
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def evaluate_piecewise(breaks, coefficients, t):
     """Piecewise cubic ``sum_k c_k (t - t_i)^(3-k)`` (scipy PPoly layout, flattened rows)."""
     pieces = breaks.shape[0] - 1
@@ -219,7 +219,7 @@ class TimeFunctionPack:
                    depth, tuple(python), tuple(functions))
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def evaluate_time_functions(table, ops, reals, t, stack, out):
     """Fill ``out[k] = (f_k, f_k', f_k'')`` for the compiled kinds (Python ones are skipped)."""
     for k in range(table.shape[0]):

@@ -128,16 +128,17 @@ def _generated_function(label: str, source: str, imports: dict[str, list[str]], 
     :func:`cache_directory` — where, with ``numba`` and ``cache``, numba's on-disk cache lets a
     rebuild of the same model (another process, a pickled copy) skip compilation — or, when that
     is unusable, to a per-process temporary folder."""
-    import numba as numba_module
+    from cmbs import jit
 
     directory = cache_directory()
+    numba = numba and jit.COMPILED          # without numba the generated code runs as Python
     cached = numba and cache and directory is not None
     if directory is None:
         directory = _scratch_directory()
-    decorator = "@numba.njit(cache=True)\n" if cached else "@numba.njit\n" if numba else ""
+    decorator = "@njit(cache=True)\n" if cached else "@njit\n" if numba else ""
     header = "".join(f"from {module} import {', '.join(names)}\n" for module, names in imports.items())
-    text = f"import numba\n{header}\n\n{decorator}{source}"
-    digest = hashlib.sha256(f"{numba_module.__version__}\n{text}".encode()).hexdigest()[:24]
+    text = f"from cmbs.jit import njit\n{header}\n\n{decorator}{source}"
+    digest = hashlib.sha256(f"{jit.VERSION}\n{text}".encode()).hexdigest()[:24]
     module_name = f"cmbs_equations_{digest}"
     path = directory / f"{module_name}.py"
     module = sys.modules.get(module_name)

@@ -21,7 +21,7 @@ import math
 import re
 from dataclasses import dataclass
 
-import numba
+from cmbs.jit import njit
 import numpy as np
 
 from cmbs.errors import ExpressionError
@@ -183,7 +183,7 @@ def parse_expression(text: str) -> Program:
     return _Parser(text).parse()
 
 
-@numba.njit(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _taylor_power(a0, a1, a2, b0, b1, b2):
     """(a^b, d/dt, d²/dt²) for Taylor triples a, b; constant exponents avoid log(a)."""
     if b1 == 0.0 and b2 == 0.0:
@@ -208,7 +208,7 @@ def _taylor_power(a0, a1, a2, b0, b1, b2):
     return p0, p0 * e1, p0 * (e2 + e1 * e1)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def evaluate_program(ops, constants, t, stack):
     """Evaluate a stack program at time ``t``: returns the top slot ``(f, f', f'')``.
 

@@ -35,7 +35,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-import numba
+from cmbs.jit import njit
 import numpy as np
 
 from cmbs.errors import ModelError
@@ -674,13 +674,13 @@ class NaturalEquations:
         return self._extended(q)[self.point_xz]
 
 
-@numba.njit(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _add(A, row, column, value, n):
     if column < n:
         A[row, column] += value
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _evaluate(q, qd, t, u, ints, reals, buffer):
     """Q, Φ, A, γ, Φ_t of a natural-coordinate model into ``buffer`` (layout of :class:`Terms`)."""
     n = q.shape[0]
@@ -836,7 +836,7 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
         Q[actuators[k]] += gains[k] * u[k]
 
 
-@numba.njit(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _add_force(Q, index, value, n):
     if index < n:
         Q[index] += value

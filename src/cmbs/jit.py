@@ -1,0 +1,44 @@
+"""numba when it is installed, else the same kernels as plain Python on numpy arrays.
+
+Every compiled kernel of cmbs is written in the subset of Python and numpy that numba compiles,
+and decorated with :func:`njit` from here.  Without numba (``import numba`` fails, e.g. on a
+platform it has no wheels for, or with ``CMBS_DISABLE_NUMBA=1``) the decorator returns the
+function unchanged: the same code runs interpreted, with the same results (tested to 1e-12
+against the compiled kernels, tests/test_jit_fallback.py) and 100-1000× slower.  numba's own
+``NUMBA_DISABLE_JIT=1`` has the same effect with numba installed.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Callable
+
+try:
+    if os.environ.get("CMBS_DISABLE_NUMBA", "") not in ("", "0"):
+        raise ImportError("CMBS_DISABLE_NUMBA is set")
+    import numba as _numba
+except ImportError:
+    _numba = None
+
+#: True when the kernels are compiled by numba.
+COMPILED = _numba is not None
+#: numba's version, or "none": part of the name of generated equation modules.
+VERSION = _numba.__version__ if _numba is not None else "none"
+
+
+def njit(*args, **options) -> Callable:
+    """``numba.njit`` with numba, else a decorator that leaves the function as it is."""
+    if _numba is not None:
+        return _numba.njit(*args, **options)
+    if len(args) == 1 and callable(args[0]) and not options:
+        return args[0]
+    return lambda function: function
+
+
+#: ``numba.prange`` (parallel loop over independent iterations) with numba, else ``range``.
+prange = _numba.prange if _numba is not None else range
+
+
+def threads() -> int:
+    """Threads a parallel kernel uses (numba's), 1 without numba."""
+    return _numba.get_num_threads() if _numba is not None else 1
