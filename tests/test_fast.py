@@ -86,7 +86,8 @@ def test_gram_bounds_enclose_the_extreme_eigenvalues():
             scale = rng.uniform(0.5, 2.0, size=m)
             gram, factor = np.empty((m, m)), np.empty((m, m))
             rows_of, dense = np.empty((n, m), dtype=np.int64), np.zeros(m, dtype=np.int64)
-            low, high = _gram_bounds(A, scale, gram, factor, rows_of, dense)
+            band = np.zeros((m, m))
+            low, high = _gram_bounds(A, scale, gram, factor, rows_of, dense, band)
             scaled = A * scale[:, None]
             np.testing.assert_allclose(gram, scaled @ scaled.T, rtol=1e-13, atol=1e-13)
             eigenvalues = np.linalg.eigvalsh(scaled @ scaled.T)  # known to rounding, ~ε‖G‖
@@ -94,7 +95,7 @@ def test_gram_bounds_enclose_the_extreme_eigenvalues():
             assert low <= eigenvalues[0] + rounding and eigenvalues[-1] <= high + rounding
             sigma = np.linalg.svd(scaled, compute_uv=False)
             for tolerance in (1e-4, 1e-2):
-                singular, certified = _conditioning(A, scale, tolerance, gram, factor, rows_of, dense)
+                singular, certified = _conditioning(A, scale, tolerance, gram, factor, rows_of, dense, band)
                 assert singular == (sigma[-1] < tolerance * max(sigma[0], 1.0))
                 assert not (certified and singular)
 

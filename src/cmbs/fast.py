@@ -24,6 +24,7 @@ import math
 from cmbs.jit import njit, prange
 import numpy as np
 
+from cmbs.banded import band_factor, band_plan, band_solve, gram_profile, inverse_trace, jacobian_pattern
 from cmbs.control.base import ZeroOrderHold
 from cmbs.control.computed_torque import ComputedTorque
 from cmbs.dynamics import Baumgarte, Formulation, Lagrange, Projection
@@ -142,7 +143,7 @@ class CompiledDynamics:
         n, m = model.n, model.m
         self._row_scale = np.ascontiguousarray(self.solver.row_scale, dtype=float)
         self._K, self._rhs = np.empty((n + m, n + m)), np.empty(n + m)
-        self._schur = schur_workspace(kind, self._mass, m)
+        self._schur = schur_workspace(kind, self._mass, m, jacobian_pattern(model))
         self._no_input = np.zeros(model.n_u)
 
     def into(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray | None, qdd: np.ndarray,
@@ -322,38 +323,41 @@ def _gram(X, scale, gram, rows_of):
 
 
 @njit(cache=True)
-def _gram_bounds(A, row_scale, gram, factor, rows_of, dense):
+def _gram_bounds(A, row_scale, gram, factor, rows_of, start, Z):
     """Bounds (λ_low, λ_high) on the extreme eigenvalues of the Gram matrix G = (SA)(SA)ᵀ
     (S = diag(row_scale)), left in ``gram``, with λ_low <= λ_min(G) and λ_max(G) <= λ_high:
-    λ_high = trace G and λ_low = 1 / trace G⁻¹ = 1 / ‖L⁻¹‖_F² from the Cholesky factor L of G
-    (in ``factor``'s lower triangle; its upper triangle is scratch), because the trace of a
-    positive definite matrix lies between its largest eigenvalue and m times it.  λ_low = 0
-    when G is not numerically positive definite."""
+    λ_high = trace G and λ_low = 1 / trace G⁻¹, because the trace of a positive definite matrix
+    lies between its largest eigenvalue and m times it.  trace G⁻¹ comes from the Cholesky
+    factor L of G (in ``factor``, keeping G's profile ``start``) by the Takahashi recurrence
+    (:func:`cmbs.banded.inverse_trace`, workspace ``Z``): O(m b²) for a profile of half-width b.
+    λ_low = 0 when G is not numerically positive definite."""
     m = A.shape[0]
     _gram(A, row_scale, gram, rows_of)
     trace = 0.0
     for i in range(m):
         trace += gram[i, i]
-        for j in range(i + 1):
+        for j in range(start[i], i + 1):
             factor[i, j] = gram[i, j]
-    if not _cholesky_in_place(factor, dense):
+    if not _cholesky_in_place(factor, start):
         return 0.0, trace
-    inverse_trace = 0.0
-    for j in range(m):                      # ‖L⁻¹ e_j‖², forward substitution from row j; the
-        diagonal = 1.0 / factor[j, j]       # entries i > j of that column go to the unused upper
-        inverse_trace += diagonal * diagonal    # triangle, factor[j, i] (no allocation)
+    if Z.shape[1] < m:                      # a narrow profile: O(m b²)
+        return 1.0 / inverse_trace(factor, start, Z), trace
+    total = 0.0                             # dense: ‖L⁻¹‖_F² column by column, the entries below
+    for j in range(m):                      # the diagonal in factor's upper triangle (scratch)
+        diagonal = 1.0 / factor[j, j]
+        total += diagonal * diagonal
         for i in range(j + 1, m):
-            total = -factor[i, j] * diagonal
+            value = -factor[i, j] * diagonal
             for k in range(j + 1, i):
-                total -= factor[i, k] * factor[j, k]
-            value = total / factor[i, i]
+                value -= factor[i, k] * factor[j, k]
+            value /= factor[i, i]
             factor[j, i] = value
-            inverse_trace += value * value
-    return 1.0 / inverse_trace, trace
+            total += value * value
+    return 1.0 / total, trace
 
 
 @njit(cache=True)
-def _conditioning(A, row_scale, tolerance, gram, factor, rows_of, dense):
+def _conditioning(A, row_scale, tolerance, gram, factor, rows_of, start, Z):
     """(singular, certified) for the constraint Jacobian A: ``singular`` when σ_min/σ_max of the
     row-scaled SA is below ``tolerance`` (as KKTSolver's SVD test, with σ_max replaced by 1 when
     smaller); ``certified`` when cheap bounds already prove it is not (:func:`_gram_bounds`).
@@ -364,7 +368,7 @@ def _conditioning(A, row_scale, tolerance, gram, factor, rows_of, dense):
         return False, True
     if m > n:
         return True, False
-    low, high = _gram_bounds(A, row_scale, gram, factor, rows_of, dense)
+    low, high = _gram_bounds(A, row_scale, gram, factor, rows_of, start, Z)
     if low >= tolerance * tolerance * max(high, 1.0):
         return False, True
     if m <= 12:
@@ -376,7 +380,7 @@ def _conditioning(A, row_scale, tolerance, gram, factor, rows_of, dense):
     return smallest < tolerance * max(largest, 1.0), False
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _schur_solve(M, Q, A, c, schur, qdd, lam):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c] by block elimination of the coordinates p that carry
     mass (the range-space method, Golub & Van Loan §4.2; Nocedal & Wright §16.2).  Split
@@ -476,17 +480,22 @@ def _schur_solve(M, Q, A, c, schur, qdd, lam):
     return True
 
 
-def schur_workspace(kind: int, mass: np.ndarray, m: int) -> tuple:
+def schur_workspace(kind: int, mass: np.ndarray, m: int, pattern: np.ndarray | None = None) -> tuple:
     """The ``schur`` tuple of :func:`_schur_solve` and :func:`field` for a kernel of ``kind``
-    with ``m`` constraints and constant mass matrix ``mass`` (natural) or its shape (joint).
+    with ``m`` constraints and constant mass matrix ``mass`` (natural) or its shape (joint);
+    ``pattern``, the structural non-zeros of A (:func:`cmbs.banded.jacobian_pattern`), lets
+    the Gram matrix keep its profile and large natural models solve by band LU.
 
     Natural coordinates: the coordinates with a zero row in M are massless (a), the others (p)
     have the constant M_pp, inverted once here (flag 1; -1 when M_pp is not positive definite);
     joint coordinates: all carry mass and M is factored at each call (flag 0).  Then
     workspaces: X (m, n_p), the reduced matrix (m + n_a)², y (n_p,), A's row non-zeros (m, n)
     and their counts (m,), two Gram matrices (m, m), the index arrays of p and a, a vector
-    (m + n_a,), the dense profile (zeros) of a matrix of max(n, m) rows and the Gram's column
-    lists (n, m)."""
+    (m + n_a,), the dense profile (zeros) of a matrix of max(n, m) rows, the Gram's column
+    lists (n, m), the Gram's profile (m,) and the Takahashi band (m, b + 1); then the band KKT
+    plan (:func:`_band_kkt`): its flag (1: used), half-width b, storage (3b + 1, n + m),
+    pivots, right-hand side, the position of each unknown, M's non-zeros (row, column, value)
+    and A's structural non-zeros (row, column)."""
     n = mass.shape[0]
     flag = 0
     massive = np.arange(n)
@@ -502,10 +511,73 @@ def schur_workspace(kind: int, mass: np.ndarray, m: int) -> tuple:
             flag = -1
     massless = np.setdiff1d(np.arange(n), massive)
     size = m + massless.size
+    start = np.zeros(m, dtype=np.int64) if pattern is None else gram_profile(pattern)
+    width = max([0] + [i - int(start[i]) for i in range(m)])
+    band = _band_workspace(kind, flag, mass, pattern, m, massive.size)
     return (matrix, flag, np.zeros((m, massive.size)), np.zeros((size, size)), np.zeros(massive.size),
             np.zeros((m, max(n, 1)), dtype=np.int64), np.zeros(m, dtype=np.int64), np.zeros((m, m)),
             np.zeros((m, m)), massive.astype(np.int64), massless.astype(np.int64), np.zeros(size),
-            np.zeros(max(n, m), dtype=np.int64), np.zeros((max(n, 1), max(m, 1)), dtype=np.int64))
+            np.zeros(max(n, m), dtype=np.int64), np.zeros((max(n, 1), max(m, 1)), dtype=np.int64),
+            start, np.zeros((max(m, 1), width + 1)), *band)
+
+
+#: Band KKT solves are used from this many unknowns (n + m) on, when cheaper than the Schur path.
+BAND_MINIMUM_SIZE = 60
+
+
+def _band_workspace(kind: int, flag: int, mass: np.ndarray, pattern: np.ndarray | None, m: int,
+                    n_p: int) -> tuple:
+    """The band part of :func:`schur_workspace`: used (flag 1) for natural models of at least
+    BAND_MINIMUM_SIZE unknowns whose band LU, ~(n + m)·3b² operations, is cheaper than the
+    Schur path's ~m³/3 + m²·n_p."""
+    n = mass.shape[0]
+    use = 0
+    width = 0
+    order = np.arange(n + m, dtype=np.int64)
+    if kind == KIND_NATURAL and flag == 1 and pattern is not None and n + m >= BAND_MINIMUM_SIZE:
+        order, width = band_plan(mass, pattern)
+        use = 1 if (n + m) * 3.0 * width * width < m ** 3 / 3.0 + m * m * n_p else 0
+    position = np.empty(n + m, dtype=np.int64)
+    position[order] = np.arange(n + m)
+    mass_rows, mass_columns = np.nonzero(mass)
+    a_rows, a_columns = np.nonzero(pattern) if pattern is not None else (np.zeros(0, int), np.zeros(0, int))
+    return (use, width, np.zeros((3 * width + 1, n + m)), np.zeros(n + m, dtype=np.int64), np.zeros(n + m),
+            position, mass_rows.astype(np.int64), mass_columns.astype(np.int64),
+            np.ascontiguousarray(mass[mass_rows, mass_columns], dtype=float), a_rows.astype(np.int64),
+            a_columns.astype(np.int64))
+
+
+@njit(cache=True)
+def _band_kkt(Q, A, c, schur, qdd, lam):
+    """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c] by band LU in the reverse Cuthill-McKee order of
+    :func:`cmbs.banded.band_plan` (M's non-zeros are constant and listed in the workspace, A's
+    read at its structural non-zeros).  Returns False for an exactly singular matrix."""
+    width, AB, pivots, rhs, position = schur[17], schur[18], schur[19], schur[20], schur[21]
+    mass_rows, mass_columns, mass_values, a_rows, a_columns = schur[22], schur[23], schur[24], schur[25], schur[26]
+    n = Q.shape[0]
+    m = c.shape[0]
+    diagonal = 2 * width
+    AB[:, :] = 0.0
+    for k in range(mass_rows.shape[0]):
+        i, j = position[mass_rows[k]], position[mass_columns[k]]
+        AB[diagonal + i - j, j] = mass_values[k]
+    for k in range(a_rows.shape[0]):
+        value = A[a_rows[k], a_columns[k]]
+        i, j = position[n + a_rows[k]], position[a_columns[k]]
+        AB[diagonal + i - j, j] = value
+        AB[diagonal + j - i, i] = value
+    for i in range(n):
+        rhs[position[i]] = Q[i]
+    for r in range(m):
+        rhs[position[n + r]] = c[r]
+    if not band_factor(AB, width, pivots):
+        return False
+    band_solve(AB, width, pivots, rhs)
+    for i in range(n):
+        qdd[i] = rhs[position[i]]
+    for r in range(m):
+        lam[r] = rhs[position[n + r]]
+    return True
 
 
 @njit(cache=True)
@@ -562,13 +634,15 @@ def _projection_by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     m = A.shape[0]
     if m == 0 or m > A.shape[1]:
         return False
-    low, high = _gram_bounds(A, row_scale, schur[7], schur[8], schur[13], schur[12])
+    low, high = _gram_bounds(A, row_scale, schur[7], schur[8], schur[13], schur[14], schur[15])
     if low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold:
         return False
+    if schur[16] == 1:
+        return _band_kkt(Q, A, gamma, schur, qdd, lam)
     return _schur_solve(M, Q, A, gamma, schur, qdd, lam)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, qdd, lam, K, rhs,
           check_rank, schur):
     """q̈ and λ at (q, q̇, t, u) into ``qdd``, ``lam``; returns a status code.
@@ -601,7 +675,8 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
                 not _projection_by_svd(M, Q, A, gamma, row_scale, parameters, qdd, lam):
             return SINGULAR
     else:
-        singular, certified = _conditioning(A, row_scale, parameters[2], schur[7], schur[8], schur[13], schur[12])
+        singular, certified = _conditioning(A, row_scale, parameters[2], schur[7], schur[8], schur[13], schur[14],
+                                            schur[15])
         if check_rank and singular:
             return SINGULAR
         for r in range(m):
@@ -612,6 +687,13 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
                     rate += A[r, j] * qd[j]
                 value -= 2.0 * parameters[0] * parameters[1] * rate + parameters[1] * parameters[1] * phi[r]
             rhs[n + r] = value
+        if schur[16] == 1:                  # large natural model: band LU of the KKT matrix
+            if not _band_kkt(Q, A, rhs[n:n + m], schur, qdd, lam):
+                return SINGULAR
+            for k in range(n):
+                if not math.isfinite(qdd[k]):
+                    return NON_FINITE
+            return OK
         if certified and _schur_solve(M, Q, A, rhs[n:n + m], schur, qdd, lam):
             for k in range(n):
                 if not math.isfinite(qdd[k]):
@@ -806,7 +888,9 @@ def _private_copy(schur):
     (:func:`rk4_batch`) do not write into each other's workspace."""
     return (schur[0].copy() if schur[1] == 0 else schur[0], schur[1], schur[2].copy(), schur[3].copy(),
             schur[4].copy(), schur[5].copy(), schur[6].copy(), schur[7].copy(), schur[8].copy(), schur[9],
-            schur[10], schur[11].copy(), schur[12], schur[13].copy())
+            schur[10], schur[11].copy(), schur[12], schur[13].copy(), schur[14], schur[15].copy(), schur[16],
+            schur[17], schur[18].copy(), schur[19].copy(), schur[20].copy(), schur[21], schur[22], schur[23],
+            schur[24], schur[25], schur[26])
 
 
 @njit(cache=True, parallel=True)

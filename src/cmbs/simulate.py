@@ -453,7 +453,7 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs
     T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, q_fail, qd_fail, u_fail = fast.rk4(
         kind, method, parameters, np.array(q0), np.array(qd0), dt, steps, 1, u0, ints, reals, buffer.size, mass,
         np.ascontiguousarray(solver.row_scale), model.m, mode, fast.law_arrays(law, model),
-        fast.schur_workspace(kind, mass, model.m))
+        fast.schur_workspace(kind, mass, model.m, fast.jacobian_pattern(model)))
     loop_wall = time.perf_counter() - loop_started
     message = ""
     if status == fast.SINGULAR:  # let the Python solver name the constraints where it happened

@@ -355,7 +355,7 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
     statuses, recorded = np.zeros(count, dtype=np.int64), np.zeros(count, dtype=np.int64)
     fast.rk4_batch(kind, method, parameters, Q0, QD0, U0, settings.dt, steps, settings.every, ints, reals,
                    buffer.size, mass, np.ascontiguousarray(solver.row_scale), model.m, fast.law_arrays(None, model),
-                   fast.schur_workspace(kind, mass, model.m), Qs, QDs, PHIs, statuses, recorded)
+                   fast.schur_workspace(kind, mass, model.m, fast.jacobian_pattern(model)), Qs, QDs, PHIs, statuses, recorded)
     outputs = []
     for v in range(count):
         k = int(recorded[v])
