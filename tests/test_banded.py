@@ -3,7 +3,6 @@ against numpy, and the large chains they make affordable."""
 
 import numpy as np
 import pytest
-import scipy.sparse
 
 import cmbs
 from cmbs.banded import band_factor, band_plan, band_solve, gram_profile, inverse_trace, jacobian_pattern
