@@ -1,0 +1,151 @@
+#!/usr/bin/env python
+"""Cost of one forward-dynamics evaluation against the number of links, beside Pinocchio and
+MuJoCo (issue targets: <= 1.0x Pinocchio on the 14- and 50-link chains; growth no faster than
+about N^1.2 from 14 to 200 links).
+
+    python benchmarks/bench_scaling.py [--quick] [--json FILE] [--plot FILE.png]
+
+Mechanisms: ``cmbs.load("chain", links=N, closed=...)`` for N = 3, 14, 50, 200, open (hanging
+from P0) and tip-pinned (closed): uniform 0.3 m, 1 kg rods on a half circle (shared/anchors
+common.py), gravity 9.81.  The other tools get the same chain through the tree builders of
+bench_dynamics.py (joint angles; the pin as a 3-D point contact).
+
+One evaluation: the model's terms and the solve for q̈ (and λ).  cmbs: ``CompiledDynamics
+(model, "lagrange").into`` — one compiled call from Python, no allocation; Pinocchio:
+``aba`` (open) or ``constraintDynamics`` (pinned), one C++ call from Python; MuJoCo:
+``mj_forward`` (everything, no contacts).  Medians of timeit batches (bench_model.time_call).
+Also: RK4 at h = 1 ms over 1 s (0.1 s for N = 200) through ``cmbs.simulate`` (compiled loop),
+the wall per evaluation.  The exponent is the least-squares slope of log(µs) on log(N) from 14
+to 200.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+import cmbs  # noqa: E402
+from cmbs.fast import CompiledDynamics  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_dynamics import GRAVITY, installed, mujoco_measure, pinocchio_measure, rod, tree_from  # noqa: E402
+from bench_model import time_call  # noqa: E402
+
+SIZES = (3, 14, 50, 200)
+TARGET_EXPONENT = 1.2
+
+
+def chain_tree(model: cmbs.Model, links: int, closed: bool):
+    return tree_from(model, [rod(f"link{k}", None if k == 1 else f"link{k - 1}", f"P{k - 1}", f"P{k}", 0.3, 1.0)
+                             for k in range(1, links + 1)],
+                     closures=[(f"link{links}", f"P{links}")] if closed else [])
+
+
+def exponent(sizes: list[int], micros: list[float]) -> float:
+    """Slope of log(µs) against log(N) over the sizes from 14 on."""
+    points = [(math.log(n), math.log(us)) for n, us in zip(sizes, micros) if n >= 14 and us]
+    x, y = np.array(points).T
+    return float(np.polyfit(x, y, 1)[0])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="shorter timing batches")
+    parser.add_argument("--json", help="write every figure to this file")
+    parser.add_argument("--plot", help="figure of µs per evaluation against N (log axes)")
+    args = parser.parse_args()
+    batches, target = (3, 0.05) if args.quick else (7, 0.2)
+    tools = {"Pinocchio": installed("pinocchio"), "MuJoCo": installed("mujoco")}
+    print(f"cmbs {cmbs.__version__}; tools: " + ", ".join(f"{k} {'yes' if v else 'not installed'}"
+                                                         for k, v in tools.items()))
+    report: dict = {"sizes": list(SIZES), "chains": {}}
+    for closed in (False, True):
+        label = "pinned" if closed else "open"
+        rows = report["chains"][label] = []
+        print(f"\n== {label} chains (gravity {GRAVITY}); µs per evaluation, median [min-max]")
+        print(f"  {'N':>4} {'n':>4} {'m':>4}  {'cmbs compiled':>16}  {'Pinocchio':>16}  {'MuJoCo':>16}  "
+              f"{'cmbs/Pin':>8}  {'cmbs/MuJoCo':>11}  {'RK4 loop µs/eval':>16}")
+        for links in SIZES:
+            if closed and links < 3:
+                continue
+            model = cmbs.load("chain", links=links, closed=closed)
+            compiled = CompiledDynamics(model, "lagrange")
+            q, qd = model.q0.copy(), model.qd0.copy()
+            qdd, lam = np.empty(model.n), np.empty(model.m)
+            compiled.into(q, qd, 0.0, None, qdd, lam)
+            ours = time_call(lambda: compiled.into(q, qd, 0.0, None, qdd, lam), batches, target)
+            span = 0.1 if links >= 200 else 1.0
+            cmbs.simulate(model, t_end=0.01, integrator="rk4", dt=1e-3)
+            started = time.perf_counter()
+            run = cmbs.simulate(model, t_end=span, integrator="rk4", dt=1e-3)
+            loop_us = 1e6 * run.info["loop_wall_time"] / (4 * run.info["steps"])
+            row = {"links": links, "n": model.n, "m": model.m, "cmbs_us": ours["median"], "cmbs": ours,
+                   "rk4_loop_us_per_eval": loop_us, "rk4_status": run.info["status"],
+                   "rk4_wall_s": time.perf_counter() - started, "span_s": span}
+            tree = chain_tree(model, links, closed)
+            for name, measure in (("Pinocchio", pinocchio_measure), ("MuJoCo", mujoco_measure)):
+                if not tools[name]:
+                    continue
+                try:
+                    measured = measure(tree, 0.001, 1, batches, target)
+                except Exception as error:  # noqa: BLE001 - reported, not fatal
+                    row[name] = {"error": f"{type(error).__name__}: {error}"[:120]}
+                    continue
+                key = next(iter(measured["per_eval"]))       # aba / constraintDynamics / mj_forward
+                row[name] = {"call": key, **measured["per_eval"][key]}
+            rows.append(row)
+
+            def cell(entry):
+                return f"{entry['median']:.3g} [{entry['min']:.3g}-{entry['max']:.3g}]" if entry and "median" in entry \
+                    else "-"
+
+            pin, mj = row.get("Pinocchio"), row.get("MuJoCo")
+            print(f"  {links:>4} {model.n:>4} {model.m:>4}  {cell(ours):>16}  {cell(pin):>16}  {cell(mj):>16}  "
+                  + (f"{ours['median'] / pin['median']:>8.2f}" if pin and "median" in pin else f"{'-':>8}") + "  "
+                  + (f"{ours['median'] / mj['median']:>11.2f}" if mj and "median" in mj else f"{'-':>11}")
+                  + f"  {loop_us:>16.3g}")
+        sizes = [row["links"] for row in rows]
+        slope = exponent(sizes, [row["cmbs_us"] for row in rows])
+        report[f"exponent_{label}"] = slope
+        others = "; ".join(f"{name} N^{exponent(sizes, [row[name]['median'] for row in rows]):.2f}"
+                           for name in tools if tools[name] and all("median" in row.get(name, {}) for row in rows))
+        print(f"  growth from 14 to 200 links: cmbs N^{slope:.2f} (target <= N^{TARGET_EXPONENT}: "
+              f"{'PASS' if slope <= TARGET_EXPONENT else 'MISS'})" + (f"; {others}" if others else ""))
+    if args.json:
+        with open(args.json, "w") as stream:
+            json.dump(report, stream, indent=1, default=float)
+        print(f"\nfigures -> {args.json}")
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        figure, axes = plt.subplots(1, 2, figsize=(10, 4.2), layout="constrained", sharey=True)
+        for axis, label in zip(axes, ("open", "pinned")):
+            rows = report["chains"][label]
+            sizes = [row["links"] for row in rows]
+            axis.loglog(sizes, [row["cmbs_us"] for row in rows], "o-", label="cmbs (compiled)")
+            for name, style in (("Pinocchio", "s--"), ("MuJoCo", "^--")):
+                if all("median" in row.get(name, {}) for row in rows):
+                    axis.loglog(sizes, [row[name]["median"] for row in rows], style, label=name)
+            axis.set_title(f"{label} chains", fontsize="medium")
+            axis.set_xlabel("links N")
+            axis.grid(alpha=0.3, which="both")
+            axis.legend(fontsize="small")
+        axes[0].set_ylabel("µs per forward-dynamics evaluation")
+        figure.savefig(args.plot, dpi=120)
+        print(f"figure -> {args.plot}")
+
+
+if __name__ == "__main__":
+    main()
