@@ -412,7 +412,9 @@ def passed(run: dict, span: float) -> bool:
 
 
 # ------------------------------------------------------------------------------------ MuJoCo
-def mujoco_measure(tree: Tree, span: float, repeat: int, batches: int, target: float) -> dict:
+def mujoco_build(tree: Tree):
+    """MuJoCo model and data of ``tree`` (hinges, connect equalities for the closures, no
+    contacts) and its start state: (model, data, q0, v0, address of a joint's qpos)."""
     import mujoco
 
     children: dict[str | None, list[Link]] = {}
@@ -467,6 +469,13 @@ def mujoco_measure(tree: Tree, span: float, repeat: int, batches: int, target: f
             v0[address("root_x")], v0[address("root_z")] = tree.velocities[link.start]
     if tree.slider:
         q0[address("slider")], v0[address("slider")] = tree.positions[tree.slider][0], tree.velocities[tree.slider][0]
+    return model, data, q0, v0, address
+
+
+def mujoco_measure(tree: Tree, span: float, repeat: int, batches: int, target: float) -> dict:
+    import mujoco
+
+    model, data, q0, v0, address = mujoco_build(tree)
 
     def reset():
         mujoco.mj_resetData(model, data)
@@ -510,9 +519,11 @@ def mujoco_measure(tree: Tree, span: float, repeat: int, batches: int, target: f
 
 
 # ------------------------------------------------------------------------------------ Pinocchio
-def pinocchio_measure(tree: Tree, span: float, repeat: int, batches: int, target: float) -> dict:
+def pinocchio_build(tree: Tree):
+    """Pinocchio model of ``tree`` (revolute joints, 3-D point contacts for the closures): (name of
+    the forward-dynamics call, accelerations(q, v), rhs(y), y0, index of a joint's q, energy(y),
+    gap(y), model, data)."""
     import pinocchio as pin
-    from scipy.integrate import solve_ivp
 
     model = pin.Model()
     model.gravity.linear = np.array([0.0, -GRAVITY, 0.0])
@@ -597,7 +608,15 @@ def pinocchio_measure(tree: Tree, span: float, repeat: int, batches: int, target
             worst = max(worst, float(np.linalg.norm(a - b)))
         return worst
 
-    y0 = np.concatenate((q0, v0))
+    return name, accelerations, rhs, np.concatenate((q0, v0)), index, energy, gap, model, data
+
+
+def pinocchio_measure(tree: Tree, span: float, repeat: int, batches: int, target: float) -> dict:
+    import pinocchio as pin
+    from scipy.integrate import solve_ivp
+
+    name, accelerations, rhs, y0, index, energy, gap, model, _ = pinocchio_build(tree)
+    q0, v0 = y0[:model.nq], y0[model.nq:]
     start_energy = energy(y0)
     result = {"version": pin.__version__, "E0": start_energy, "runs": {}, "per_eval": {
         f"{name} (C++ call)": time_call(lambda: accelerations(q0, v0), batches, target),

@@ -36,7 +36,9 @@ def test_compiled_loop_stops_at_a_singular_position_with_the_python_message():
 def test_compiled_loop_refuses_what_it_cannot_run():
     model = cmbs.load("pendulum")
     with pytest.raises(CmbsError, match="compiled loop cannot run"):
-        simulate(model, t_end=0.1, integrator="rk45", compiled=True)
+        simulate(model, t_end=0.1, integrator="trapezoidal", compiled=True)
+    with pytest.raises(CmbsError, match="compiled loop cannot run"):
+        simulate(model, t_end=0.1, integrator="rk45", u=lambda t, q, qd: np.zeros(model.n_u), compiled=True)
     with pytest.raises(CmbsError, match="compiled loop cannot run"):
         simulate(model, t_end=0.1, integrator="rk4", formulation="penalty", compiled=True)
 
@@ -245,3 +247,34 @@ def test_runs_on_the_python_loop_say_why():
     assert notes["off"] == "Python loop: compiled=False"
     compiled = simulate(model, t_end=0.01, integrator="rk4", dt=1e-3)
     assert compiled.info["compiled"] and "note" not in compiled.info
+
+
+@pytest.mark.parametrize("integrator", ["rk45", "rk23"])
+@pytest.mark.parametrize("name", ["four-bar", "slider-crank-joint", "human"])
+def test_compiled_adaptive_loop_takes_the_python_loops_steps(name, integrator):
+    """Same tableau, starting step, controller and dense output as cmbs.integrate.explicit: the
+    same accepted and rejected steps, and the same outputs to rounding (the slider-crank up to
+    0.4 s: at its singular position, 0.46 s, the ill-conditioned solve amplifies rounding)."""
+    model = cmbs.load(name).without_drivers() if name == "four-bar" else cmbs.load(name)
+    options = dict(t_end={"four-bar": 1.0, "slider-crank-joint": 0.4, "human": 0.3}[name], integrator=integrator,
+                   rtol=1e-8, atol=1e-8, dt=0.01, formulation="lagrange")
+    fast, python = simulate(model, **options), simulate(model, compiled=False, **options)
+    assert fast.info["compiled"] and "compiled" not in python.info
+    assert (fast.info["steps"], fast.info["rejected"]) == (python.info["steps"], python.info["rejected"])
+    assert fast.info["evaluations"] == python.info["evaluations"]
+    np.testing.assert_allclose(fast.t, python.t, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(fast.q, python.q, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(fast.qd, python.qd, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(fast["lam"], python["lam"], rtol=0, atol=1e-8 * max(1.0, np.abs(python["lam"]).max()))
+    np.testing.assert_allclose(fast["energy"], python["energy"], rtol=0, atol=1e-9 * max(1.0, abs(python["energy"][0])))
+
+
+def test_compiled_adaptive_loop_stops_at_the_singular_position_naming_the_constraints():
+    model = cmbs.load("slider-crank")
+    run = simulate(model, t_end=10.0, rtol=1e-10, atol=1e-12)
+    python = simulate(model, t_end=10.0, rtol=1e-10, atol=1e-12, compiled=False)
+    assert run.info["compiled"] and run.info["status"] == "failed"
+    assert "singular configuration" in run.info["message"] and "dependent:" in run.info["message"]
+    # both stop at the same pass of θ1 = ±90° (the step sequences part near the first pass, where
+    # the ill-conditioned solve amplifies rounding differently)
+    assert abs(run.t[-1] - python.t[-1]) < 0.05 and abs(np.cos(run["theta1"][-1])) < 0.05

@@ -126,8 +126,9 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
         (rk4; lagrange, baumgarte or standard projection; constant inputs, or a
         :class:`~cmbs.control.ComputedTorque` law alone or in a
         :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; or matrix-r with constant inputs
-        on a holonomic model (:mod:`cmbs.fast_matrix_r`); no projection; no Python time
-        functions), True requires it, False keeps the Python loop.
+        on a holonomic model (:mod:`cmbs.fast_matrix_r`); rk45/rk23 with lagrange, baumgarte or
+        standard projection and constant inputs (:mod:`cmbs.fast_adaptive`); no projection; no
+        Python time functions), True requires it, False keeps the Python loop.
 
     Returns
     -------
@@ -180,6 +181,9 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
                         "a compiled model, or matrix-r with constant inputs on a holonomic compiled model; no "
                         f"--project and no Python time functions; model {model.name!r})")
     run_options = {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol, "project": project}
+    if fast_plan is not None and compiled is not False and integrator != "rk4":
+        return _run_compiled_adaptive(model, solver, chosen, fast_plan, inputs, q_start, qd_start, times, started,
+                                      run_options)
     if fast_plan is not None and compiled is not False:
         return _run_compiled(model, solver, chosen, fast_plan, inputs, q_start, qd_start, t_end, dt, started,
                              run_options)
@@ -431,7 +435,12 @@ def _compiled_plan(model: Model, chosen: Formulation, integrator: str, u: object
     kind = fast.supported(model)
     inputs = fast.control(u, model, dt)
     steps = round(t_end / dt)
-    if integrator != "rk4" or project or inputs is None or kind is None or abs(steps * dt - t_end) > 1e-9 * t_end:
+    if project or inputs is None or kind is None:
+        return None
+    if integrator in ("rk45", "rk23"):      # cmbs.fast_adaptive: constant inputs only
+        if inputs[0] != fast.CONSTANT:
+            return None
+    elif integrator != "rk4" or abs(steps * dt - t_end) > 1e-9 * t_end:
         return None
     method = fast.method_of(chosen)
     return None if method is None else (kind, *method, *inputs)
@@ -491,5 +500,47 @@ def _run_compiled_matrix_r(model: Model, solver, chosen: Formulation, inputs: In
     info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall}, status, message,
                  {"steps": done, "evaluations": 4 * done, "repartitions": repartitions})
     trajectory = _trajectory(model, T, Q, QD, QDD, LAM, np.tile(u, (recorded, 1)), PHI, PHID, info, FORCE)
+    info["wall_time"] = time.perf_counter() - started
+    return trajectory
+
+
+def _run_compiled_adaptive(model: Model, solver, chosen: Formulation, plan: tuple, inputs: Inputs, q0: np.ndarray,
+                           qd0: np.ndarray, times: np.ndarray, started: float, options: dict) -> Trajectory:
+    """The rk45/rk23 loop of :mod:`cmbs.fast_adaptive`; outputs at ``times``."""
+    from cmbs import fast, fast_adaptive
+
+    kind, method, parameters, _, _ = plan
+    parameters = fast.bound_parameters(method, parameters, solver)
+    tableau = TABLEAUS[options["integrator"]]
+    _, ints, reals, buffer, mass = fast.kernel(model)
+    u = np.array(inputs(0.0, q0, qd0), dtype=float)
+    loop_started = time.perf_counter()
+    (T, Q, QD, QDD, LAM, PHI, PHID, FORCE, recorded, status, t_stop, steps, rejected, evaluations,
+     unsolved, state) = fast_adaptive.adaptive(
+        kind, method, parameters, np.array(q0), np.array(qd0), np.ascontiguousarray(times, dtype=float),
+        options["rtol"], options["atol"], u, ints, reals, buffer.size, mass, np.ascontiguousarray(solver.row_scale),
+        model.m, fast.schur_workspace(kind, mass, model.m, fast.jacobian_pattern(model)), tableau.c, tableau.a,
+        tableau.b, tableau.b_error, 1.0 / (min(tableau.order, tableau.error_order) + 1), 1.0 / (tableau.order + 1),
+        tableau.first_same_as_last,
+        10_000_000)
+    loop_wall = time.perf_counter() - loop_started
+    message = ""
+    if status == fast.SINGULAR:             # the Python solver names the constraints at that state
+        q_stop, qd_stop = state[:model.n], state[model.n:]
+        try:
+            solver.accelerations(model.evaluate(q_stop, qd_stop, t_stop, u), q_stop, qd_stop, t_stop)
+            message = f"singular system at t={t_stop:.6g}"
+        except CmbsError as error:
+            message = str(error)
+    elif status != fast.OK:
+        message = f"{fast_adaptive.REASONS.get(status, 'failed')} at t={t_stop:.6g}"
+    counters = {"steps": int(steps), "rejected": int(rejected), "evaluations": int(evaluations)}
+    info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall},
+                 "success" if status == fast.OK else "failed", message, counters)
+    if unsolved:
+        info["outputs_from_integrator"] = int(unsolved)
+    k = recorded
+    trajectory = _trajectory(model, T[:k], Q[:k], QD[:k], QDD[:k], LAM[:k], np.tile(u, (k, 1)), PHI[:k], PHID[:k],
+                             info, FORCE[:k])
     info["wall_time"] = time.perf_counter() - started
     return trajectory

@@ -1,0 +1,264 @@
+#!/usr/bin/env python
+"""Work-precision diagrams: error at the end of a run against its wall time, for every cmbs
+formulation/integrator pair over a range of steps or tolerances, beside MuJoCo and Pinocchio.
+
+    python benchmarks/work_precision.py [--quick] [--out-dir DIR] [--json FILE]
+
+Mechanisms (the same in every tool; bench_dynamics.py builds the other tools' models):
+``four-bar`` (the anchors' crank-rocker), ``slider-crank`` (equal links, natural coordinates,
+gravity 9.81; its crank passes 90° at 0.83 s, where the constraint Jacobian loses rank) and
+``chain14`` (14 links, tip pinned).  Span 1 s from the common start state.
+
+Error: |θ(1 s) - θ_ref| of the first link's absolute angle (the crank; link 1 of the chain),
+a quantity every tool has.  Reference: cmbs matrix R with RK45 at rtol = atol = 1e-12, checked
+against Pinocchio with scipy's DOP853 at 1e-12 (the difference is printed; a tool's error below
+it is not resolved).  Wall: the whole call (cmbs.simulate; the other tools' loop), one run
+after a warm-up of each configuration family.
+
+Configurations: cmbs RK4 with h = 10 ms ... 0.1 ms on the compiled loops (baumgarte,
+projection, matrix-r); RK45 with rtol = 1e-4 ... 1e-10 (lagrange, matrix-r); generalized-α with
+h = 10, 2, 1 ms; MuJoCo RK4 and implicitfast with h = 10 ms ... 0.1 ms; Pinocchio RK45 and
+DOP853 (scipy) with rtol = 1e-4 ... 1e-10 and RK4 (Python loop) with h = 10, 2, 1 ms.
+
+For each accuracy level 1e-3 ... 1e-9: the fastest configuration of cmbs and of each tool that
+reaches it, and whether cmbs's is faster than every tool's that reaches it (the issue's
+target).  One figure per mechanism (error vs wall, log-log).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+import cmbs  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bench_dynamics import (GRAVITY, anchors_four_bar, chain_tree, four_bar_tree, installed,  # noqa: E402
+                            mujoco_build, pinocchio_build, slider_crank_tree)
+
+SPAN = 1.0
+LEVELS = [10.0 ** -k for k in range(3, 10)]
+STEPS = [1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4]
+TOLERANCES = [1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10]
+
+MECHANISMS = {
+    "four-bar": (anchors_four_bar, four_bar_tree),
+    "slider-crank": (lambda: cmbs.load("slider-crank", gravity=GRAVITY), slider_crank_tree),
+    "chain14": (lambda: cmbs.load("chain", links=14, closed=True), lambda model: chain_tree(model, 14)),
+}
+
+
+def wrap(angle: float) -> float:
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def first_link_angle(model: cmbs.Model, tree, q: np.ndarray) -> float:
+    """Absolute angle of the tree's first link from the cmbs model's point positions."""
+    link = tree.links[0]
+    points = dict(zip(model.point_names, np.asarray(model.point_positions(q))))
+    d = points[link.end] - points[link.start]
+    return math.atan2(d[1], d[0])
+
+
+def timed(call):
+    started = time.perf_counter()
+    value = call()
+    return value, time.perf_counter() - started
+
+
+def cmbs_configurations(quick: bool) -> list[tuple[str, str, dict, str]]:
+    steps = STEPS[::2] if quick else STEPS
+    tolerances = TOLERANCES[::2] if quick else TOLERANCES
+    configurations = []
+    for formulation in ("baumgarte", "projection", "matrix-r"):
+        configurations += [(f"cmbs {formulation} RK4", formulation, {"integrator": "rk4", "dt": h}, f"h={h:g}")
+                           for h in steps]
+    for formulation in ("lagrange", "matrix-r"):
+        configurations += [(f"cmbs {formulation} RK45", formulation,
+                            {"integrator": "rk45", "rtol": tol, "atol": tol, "dt": SPAN / 10}, f"rtol={tol:g}")
+                           for tol in tolerances]
+    configurations += [("cmbs generalized-alpha", None, {"integrator": "generalized-alpha", "dt": h}, f"h={h:g}")
+                       for h in (1e-2, 2e-3, 1e-3)]
+    return configurations
+
+
+def run_cmbs(model, tree, quick: bool, reference: float) -> list[dict]:
+    rows = []
+    warmed = set()
+    for family, formulation, options, setting in cmbs_configurations(quick):
+        if family not in warmed:           # compile / warm the family once
+            cmbs.simulate(model, t_end=0.01, formulation=formulation, **{**options, "dt": min(options["dt"], 0.01)})
+            warmed.add(family)
+        run, wall = timed(lambda: cmbs.simulate(model, t_end=SPAN, formulation=formulation, **options))
+        ok = run.info["status"] == "success" and abs(run.t[-1] - SPAN) < 1e-9
+        error = abs(wrap(first_link_angle(model, tree, run.q[-1]) - reference)) if ok else None
+        rows.append({"tool": "cmbs", "family": family, "setting": setting, "wall_s": wall, "error": error,
+                     "status": run.info["status"], "path": "compiled" if run.info.get("compiled") else "python"})
+    return rows
+
+
+def run_mujoco(tree, quick: bool, reference: float) -> list[dict]:
+    import mujoco
+
+    model, data, q0, v0, address = mujoco_build(tree)
+    root = address(tree.links[0].name)
+    rows = []
+    for label, integrator in (("MuJoCo RK4", mujoco.mjtIntegrator.mjINT_RK4),
+                              ("MuJoCo implicitfast", mujoco.mjtIntegrator.mjINT_IMPLICITFAST)):
+        model.opt.integrator = integrator
+        for h in (STEPS[::2] if quick else STEPS):
+            model.opt.timestep = h
+            steps = int(round(SPAN / h))
+
+            def simulate():
+                mujoco.mj_resetData(model, data)
+                data.qpos[:], data.qvel[:] = q0, v0
+                for _ in range(steps):
+                    mujoco.mj_step(model, data)
+                return float(data.qpos[root])
+            simulate()
+            angle, wall = timed(simulate)
+            rows.append({"tool": "MuJoCo", "family": label, "setting": f"h={h:g}", "wall_s": wall,
+                         "error": abs(wrap(angle - reference)) if math.isfinite(angle) else None})
+    return rows
+
+
+def pinocchio_solution(tree, method: str, tolerance: float) -> tuple[float, float]:
+    from scipy.integrate import solve_ivp
+
+    _, _, rhs, y0, index, *_ = pinocchio_build(tree)
+    root = index(tree.links[0].name)
+    solution, wall = timed(lambda: solve_ivp(lambda t, y: rhs(y), (0.0, SPAN), y0, method=method, rtol=tolerance,
+                                             atol=tolerance))
+    return float(solution.y[root, -1]), wall
+
+
+def run_pinocchio(tree, quick: bool, reference: float) -> list[dict]:
+    _, _, rhs, y0, index, *_ = pinocchio_build(tree)
+    root = index(tree.links[0].name)
+    rows = []
+    for method in ("RK45", "DOP853"):
+        for tolerance in (TOLERANCES[::2] if quick else TOLERANCES):
+            angle, wall = pinocchio_solution(tree, method, tolerance)
+            rows.append({"tool": "Pinocchio", "family": f"Pinocchio {method} (scipy)", "setting": f"rtol={tolerance:g}",
+                         "wall_s": wall, "error": abs(wrap(angle - reference)) if math.isfinite(angle) else None})
+    for h in (1e-2, 2e-3, 1e-3):
+        def rk4():
+            y = y0.copy()
+            for _ in range(int(round(SPAN / h))):
+                k1 = rhs(y)
+                k2 = rhs(y + 0.5 * h * k1)
+                k3 = rhs(y + 0.5 * h * k2)
+                k4 = rhs(y + h * k3)
+                y = y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            return float(y[root])
+        angle, wall = timed(rk4)
+        rows.append({"tool": "Pinocchio", "family": "Pinocchio RK4 (Python loop)", "setting": f"h={h:g}",
+                     "wall_s": wall, "error": abs(wrap(angle - reference)) if math.isfinite(angle) else None})
+    return rows
+
+
+def fastest(rows: list[dict], tool: str, level: float) -> dict | None:
+    reached = [row for row in rows if row["tool"] == tool and row["error"] is not None and row["error"] <= level]
+    return min(reached, key=lambda row: row["wall_s"]) if reached else None
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="every other step and tolerance")
+    parser.add_argument("--out-dir", default="out", help="folder of the figures (work-precision-MECHANISM.png)")
+    parser.add_argument("--json", help="write every run to this file")
+    parser.add_argument("--mechanism", action="append", choices=list(MECHANISMS), help="only these (repeatable)")
+    args = parser.parse_args()
+    os.makedirs(args.out_dir, exist_ok=True)
+    tools = [name for name, module in (("MuJoCo", "mujoco"), ("Pinocchio", "pinocchio")) if installed(module)]
+    print(f"cmbs {cmbs.__version__}; other tools: {', '.join(tools) or 'none installed'}; span {SPAN} s")
+    report = {}
+    for label in args.mechanism or list(MECHANISMS):
+        build, tree_of = MECHANISMS[label]
+        model = build()
+        tree = tree_of(model)
+        reference_run = cmbs.simulate(model, t_end=SPAN, formulation="matrix-r", integrator="rk45", rtol=1e-12,
+                                      atol=1e-12, dt=SPAN / 10)
+        reference = first_link_angle(model, tree, reference_run.q[-1])
+        check = None
+        if "Pinocchio" in tools:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                other, _ = pinocchio_solution(tree, "DOP853", 1e-12)
+            check = abs(wrap(other - reference))
+        print(f"\n== {label}: reference θ1(1 s) = {reference:.12f} rad (cmbs matrix-r RK45 1e-12)"
+              + (f"; Pinocchio DOP853 1e-12 differs by {check:.1e} rad" if check is not None else ""))
+        rows = run_cmbs(model, tree, args.quick, reference)
+        if "MuJoCo" in tools:
+            rows += run_mujoco(tree, args.quick, reference)
+        if "Pinocchio" in tools:
+            rows += run_pinocchio(tree, args.quick, reference)
+        print(f"  {'configuration':<34} {'setting':<12} {'wall s':>9} {'error rad':>10}")
+        for row in rows:
+            error = f"{row['error']:.2e}" if row["error"] is not None else "failed"
+            print(f"  {row['family']:<34} {row['setting']:<12} {row['wall_s']:>9.4f} {error:>10}")
+        print(f"  fastest configuration reaching each error level (wall s); target: cmbs faster than every tool "
+              "that reaches the level")
+        verdicts = []
+        for level in LEVELS:
+            ours = fastest(rows, "cmbs", level)
+            theirs = {tool: fastest(rows, tool, level) for tool in tools}
+            beaten = [tool for tool, row in theirs.items() if row and (ours is None or row["wall_s"] < ours["wall_s"])]
+            resolved = check is None or level > 10 * check
+            verdict = ("PASS" if not beaten else "MISS") if ours else ("MISS" if any(theirs.values()) else "-")
+            if not resolved:
+                verdict += " (below the references' agreement)"
+            verdicts.append({"level": level, "verdict": verdict, "cmbs": ours, **theirs})
+            cells = [f"cmbs {ours['wall_s']:.4f} ({ours['family'][5:]}, {ours['setting']})" if ours else "cmbs -"]
+            cells += [f"{tool} {row['wall_s']:.4f} ({row['family'].split(' ', 1)[1]}, {row['setting']})" if row
+                      else f"{tool} -" for tool, row in theirs.items()]
+            print(f"    {level:.0e}: " + "; ".join(cells) + f"  {verdict}")
+        report[label] = {"reference": reference, "reference_check": check, "runs": rows, "levels": verdicts}
+        plot(label, rows, os.path.join(args.out_dir, f"work-precision-{label}.png"), check)
+    if args.json:
+        with open(args.json, "w") as stream:
+            json.dump(report, stream, indent=1, default=float)
+        print(f"\nruns -> {args.json}")
+
+
+def plot(label: str, rows: list[dict], path: str, floor: float | None) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(8, 5.5), layout="constrained")
+    families = list(dict.fromkeys(row["family"] for row in rows))
+    markers = "os^vD<>ph*"
+    for k, family in enumerate(families):
+        points = sorted((row["wall_s"], row["error"]) for row in rows if row["family"] == family
+                        and row["error"] is not None and row["error"] > 0)
+        if points:
+            x, y = zip(*points)
+            axis.loglog(x, y, marker=markers[k % len(markers)], linestyle="-" if family.startswith("cmbs") else "--",
+                        label=family)
+    if floor:
+        axis.axhline(floor, color="0.5", linewidth=0.8, linestyle=":", label="references' agreement")
+    axis.set_xlabel("wall time [s] for 1 s of motion")
+    axis.set_ylabel("|θ1(1 s) - reference| [rad]")
+    axis.set_title(f"work-precision: {label}", fontsize="medium")
+    axis.grid(alpha=0.3, which="both")
+    axis.legend(fontsize="x-small", ncol=2)
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+    print(f"  figure -> {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,216 @@
+"""Compiled adaptive Runge-Kutta loop: the rk45 (Dormand-Prince) and rk23 (Bogacki-Shampine)
+runs of :func:`cmbs.simulate` with the formulations of :func:`cmbs.fast.field`, constant inputs.
+
+The algorithm is that of :func:`cmbs.integrate.explicit.integrate`, step for step: the same
+tableau (passed as arrays from :mod:`cmbs.integrate.tableaus`), Hairer's starting step, the
+scaled RMS error ‖h Σ(b - b̂)_i k_i / (atol + rtol max(|y|, |y_new|))‖ ≤ 1, a rejected step
+shrunk by max(0.2, 0.9 e^(-1/(p+1))), Gustafsson's PI controller for accepted steps
+(0.9 e^(-0.7/(p+1)) e_old^(0.4/(p+1)), growth within [0.2, 5]), a non-finite step retried at a
+tenth, FSAL, and cubic Hermite output at the requested times.  At every output the accelerations,
+multipliers, |Φ|, |Φ̇| and -Aᵀλ are evaluated at the interpolated state, as the Python path's
+recording does (where that state is singular, q̈ is the interpolant's slope and λ is left 0).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cmbs.fast import NON_FINITE, OK, SINGULAR, _private_copy, field
+from cmbs.jit import njit
+
+#: statuses besides fast.OK and SINGULAR
+UNDERFLOW, TOO_MANY_STEPS = 5, 6
+
+
+@njit(cache=True)
+def _rhs(kind, method, parameters, y, t, u, ints, reals, buffer, mass, row_scale, lam, K, rhs, schur, out):
+    """dy/dt = (q̇, q̈) into ``out``; returns the field's status."""
+    n = y.shape[0] // 2
+    status = field(kind, method, parameters, y[:n], y[n:], t, u, ints, reals, buffer, mass, row_scale, out[n:], lam,
+                   K, rhs, True, schur)
+    out[:n] = y[n:]
+    return status
+
+
+@njit(cache=True)
+def _rms(values, scale):
+    total = 0.0
+    for i in range(values.shape[0]):
+        total += (values[i] / scale[i]) ** 2
+    return math.sqrt(total / values.shape[0])
+
+
+@njit(cache=True)
+def _record(kind, method, parameters, t, y, slope, u, ints, reals, buffer, mass, row_scale, K, rhs, schur, k,
+            T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE):
+    """Row ``k`` of the outputs at (t, y); returns 1 when the state was singular (q̈ from the
+    interpolant's slope, λ = 0), else 0."""
+    n = y.shape[0] // 2
+    m = LAMs.shape[1]
+    lam = np.zeros(m)
+    qdd = np.empty(n)
+    status = field(kind, method, parameters, y[:n], y[n:], t, u, ints, reals, buffer, mass, row_scale, qdd, lam,
+                   K, rhs, True, schur)
+    unsolved = 0
+    if status != OK:                         # the terms at the state are in the buffer all the same
+        qdd[:] = slope[n:]
+        lam[:] = 0.0
+        unsolved = 1
+    T[k] = t
+    Qs[k] = y[:n]
+    QDs[k] = y[n:]
+    QDDs[k] = qdd
+    LAMs[k] = lam
+    A = buffer[n + m:n + m + m * n].reshape((m, n))
+    largest, rate_largest = 0.0, 0.0
+    for a in range(m):
+        largest = max(largest, abs(buffer[n + a]))
+        rate = buffer[n + 2 * m + m * n + a]
+        for j in range(n):
+            rate += A[a, j] * y[n + j]
+        rate_largest = max(rate_largest, abs(rate))
+    PHI[k], PHID[k] = largest, rate_largest
+    for j in range(n):
+        total = 0.0
+        for a in range(m):
+            total -= A[a, j] * lam[a]
+        FORCE[k, j] = total
+    return unsolved
+
+
+@njit(cache=True)
+def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, reals, buffer_size, mass, row_scale, m,
+             schur, c, a, b, b_error, exponent, start_exponent, first_same_as_last, max_steps):
+    """Integrate from t_out[0] to t_out[-1] with the tableau (c, a, b, b_error), the controller's
+    exponent 1/(min(p, p̂) + 1) and the starting step's 1/(p + 1); returns the
+    outputs (t, q, q̇, q̈, λ, |Φ|, |Φ̇|, -Aᵀλ), the number recorded, the status, the time
+    reached, the counters (steps, rejected, evaluations, outputs from the interpolant) and the
+    state (q, q̇) the status refers to (where a stage failed, for a failed run)."""
+    schur = _private_copy(schur)
+    n = q0.shape[0]
+    d = 2 * n
+    count = t_out.shape[0]
+    T, Qs, QDs, QDDs = np.zeros(count), np.zeros((count, n)), np.zeros((count, n)), np.zeros((count, n))
+    LAMs, PHI, PHID, FORCE = np.zeros((count, m)), np.zeros(count), np.zeros(count), np.zeros((count, n))
+    buffer = np.zeros(buffer_size)
+    K = np.empty((n + m, n + m))
+    rhs = np.empty(n + m)
+    lam = np.empty(m)
+    stages = np.zeros((c.shape[0], d))
+    y = np.empty(d)
+    y[:n] = q0
+    y[n:] = qd0
+    k1 = np.empty(d)
+    steps, rejected, evaluations, unsolved = 0, 0, 0, 0
+    t = t_out[0]
+    status = _rhs(kind, method, parameters, y, t, u, ints, reals, buffer, mass, row_scale, lam, K, rhs, schur, k1)
+    evaluations += 1
+    if status != OK:
+        return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, 0, status, t, steps, rejected, evaluations, unsolved, y
+    unsolved += _record(kind, method, parameters, t, y, k1, u, ints, reals, buffer, mass, row_scale, K, rhs, schur,
+                        0, T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE)
+    next_out = 1
+    t_end = t_out[count - 1]
+    # Hairer & Wanner's starting step (Solving ODEs I, §II.4), as the Python loop
+    scale = atol + np.abs(y) * rtol
+    d0, d1 = _rms(y, scale), _rms(k1, scale)
+    h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+    h0 = min(h0, t_end - t)
+    probe = np.empty(d)
+    status = _rhs(kind, method, parameters, y + h0 * k1, t + h0, u, ints, reals, buffer, mass, row_scale, lam, K,
+                  rhs, schur, probe)
+    evaluations += 1
+    d2 = _rms(probe - k1, scale) / h0
+    h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** start_exponent
+    h = min(100.0 * h0, h1, t_end - t)
+    factor_old = 1e-4
+    y_new = np.empty(d)
+    k_new = np.empty(d)
+    work = np.empty(d)
+    while next_out < count:
+        if steps >= max_steps:
+            return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, TOO_MANY_STEPS, t, steps, rejected, \
+                evaluations, unsolved, y
+        h_try = min(h, t_end - t)
+        stages[0] = k1
+        finite = True
+        for i in range(1, c.shape[0]):
+            work[:] = y
+            for j in range(i):
+                if a[i, j] != 0.0:
+                    work += h_try * a[i, j] * stages[j]
+            status = _rhs(kind, method, parameters, work, t + c[i] * h_try, u, ints, reals, buffer, mass, row_scale,
+                          lam, K, rhs, schur, stages[i])
+            evaluations += 1
+            if status == SINGULAR:
+                return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, SINGULAR, t + c[i] * h_try, steps, \
+                    rejected, evaluations, unsolved, work
+            if status != OK:
+                finite = False
+                break
+        if finite:
+            y_new[:] = y
+            for i in range(c.shape[0]):
+                if b[i] != 0.0:
+                    y_new += h_try * b[i] * stages[i]
+            for i in range(d):
+                if not math.isfinite(y_new[i]):
+                    finite = False
+        if not finite:
+            if h_try > 1e-14 * max(1.0, abs(t)):
+                h = h_try / 10.0
+                rejected += 1
+                continue
+            return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, NON_FINITE, t + h_try, steps, rejected, \
+                evaluations, unsolved, y
+        work[:] = 0.0
+        for i in range(c.shape[0]):
+            if b_error[i] != 0.0:
+                work += h_try * b_error[i] * stages[i]
+        for i in range(d):
+            scale[i] = atol + rtol * max(abs(y[i]), abs(y_new[i]))
+        error = _rms(work, scale)
+        if error > 1.0:
+            h = h_try * max(0.2, 0.9 * error ** -exponent)
+            rejected += 1
+            if h < 1e-14 * max(1.0, abs(t)):
+                return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, UNDERFLOW, t, steps, rejected, \
+                    evaluations, unsolved, y
+            continue
+        error = max(error, 1e-10)
+        growth = 0.9 * error ** (-0.7 * exponent) * factor_old ** (0.4 * exponent)
+        h = h_try * min(5.0, max(0.2, growth))
+        factor_old = error
+        t_new = t + h_try
+        if first_same_as_last:
+            k_new[:] = stages[c.shape[0] - 1]
+        else:
+            status = _rhs(kind, method, parameters, y_new, t_new, u, ints, reals, buffer, mass, row_scale, lam, K,
+                          rhs, schur, k_new)
+            evaluations += 1
+            if status == SINGULAR:
+                return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, SINGULAR, t_new, steps, rejected, \
+                    evaluations, unsolved, y_new
+        steps += 1
+        while next_out < count and t_out[next_out] <= t_new + 1e-12 * max(1.0, abs(t_new)):
+            s = (t_out[next_out] - t) / h_try       # cubic Hermite on [t, t_new]
+            h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
+            h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
+            d00, d10 = (6 * s**2 - 6 * s) / h_try, 3 * s**2 - 4 * s + 1
+            d01, d11 = (-6 * s**2 + 6 * s) / h_try, 3 * s**2 - 2 * s
+            value = h00 * y + h10 * h_try * k1 + h01 * y_new + h11 * h_try * k_new
+            slope = d00 * y + d10 * k1 + d01 * y_new + d11 * k_new
+            unsolved += _record(kind, method, parameters, t_out[next_out], value, slope, u, ints, reals, buffer,
+                                mass, row_scale, K, rhs, schur, next_out, T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE)
+            next_out += 1
+        t = t_new
+        y[:] = y_new
+        k1[:] = k_new
+    return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, OK, t, steps, rejected, evaluations, unsolved, y
+
+
+#: reasons of the failure statuses, for messages
+REASONS = {UNDERFLOW: "step size underflow", TOO_MANY_STEPS: "step limit reached",
+           NON_FINITE: "the state became non-finite"}
