@@ -208,7 +208,7 @@ def main() -> None:
         for row in rows:
             error = f"{row['error']:.2e}" if row["error"] is not None else "failed"
             print(f"  {row['family']:<34} {row['setting']:<12} {row['wall_s']:>9.4f} {error:>10}")
-        print(f"  fastest configuration reaching each error level (wall s); target: cmbs faster than every tool "
+        print("  fastest configuration reaching each error level (wall s); target: cmbs faster than every tool "
               "that reaches the level")
         verdicts = []
         for level in LEVELS:
