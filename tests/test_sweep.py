@@ -216,6 +216,10 @@ def test_sweep_command_initial_speeds_are_consistent_and_batched(tmp_path, capsy
     for v in range(3):                       # consistent: A q̇ = 0 at the start
         A = model.jacobian(result.q[v, 0], 0.0)
         assert np.abs(A @ result.qd[v, 0]).max() < 1e-12
+        # the undriven model ran (not the driven one of the library name)
+        run = simulate(model, t_end=0.1, dt=1e-3, integrator="rk4", qd0=result.qd[v, 0])
+        np.testing.assert_allclose(result.q[v], run.q, rtol=0, atol=1e-12)
+    assert result.constraint_error.max() < 1e-9
 
 
 def test_sweep_command_mistakes_exit_2_with_one_line(tmp_path, capsys):
@@ -224,6 +228,7 @@ def test_sweep_command_mistakes_exit_2_with_one_line(tmp_path, capsys):
     cases = [(["--vary", "crank_speed"], "--vary expects NAME=V1,V2"),
              (["--vary", "colour=1,2"], "no parameter"),
              (["--speed", "nope=1,2"], "has no coordinate 'nope'"),
+             (["--undriven", "--vary", "crank_speed=1,2"], "--undriven cannot be combined with --vary"),
              (["--mass", "crank=a,b"], "expected numbers"),
              ([], "needs at least one of"),
              (["--vary", "crank_speed=1,2", "--out", str(tmp_path / "x.csv")], "must end in .npz")]

@@ -74,7 +74,7 @@ def variants_from(args: argparse.Namespace, model) -> list:
         key, values = _values(args.speed, "--speed")
         if key not in model.coordinate_names:
             raise SweepUsageError(f"--speed: model {model.name!r} has no coordinate {key!r}; coordinates: "
-                                  f"{', '.join(model.coordinate_names)}")
+                                  f"{_listing(model.coordinate_names)}")
         axes.append(("speed", key, _numbers(key, values, "--speed")))
     if not axes:
         raise SweepUsageError("cmbs sweep needs at least one of --vary, --mass or --speed")
@@ -95,6 +95,12 @@ def variants_from(args: argparse.Namespace, model) -> list:
     return variants
 
 
+def _listing(names, shown: int = 12) -> str:
+    """The first ``shown`` names, and how many there are in all when more."""
+    names = list(names)
+    return ", ".join(names[:shown]) + (f", ... ({len(names)} in all)" if len(names) > shown else "")
+
+
 def _fixed(text: str) -> tuple[str, object]:
     key, values = _values(text, "--param")
     if len(values) != 1:
@@ -113,16 +119,16 @@ def _sweep(args: argparse.Namespace) -> int:
     if args.t_end <= 0 or args.dt <= 0 or args.every < 1 or (args.workers is not None and args.workers < 1):
         raise SweepUsageError(f"--t-end and --dt must be > 0, --every and --workers >= 1 (got {args.t_end}, "
                               f"{args.dt}, {args.every}, {args.workers})")
+    if args.undriven and args.vary:
+        raise SweepUsageError("--undriven cannot be combined with --vary (the varied model is rebuilt by name)")
     parameters = dict(_fixed(text) for text in args.param)
     nominal = load(args.model, **parameters)
     nominal = nominal.without_drivers() if args.undriven else nominal
     variants = variants_from(args, nominal)
-    target = nominal if not args.vary and not args.undriven else args.model
-    if args.undriven and args.vary:
-        raise SweepUsageError("--undriven cannot be combined with --vary (the varied model is rebuilt by name)")
+    target = args.model if args.vary else nominal   # parameter variants rebuild the model by name
     if args.coordinate and args.coordinate not in nominal.coordinate_names:
         raise SweepUsageError(f"--coordinate: no coordinate {args.coordinate!r}; coordinates: "
-                              f"{', '.join(nominal.coordinate_names)}")
+                              f"{_listing(nominal.coordinate_names)}")
     result = sweep(target, variants, t_end=args.t_end, formulation=args.formulation, integrator=args.integrator,
                    dt=args.dt, rtol=args.rtol, atol=args.atol, project=args.project, every=args.every,
                    workers=args.workers, scheduler=args.scheduler)
