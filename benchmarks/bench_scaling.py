@@ -14,8 +14,10 @@ One evaluation: the model's terms and the solve for q̈ (and λ).  cmbs: ``Compi
 (model, "lagrange").into`` — one compiled call from Python, no allocation; Pinocchio:
 ``aba`` (open) or ``constraintDynamics`` (pinned), one C++ call from Python; MuJoCo:
 ``mj_forward`` (everything, no contacts).  Medians of timeit batches (bench_model.time_call).
-Also: RK4 at h = 1 ms over 1 s (0.1 s for N = 200) through ``cmbs.simulate`` (compiled loop),
-the wall per evaluation.  The exponent is the least-squares slope of log(µs) on log(N) from 14
+Also, through ``cmbs.simulate`` (compiled loops) over 10 s (1 s for N = 200; --quick: 1 s and
+0.1 s), Baumgarte (ξ = 1, ω = 10): RK4 at h = 1 ms and RK45 at rtol = atol = 1e-8, wall, max |Φ|
+and the relative energy error at the end; and the peak resident memory of a fresh process that
+runs the RK4 case (its second launch, with numba's cache warm).  The exponent is the least-squares slope of log(µs) on log(N) from 14
 to 200.
 """
 
@@ -28,6 +30,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
@@ -48,6 +51,21 @@ def chain_tree(model: cmbs.Model, links: int, closed: bool):
     return tree_from(model, [rod(f"link{k}", None if k == 1 else f"link{k - 1}", f"P{k - 1}", f"P{k}", 0.3, 1.0)
                              for k in range(1, links + 1)],
                      closures=[(f"link{links}", f"P{links}")] if closed else [])
+
+
+def peak_memory(links: int, closed: bool, span: float) -> float:
+    """Peak resident memory [MB] of a fresh process that imports cmbs, builds the chain and runs
+    ``span`` s of RK4 at 1 ms: the child's VmHWM (Linux; getrusage's maxrss would keep the
+    forking parent's high-water mark across exec)."""
+    code = ("import cmbs; "
+            f"m = cmbs.load('chain', links={links}, closed={closed}); "
+            f"cmbs.simulate(m, t_end={span}, integrator='rk4', dt=1e-3, formulation='baumgarte'); "
+            "print([line.split()[1] for line in open('/proc/self/status') if line.startswith('VmHWM')][0])")
+    peaks = []
+    for _ in range(2):                      # the second launch: numba's cache is warm (a compile takes GBs)
+        output = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+        peaks.append(int(output.split()[-1]) / 1024.0)
+    return peaks[-1]
 
 
 def exponent(sizes: list[int], micros: list[float]) -> float:
@@ -83,14 +101,24 @@ def main() -> None:
             qdd, lam = np.empty(model.n), np.empty(model.m)
             compiled.into(q, qd, 0.0, None, qdd, lam)
             ours = time_call(lambda: compiled.into(q, qd, 0.0, None, qdd, lam), batches, target)
-            span = 0.1 if links >= 200 else 1.0
-            cmbs.simulate(model, t_end=0.01, integrator="rk4", dt=1e-3)
-            started = time.perf_counter()
-            run = cmbs.simulate(model, t_end=span, integrator="rk4", dt=1e-3)
-            loop_us = 1e6 * run.info["loop_wall_time"] / (4 * run.info["steps"])
+            span = (0.1 if links >= 200 else 1.0) if args.quick else (1.0 if links >= 200 else 10.0)
+            runs = {}
+            for label, options in (("RK4 h=1ms", dict(integrator="rk4", dt=1e-3, formulation="baumgarte")),
+                                   ("RK45 rtol=1e-8", dict(integrator="rk45", rtol=1e-8, atol=1e-8, dt=1e-2,
+                                                           formulation="baumgarte"))):
+                cmbs.simulate(model, t_end=0.01, **{**options, "dt": min(options["dt"], 0.01)})
+                started = time.perf_counter()
+                run = cmbs.simulate(model, t_end=span, **options)
+                energy = run["energy"]
+                runs[label] = {"wall_s": time.perf_counter() - started, "status": run.info["status"],
+                               "evaluations": run.info["evaluations"], "compiled": bool(run.info.get("compiled")),
+                               "max_constraint_error": float(run["constraint_error"].max()),
+                               "relative_energy_error_end": float(abs(energy[-1] - energy[0]) / max(abs(energy[0]), 1.0))}
+            rk4 = runs["RK4 h=1ms"]
+            loop_us = 1e6 * rk4["wall_s"] / rk4["evaluations"]
             row = {"links": links, "n": model.n, "m": model.m, "cmbs_us": ours["median"], "cmbs": ours,
-                   "rk4_loop_us_per_eval": loop_us, "rk4_status": run.info["status"],
-                   "rk4_wall_s": time.perf_counter() - started, "span_s": span}
+                   "rk4_loop_us_per_eval": loop_us, "span_s": span, "runs": runs,
+                   "peak_rss_mb": peak_memory(links, closed, span)}
             tree = chain_tree(model, links, closed)
             for name, measure in (("Pinocchio", pinocchio_measure), ("MuJoCo", mujoco_measure)):
                 if not tools[name]:
@@ -113,6 +141,12 @@ def main() -> None:
                   + (f"{ours['median'] / pin['median']:>8.2f}" if pin and "median" in pin else f"{'-':>8}") + "  "
                   + (f"{ours['median'] / mj['median']:>11.2f}" if mj and "median" in mj else f"{'-':>11}")
                   + f"  {loop_us:>16.3g}")
+            for label, entry in runs.items():
+                print(f"        {span:g} s {label:<15} {entry['wall_s']:8.3f} s wall ({entry['status']}, "
+                      f"{'compiled' if entry['compiled'] else 'python'}), max|Φ| {entry['max_constraint_error']:.1e}, "
+                      f"|ΔE|/E0 at the end {entry['relative_energy_error_end']:.1e}")
+            print(f"        peak memory of a process importing cmbs and running {span:g} s of RK4: "
+                  f"{row['peak_rss_mb']:.0f} MB")
         sizes = [row["links"] for row in rows]
         slope = exponent(sizes, [row["cmbs_us"] for row in rows])
         report[f"exponent_{label}"] = slope
