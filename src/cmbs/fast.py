@@ -882,6 +882,26 @@ def computed_torque(law, q, qd, t, K, rhs, u):
 
 
 @njit(cache=True)
+def record_constraints(buffer, n, m, qd, lam, PHI, PHID, FORCE, k):
+    """Row ``k`` of a loop's records from the terms in ``buffer`` (at the state with velocities
+    ``qd``) and the multipliers ``lam``: max |Φ|, max |A q̇ + Φ_t| and f_c = -Aᵀλ."""
+    A = buffer[n + m:n + m + m * n].reshape((m, n))
+    largest, rate_largest = 0.0, 0.0
+    for a in range(m):
+        largest = max(largest, abs(buffer[n + a]))
+        rate = buffer[n + 2 * m + m * n + a]
+        for j in range(n):
+            rate += A[a, j] * qd[j]
+        rate_largest = max(rate_largest, abs(rate))
+    PHI[k], PHID[k] = largest, rate_largest
+    for j in range(n):
+        total = 0.0
+        for a in range(m):
+            total -= A[a, j] * lam[a]
+        FORCE[k, j] = total
+
+
+@njit(cache=True)
 def _private_copy(schur):
     """The :func:`schur_workspace` tuple with fresh copies of its scratch arrays (the constant
     M_pp⁻¹, its flag and the index arrays are shared), so that loops running at the same time
@@ -967,16 +987,7 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
             QDDs[recorded] = k1v
             LAMs[recorded] = lam
             Us[recorded] = u
-            phi = buffer[n:n + m]
-            A = buffer[n + m:n + m + m * n].reshape((m, n))
-            phid = A @ qd + buffer[n + 2 * m + m * n:n + 3 * m + m * n]
-            PHI[recorded] = np.max(np.abs(phi)) if m else 0.0
-            PHID[recorded] = np.max(np.abs(phid)) if m else 0.0
-            for j in range(n):
-                total = 0.0
-                for r_ in range(m):
-                    total -= A[r_, j] * lam[r_]
-                FORCE[recorded, j] = total
+            record_constraints(buffer, n, m, qd, lam, PHI, PHID, FORCE, recorded)
             recorded += 1
         if step == steps:
             break

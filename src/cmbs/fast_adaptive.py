@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from cmbs.fast import NON_FINITE, OK, SINGULAR, _private_copy, field
+from cmbs.fast import NON_FINITE, OK, SINGULAR, _private_copy, field, record_constraints
 from cmbs.jit import njit
 
 #: statuses besides fast.OK and SINGULAR
@@ -63,20 +63,7 @@ def _record(kind, method, parameters, t, y, slope, u, ints, reals, buffer, mass,
     QDs[k] = y[n:]
     QDDs[k] = qdd
     LAMs[k] = lam
-    A = buffer[n + m:n + m + m * n].reshape((m, n))
-    largest, rate_largest = 0.0, 0.0
-    for a in range(m):
-        largest = max(largest, abs(buffer[n + a]))
-        rate = buffer[n + 2 * m + m * n + a]
-        for j in range(n):
-            rate += A[a, j] * y[n + j]
-        rate_largest = max(rate_largest, abs(rate))
-    PHI[k], PHID[k] = largest, rate_largest
-    for j in range(n):
-        total = 0.0
-        for a in range(m):
-            total -= A[a, j] * lam[a]
-        FORCE[k, j] = total
+    record_constraints(buffer, n, m, y[n:], lam, PHI, PHID, FORCE, k)
     return unsolved
 
 

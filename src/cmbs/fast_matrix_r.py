@@ -25,7 +25,7 @@ import numpy as np
 from cmbs.dynamics.matrix_r import MatrixR, MatrixRSolver
 from cmbs.errors import CmbsError
 from cmbs.fast import NON_FINITE, OK, SINGULAR, _evaluate, _lu_in_place, _lu_solve, _lu_solve_transposed, \
-    _solve_in_place, kernel, supported
+    _solve_in_place, kernel, record_constraints, supported
 from cmbs.model.model import Model
 
 #: status codes besides fast.OK, SINGULAR and NON_FINITE
@@ -205,25 +205,12 @@ def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, ro
         if status != OK:
             return status, step, recorded, q, qd
         if step > first or first == 0:
-            A = buffer[n + m:n + m + m * n].reshape((m, n))
             T[step] = t
             Qs[step] = q
             QDs[step] = qd
             QDDs[step] = k1v
             LAMs[step] = lam
-            largest, rate_largest = 0.0, 0.0
-            for a in range(m):
-                largest = max(largest, abs(buffer[n + a]))
-                rate = buffer[n + 2 * m + m * n + a]
-                for j in range(n):
-                    rate += A[a, j] * qd[j]
-                rate_largest = max(rate_largest, abs(rate))
-            PHI[step], PHID[step] = largest, rate_largest
-            for j in range(n):
-                total = 0.0
-                for a in range(m):
-                    total -= A[a, j] * lam[a]
-                FORCE[step, j] = total
+            record_constraints(buffer, n, m, qd, lam, PHI, PHID, FORCE, step)
             recorded = step + 1
             condition = _condition(buffer, n, m, rows, dependent)
             if condition > SINGULAR_CONDITION or (automatic and condition > growth * reference_condition):
