@@ -96,6 +96,32 @@ def method_of(chosen: Formulation) -> tuple[int, np.ndarray] | None:
     return None
 
 
+def compiled_plan(model: Model, chosen: Formulation, integrator: str, u: object, project: bool, t_end: float,
+                  dt: float) -> tuple | None:
+    """(kernel kind, method, parameters, input mode, law) when :func:`rk4` (integrator ``rk4``,
+    t_end a multiple of dt) or :mod:`cmbs.fast_adaptive` (``rk45``/``rk23``, constant inputs)
+    can run the simulation of ``model`` under ``chosen``, else None."""
+    kind = supported(model)
+    inputs = control(u, model, dt)
+    steps = round(t_end / dt)
+    if project or inputs is None or kind is None:
+        return None
+    if integrator in ("rk45", "rk23"):
+        if inputs[0] != CONSTANT:
+            return None
+    elif integrator != "rk4" or abs(steps * dt - t_end) > 1e-9 * t_end:
+        return None
+    method = method_of(chosen)
+    return None if method is None else (kind, *method, *inputs)
+
+
+def workspace(model: Model) -> tuple:
+    """(kind, ints, reals, buffer, mass, schur) of a supported model: :func:`kernel` and the
+    :func:`schur_workspace` built with its Jacobian's structure (:func:`jacobian_pattern`)."""
+    kind, ints, reals, buffer, mass = kernel(model)
+    return kind, ints, reals, buffer, mass, schur_workspace(kind, mass, model.m, jacobian_pattern(model))
+
+
 def bound_parameters(method: int, parameters: np.ndarray, solver: object) -> np.ndarray:
     """``parameters`` with the mass-regularisation scale and semi-definite flag of the bound
     projection ``solver`` (unchanged for the other methods)."""
@@ -138,12 +164,10 @@ class CompiledDynamics:
         self.solver = chosen.bind(model)
         self.method = plan[0]
         self.parameters = bound_parameters(plan[0], plan[1], self.solver)
-        _, self._ints, self._reals, self._buffer, self._mass = kernel(model)
-        self._kind = kind
+        self._kind, self._ints, self._reals, self._buffer, self._mass, self._schur = workspace(model)
         n, m = model.n, model.m
         self._row_scale = np.ascontiguousarray(self.solver.row_scale, dtype=float)
         self._K, self._rhs = np.empty((n + m, n + m)), np.empty(n + m)
-        self._schur = schur_workspace(kind, self._mass, m, jacobian_pattern(model))
         self._no_input = np.zeros(model.n_u)
 
     def into(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray | None, qdd: np.ndarray,
@@ -512,7 +536,7 @@ def schur_workspace(kind: int, mass: np.ndarray, m: int, pattern: np.ndarray | N
     massless = np.setdiff1d(np.arange(n), massive)
     size = m + massless.size
     start = np.zeros(m, dtype=np.int64) if pattern is None else gram_profile(pattern)
-    width = max([0] + [i - int(start[i]) for i in range(m)])
+    width = int(np.max(np.arange(m) - start, initial=0))
     band = _band_workspace(kind, flag, mass, pattern, m, massive.size)
     return (matrix, flag, np.zeros((m, massive.size)), np.zeros((size, size)), np.zeros(massive.size),
             np.zeros((m, max(n, 1)), dtype=np.int64), np.zeros(m, dtype=np.int64), np.zeros((m, m)),
@@ -690,29 +714,21 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
         if schur[16] == 1:                  # large natural model: band LU of the KKT matrix
             if not _band_kkt(Q, A, rhs[n:n + m], schur, qdd, lam):
                 return SINGULAR
-            for k in range(n):
-                if not math.isfinite(qdd[k]):
-                    return NON_FINITE
-            return OK
-        if certified and _schur_solve(M, Q, A, rhs[n:n + m], schur, qdd, lam):
-            for k in range(n):
-                if not math.isfinite(qdd[k]):
-                    return NON_FINITE
-            return OK
-        for i in range(n):
-            for j in range(n):
-                K[i, j] = M[i, j]
-            rhs[i] = Q[i]
-        for r in range(m):
-            for j in range(n):
-                K[n + r, j] = A[r, j]
-                K[j, n + r] = A[r, j]
-            for j in range(m):
-                K[n + r, n + j] = 0.0
-        if not _solve_in_place(K, rhs):
-            return SINGULAR
-        qdd[:] = rhs[:n]
-        lam[:] = rhs[n:]
+        elif not (certified and _schur_solve(M, Q, A, rhs[n:n + m], schur, qdd, lam)):
+            for i in range(n):              # the full augmented system
+                for j in range(n):
+                    K[i, j] = M[i, j]
+                rhs[i] = Q[i]
+            for r in range(m):
+                for j in range(n):
+                    K[n + r, j] = A[r, j]
+                    K[j, n + r] = A[r, j]
+                for j in range(m):
+                    K[n + r, n + j] = 0.0
+            if not _solve_in_place(K, rhs):
+                return SINGULAR
+            qdd[:] = rhs[:n]
+            lam[:] = rhs[n:]
     for k in range(n):
         if not math.isfinite(qdd[k]):
             return NON_FINITE

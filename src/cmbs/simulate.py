@@ -169,9 +169,9 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
     steps = int(round(t_end / dt))
     times = np.linspace(0.0, steps * dt, steps + 1) if abs(steps * dt - t_end) < 1e-9 * t_end else \
         np.append(np.arange(0.0, t_end, dt), t_end)
-    from cmbs import fast_matrix_r
+    from cmbs import fast, fast_matrix_r
 
-    fast_plan = _compiled_plan(model, chosen, integrator, u, project, t_end, dt)
+    fast_plan = fast.compiled_plan(model, chosen, integrator, u, project, t_end, dt)
     velocity_loop = fast_plan is None and fast_matrix_r.runs(model, chosen, integrator, u, project,
                                                              abs(steps * dt - t_end) <= 1e-9 * t_end)
     if compiled and fast_plan is None and not velocity_loop:
@@ -426,24 +426,14 @@ def _trajectory(model: Model, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd:
                        "constraint_error": position_error, "velocity_constraint_error": velocity_error}, info)
 
 
-def _compiled_plan(model: Model, chosen: Formulation, integrator: str, u: object, project: bool, t_end: float,
-                   dt: float) -> tuple | None:
-    """(kernel kind, method, parameters, input mode, law) when :mod:`cmbs.fast` can run the
-    simulation, else None."""
-    from cmbs import fast
-
-    kind = fast.supported(model)
-    inputs = fast.control(u, model, dt)
-    steps = round(t_end / dt)
-    if project or inputs is None or kind is None:
-        return None
-    if integrator in ("rk45", "rk23"):      # cmbs.fast_adaptive: constant inputs only
-        if inputs[0] != fast.CONSTANT:
-            return None
-    elif integrator != "rk4" or abs(steps * dt - t_end) > 1e-9 * t_end:
-        return None
-    method = fast.method_of(chosen)
-    return None if method is None else (kind, *method, *inputs)
+def _singular_message(model: Model, solver, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray) -> str:
+    """Why a compiled loop stopped as singular at (q, q̇, t, u): the Python solver's own error,
+    which names the dependent constraints."""
+    try:
+        solver.accelerations(model.evaluate(q, qd, t, u), q, qd, t)
+    except CmbsError as error:
+        return str(error)
+    return f"singular system at t={t:.6g}"
 
 
 def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs: Inputs, q0: np.ndarray,
@@ -456,22 +446,16 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs
     kind, method, parameters, mode, law = plan
     steps = int(round(t_end / dt))
     parameters = fast.bound_parameters(method, parameters, solver)
-    _, ints, reals, buffer, mass = fast.kernel(model)
+    _, ints, reals, buffer, mass, schur = fast.workspace(model)
     u0 = np.array(inputs(0.0, q0, qd0), dtype=float) if mode == fast.CONSTANT else np.zeros(model.n_u)
     loop_started = time.perf_counter()
     T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, q_fail, qd_fail, u_fail = fast.rk4(
         kind, method, parameters, np.array(q0), np.array(qd0), dt, steps, 1, u0, ints, reals, buffer.size, mass,
-        np.ascontiguousarray(solver.row_scale), model.m, mode, fast.law_arrays(law, model),
-        fast.schur_workspace(kind, mass, model.m, fast.jacobian_pattern(model)))
+        np.ascontiguousarray(solver.row_scale), model.m, mode, fast.law_arrays(law, model), schur)
     loop_wall = time.perf_counter() - loop_started
     message = ""
-    if status == fast.SINGULAR:  # let the Python solver name the constraints where it happened
-        try:
-            terms = model.evaluate(q_fail, qd_fail, t_fail, u_fail)
-            solver.accelerations(terms, q_fail, qd_fail, t_fail)
-            message = f"singular system at t={t_fail:.6g}"
-        except CmbsError as error:
-            message = str(error)
+    if status == fast.SINGULAR:
+        message = _singular_message(model, solver, q_fail, qd_fail, t_fail, u_fail)
     elif status != fast.OK:
         message = (f"non-finite state or accelerations at t={t_fail:.6g}: the motion diverged; try a smaller "
                    "step, drift projection (project=True) or another formulation")
@@ -512,26 +496,20 @@ def _run_compiled_adaptive(model: Model, solver, chosen: Formulation, plan: tupl
     kind, method, parameters, _, _ = plan
     parameters = fast.bound_parameters(method, parameters, solver)
     tableau = TABLEAUS[options["integrator"]]
-    _, ints, reals, buffer, mass = fast.kernel(model)
+    _, ints, reals, buffer, mass, schur = fast.workspace(model)
     u = np.array(inputs(0.0, q0, qd0), dtype=float)
     loop_started = time.perf_counter()
     (T, Q, QD, QDD, LAM, PHI, PHID, FORCE, recorded, status, t_stop, steps, rejected, evaluations,
      unsolved, state) = fast_adaptive.adaptive(
         kind, method, parameters, np.array(q0), np.array(qd0), np.ascontiguousarray(times, dtype=float),
         options["rtol"], options["atol"], u, ints, reals, buffer.size, mass, np.ascontiguousarray(solver.row_scale),
-        model.m, fast.schur_workspace(kind, mass, model.m, fast.jacobian_pattern(model)), tableau.c, tableau.a,
-        tableau.b, tableau.b_error, 1.0 / (min(tableau.order, tableau.error_order) + 1), 1.0 / (tableau.order + 1),
-        tableau.first_same_as_last,
+        model.m, schur, tableau.c, tableau.a, tableau.b, tableau.b_error,
+        1.0 / (min(tableau.order, tableau.error_order) + 1), 1.0 / (tableau.order + 1), tableau.first_same_as_last,
         10_000_000)
     loop_wall = time.perf_counter() - loop_started
     message = ""
-    if status == fast.SINGULAR:             # the Python solver names the constraints at that state
-        q_stop, qd_stop = state[:model.n], state[model.n:]
-        try:
-            solver.accelerations(model.evaluate(q_stop, qd_stop, t_stop, u), q_stop, qd_stop, t_stop)
-            message = f"singular system at t={t_stop:.6g}"
-        except CmbsError as error:
-            message = str(error)
+    if status == fast.SINGULAR:
+        message = _singular_message(model, solver, state[:model.n], state[model.n:], t_stop, u)
     elif status != fast.OK:
         message = f"{fast_adaptive.REASONS.get(status, 'failed')} at t={t_stop:.6g}"
     counters = {"steps": int(steps), "rejected": int(rejected), "evaluations": int(evaluations)}

@@ -317,20 +317,20 @@ def _run_dask(model: str | Model, settings: RunSettings, variants: list[Variant]
 
 # ---------------------------------------------------------------------------------- batched path
 def _batch_plan(model: Model, settings: RunSettings, variants: list[Variant]) -> tuple | None:
+    """(method, parameters, solver, steps) of the batched path, or None: state-only variants and
+    a run :func:`cmbs.fast.rk4` takes (:func:`cmbs.fast.compiled_plan` with constant inputs)."""
     from cmbs import fast
     from cmbs.dynamics import formulation as make_formulation
 
-    if not all(variant.state_only for variant in variants) or settings.integrator != "rk4" or settings.project:
-        return None
-    steps = round(settings.t_end / settings.dt)
-    if abs(steps * settings.dt - settings.t_end) > 1e-9 * settings.t_end or fast.supported(model) is None:
+    if not all(variant.state_only for variant in variants) or settings.integrator != "rk4":
         return None
     chosen = make_formulation(settings.formulation, **settings.formulation_options)
-    method = fast.method_of(chosen)
-    if method is None:
+    plan = fast.compiled_plan(model, chosen, "rk4", None, settings.project, settings.t_end, settings.dt)
+    if plan is None:
         return None
+    _, method, parameters, _, _ = plan
     solver = chosen.bind(model)
-    return method[0], fast.bound_parameters(method[0], method[1], solver), solver, steps
+    return method, fast.bound_parameters(method, parameters, solver), solver, round(settings.t_end / settings.dt)
 
 
 def _threads() -> int:
@@ -343,7 +343,7 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
     from cmbs import fast
 
     method, parameters, solver, steps = plan
-    kind, ints, reals, buffer, mass = fast.kernel(model)
+    kind, ints, reals, buffer, mass, schur = fast.workspace(model)
     count = len(variants)
     Q0 = np.array([model.q0 if v.q0 is None else v.q0 for v in variants], dtype=float).reshape(count, model.n)
     QD0 = np.array([model.qd0 if v.qd0 is None else v.qd0 for v in variants], dtype=float).reshape(count, model.n)
@@ -355,16 +355,16 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
     statuses, recorded = np.zeros(count, dtype=np.int64), np.zeros(count, dtype=np.int64)
     fast.rk4_batch(kind, method, parameters, Q0, QD0, U0, settings.dt, steps, settings.every, ints, reals,
                    buffer.size, mass, np.ascontiguousarray(solver.row_scale), model.m, fast.law_arrays(None, model),
-                   fast.schur_workspace(kind, mass, model.m, fast.jacobian_pattern(model)), Qs, QDs, PHIs, statuses, recorded)
+                   schur, Qs, QDs, PHIs, statuses, recorded)
+    reasons = {fast.SINGULAR: "singular system (rank of A)", fast.NON_FINITE: "the motion diverged"}
     outputs = []
     for v in range(count):
         k = int(recorded[v])
         failed = statuses[v] != fast.OK or k < records
-        reason = {fast.SINGULAR: "singular system (rank of A)", fast.NON_FINITE: "the motion diverged"}
+        message = f"{reasons.get(int(statuses[v]), 'failed')} at t={k * settings.every * settings.dt:.6g}"
         outputs.append({"q": Qs[v, :k], "qd": QDs[v, :k], "energy": model.energy_history(Qs[v, :k], QDs[v, :k]),
                         "phi": PHIs[v, :k], "status": "failed" if failed else "success",
-                        "message": (f"{reason.get(int(statuses[v]), 'failed')} at t={k * settings.every * settings.dt:.6g}"
-                                    if failed else "")})
+                        "message": message if failed else ""})
     return outputs
 
 
