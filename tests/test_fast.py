@@ -6,6 +6,8 @@ import pytest
 import cmbs
 from cmbs.errors import CmbsError
 from cmbs.simulate import simulate
+from cmbs import fast as compiled
+from helpers import kitchen_sink
 
 
 @pytest.mark.parametrize("name", ["four-bar", "slider-crank-joint"])
@@ -278,3 +280,25 @@ def test_compiled_adaptive_loop_stops_at_the_singular_position_naming_the_constr
     # both stop at the same pass of θ1 = ±90° (the step sequences part near the first pass, where
     # the ill-conditioned solve amplifies rounding differently)
     assert abs(run.t[-1] - python.t[-1]) < 0.05 and abs(np.cos(run["theta1"][-1])) < 0.05
+
+
+def test_undriven_model_no_longer_evaluates_its_drivers_time_functions():
+    """Removing the drivers drops the time functions only they used: a model whose driver is a
+    Python callable becomes compilable once undriven, and its terms (time-varying force and torque
+    included) equal those of the same model with the driver given as an expression."""
+    callable_driven = kitchen_sink(python_driver=True).without_drivers()
+    expression_driven = kitchen_sink(python_driver=False).without_drivers()
+    assert compiled.supported(kitchen_sink(python_driver=True)) is None
+    assert compiled.supported(callable_driven) == compiled.KIND_NATURAL
+    rng = np.random.default_rng(3)
+    q = callable_driven.q0 + 0.01 * rng.standard_normal(callable_driven.n)
+    qd = rng.standard_normal(callable_driven.n)
+    u = np.array([0.3, -0.2])
+    for t in (0.0, 0.7):
+        first = callable_driven.evaluate(q, qd, t, u)
+        second = expression_driven.evaluate(q, qd, t, u)
+        for name in ("Q", "phi", "A", "gamma", "phi_t"):
+            np.testing.assert_array_equal(getattr(first, name), getattr(second, name))
+    loaded = kitchen_sink(python_driver=False, loads=True).without_drivers().evaluate(q, qd, 0.7, u).Q
+    unloaded = kitchen_sink(python_driver=False, loads=False).without_drivers().evaluate(q, qd, 0.7, u).Q
+    assert np.abs(loaded - unloaded).max() > 0.1      # the force and torque functions are still evaluated

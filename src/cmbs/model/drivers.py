@@ -18,6 +18,7 @@ kernels read; :func:`evaluate_time_functions` fills an ``(k, 3)`` array of value
 from __future__ import annotations
 
 import abc
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -28,7 +29,7 @@ from scipy.interpolate import CubicSpline
 from cmbs.errors import ModelError
 from cmbs.model.expressions import Program, evaluate_program, parse_expression
 
-KIND_EXPRESSION, KIND_PIECEWISE, KIND_PYTHON = 0, 1, 2
+KIND_EXPRESSION, KIND_PIECEWISE, KIND_PYTHON, KIND_UNUSED = 0, 1, 2, 3
 
 
 class TimeFunction(abc.ABC):
@@ -186,6 +187,17 @@ class TimeFunctionPack:
     def count(self) -> int:
         return len(self.functions)
 
+    def keeping(self, used: set[int]) -> "TimeFunctionPack":
+        """The same pack with the functions whose index is not in ``used`` marked unused: the
+        kernels skip them (their rows of ``out`` stay as they were) and the Python ones among
+        them are no longer called."""
+        table = self.table.copy()
+        for k in range(table.shape[0]):
+            if k not in used:
+                table[k, 0] = KIND_UNUSED
+        python = tuple((k, function) for k, function in self.python if k in used)
+        return dataclasses.replace(self, table=table, python=python)
+
     @classmethod
     def build(cls, functions: Sequence[TimeFunction]) -> "TimeFunctionPack":
         table = np.zeros((len(functions), 4), dtype=np.int64)
@@ -221,7 +233,8 @@ class TimeFunctionPack:
 
 @njit(cache=True)
 def evaluate_time_functions(table, ops, reals, t, stack, out):
-    """Fill ``out[k] = (f_k, f_k', f_k'')`` for the compiled kinds (Python ones are skipped)."""
+    """Fill ``out[k] = (f_k, f_k', f_k'')`` for the compiled kinds (Python and unused ones are
+    skipped)."""
     for k in range(table.shape[0]):
         kind = table[k, 0]
         if kind == KIND_EXPRESSION:

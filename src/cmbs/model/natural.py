@@ -620,21 +620,28 @@ class NaturalEquations:
 
     @property
     def _scratch_size(self) -> int:
-        return 3 * (self.time_functions.count + self.time_functions.depth)
+        """Time-function values and stack (3 per row), then the extended x and v of the kernel."""
+        return 3 * (self.time_functions.count + self.time_functions.depth) + 2 * (self.n + self.constants.size)
 
     def new_terms(self) -> Terms:
         return Terms(self.n, self.m, constant_mass=self.mass, scratch=self._scratch_size)
 
     def without_drivers(self) -> "NaturalEquations":
-        """The same equations with the driver rows (the last section of constraints) removed."""
+        """The same equations with the driver rows (the last section of constraints) removed, and
+        the time functions only they used no longer evaluated (:meth:`TimeFunctionPack.keeping`)."""
         ints, reals = self.ints, self.reals
         int_sections = [ints[ints[1 + k]:ints[2 + k]] for k in range(int(ints[0]))]
         base = int(ints[0]) + 2
         real_sections = [reals[ints[base + 1 + k]:ints[base + 2 + k]] for k in range(int(ints[base]))]
         drivers = int_sections[_DRIVER].size // 2
         int_sections[_DRIVER] = np.zeros(0, dtype=np.int64)
+        used = set(int_sections[_POINT_FORCE].reshape(-1, 4)[:, 2:].ravel().tolist())
+        used |= set(int_sections[_TORQUE][1::2].tolist())
+        time_functions = self.time_functions.keeping(used)
+        int_sections[_TF_TABLE] = time_functions.table.ravel() if used else np.zeros(0, dtype=np.int64)
         new_ints, new_reals = pack(int_sections, real_sections)
-        return dataclasses.replace(self, m=self.m - drivers, ints=new_ints, reals=new_reals)
+        return dataclasses.replace(self, m=self.m - drivers, ints=new_ints, reals=new_reals,
+                                   time_functions=time_functions)
 
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
         for k, function in self.time_functions.python:
@@ -675,165 +682,177 @@ class NaturalEquations:
 
 
 @njit(cache=True, inline="always")
-def _add(A, row, column, value, n):
+def _add(buffer, a0, row, column, value, n):
+    """A[row, column] += value where A is row-major at ``buffer[a0:]`` (constant columns skipped)."""
     if column < n:
-        A[row, column] += value
+        buffer[a0 + row * n + column] += value
 
 
 @njit(cache=True)
 def _evaluate(q, qd, t, u, ints, reals, buffer):
-    """Q, Φ, A, γ, Φ_t of a natural-coordinate model into ``buffer`` (layout of :class:`Terms`)."""
+    """Q, Φ, A, γ, Φ_t of a natural-coordinate model into ``buffer`` (layout of :class:`Terms`;
+    its scratch holds the time-function rows, their stack, and the extended x = (q, constants),
+    v = (q̇, 0), so a call allocates nothing).
+
+    The kernel indexes ``ints``, ``reals`` and ``buffer`` by offsets rather than through array
+    views: each view costs numba an atomic reference count, which at a four-bar's size made up
+    most of the call."""
     n = q.shape[0]
-    constants = real_section(ints, reals, _CONSTANTS)
-    n_ext = n + constants.shape[0]
-    x = np.empty(n_ext)
-    v = np.zeros(n_ext)
-    x[:n] = q
-    x[n:] = constants
-    v[:n] = qd
+    real_base = ints[0] + 2
+    c0, c1 = ints[real_base + 1 + _CONSTANTS], ints[real_base + 2 + _CONSTANTS]
+    n_ext = n + c1 - c0
+    m = ((ints[2 + _RIGID] - ints[1 + _RIGID]) // 4 + (ints[2 + _DISTANCE] - ints[1 + _DISTANCE]) // 5
+         + (ints[2 + _ANGLE] - ints[1 + _ANGLE]) // 9 + (ints[2 + _PARALLEL] - ints[1 + _PARALLEL]) // 8
+         + (ints[2 + _DRIVER] - ints[1 + _DRIVER]) // 2)
+    a0 = n + m                               # offsets of A, γ, Φ_t and the scratch in buffer
+    g0 = a0 + m * n
+    t0 = g0 + m
+    s0 = t0 + m
+    x0 = buffer.shape[0] - 2 * n_ext         # x, then v, at the end of the scratch
+    v0 = x0 + n_ext
+    for k in range(n):
+        buffer[x0 + k] = q[k]
+        buffer[v0 + k] = qd[k]
+    for k in range(n, n_ext):
+        buffer[x0 + k] = reals[c0 + k - n]
+        buffer[v0 + k] = 0.0
+    x = buffer[x0:v0]
+    v = buffer[v0:v0 + n_ext]
 
-    rigid = int_section(ints, _RIGID)
-    distance = int_section(ints, _DISTANCE)
-    angle = int_section(ints, _ANGLE)
-    parallel = int_section(ints, _PARALLEL)
-    driver = int_section(ints, _DRIVER)
-    m = rigid.shape[0] // 4 + distance.shape[0] // 5 + angle.shape[0] // 9 + parallel.shape[0] // 8 \
-        + driver.shape[0] // 2
+    # time functions: (f, f', f'') rows at the scratch's start, then the expression stack
+    n_tf = (ints[2 + _TF_TABLE] - ints[1 + _TF_TABLE]) // 4
+    if n_tf > 0:
+        evaluate_time_functions(int_section(ints, _TF_TABLE).reshape((n_tf, 4)),
+                                int_section(ints, _TF_OPS).reshape((-1, 2)), real_section(ints, reals, _TF_REALS), t,
+                                buffer[s0 + 3 * n_tf:x0].reshape((-1, 3)), buffer[s0:s0 + 3 * n_tf].reshape((n_tf, 3)))
 
-    Q = buffer[:n]
-    phi = buffer[n:n + m]
-    A = buffer[n + m:n + m + m * n].reshape((m, n))
-    gamma = buffer[n + m + m * n:n + 2 * m + m * n]
-    phi_t = buffer[n + 2 * m + m * n:n + 3 * m + m * n]
-    scratch = buffer[n + 3 * m + m * n:]
-
-    # time functions: (f, f', f'') rows, then the expression stack
-    tf_table = int_section(ints, _TF_TABLE).reshape((-1, 4))
-    n_tf = tf_table.shape[0]
-    tf_values = scratch[:3 * n_tf].reshape((n_tf, 3))
-    stack = scratch[3 * n_tf:].reshape((-1, 3))
-    evaluate_time_functions(tf_table, int_section(ints, _TF_OPS).reshape((-1, 2)),
-                            real_section(ints, reals, _TF_REALS), t, stack, tf_values)
-
-    A[:, :] = 0.0
-    phi_t[:] = 0.0
+    for k in range(a0, g0):
+        buffer[k] = 0.0
+    for k in range(t0, s0):
+        buffer[k] = 0.0
     row = 0
-    lengths2 = real_section(ints, reals, _LENGTH2)
-    for k in range(rigid.shape[0] // 4):
-        xi, zi, xj, zj = rigid[4 * k], rigid[4 * k + 1], rigid[4 * k + 2], rigid[4 * k + 3]
+    i0 = ints[1 + _RIGID]
+    l0 = ints[real_base + 1 + _LENGTH2]
+    for k in range((ints[2 + _RIGID] - i0) // 4):
+        xi, zi, xj, zj = ints[i0 + 4 * k], ints[i0 + 4 * k + 1], ints[i0 + 4 * k + 2], ints[i0 + 4 * k + 3]
         dx, dz = x[xj] - x[xi], x[zj] - x[zi]
         dvx, dvz = v[xj] - v[xi], v[zj] - v[zi]
-        phi[row] = dx * dx + dz * dz - lengths2[k]
-        _add(A, row, xi, -2.0 * dx, n)
-        _add(A, row, zi, -2.0 * dz, n)
-        _add(A, row, xj, 2.0 * dx, n)
-        _add(A, row, zj, 2.0 * dz, n)
-        gamma[row] = -2.0 * (dvx * dvx + dvz * dvz)
+        buffer[n + row] = dx * dx + dz * dz - reals[l0 + k]
+        _add(buffer, a0, row, xi, -2.0 * dx, n)
+        _add(buffer, a0, row, zi, -2.0 * dz, n)
+        _add(buffer, a0, row, xj, 2.0 * dx, n)
+        _add(buffer, a0, row, zj, 2.0 * dz, n)
+        buffer[g0 + row] = -2.0 * (dvx * dvx + dvz * dvz)
         row += 1
 
-    for k in range(distance.shape[0] // 5):
-        xi, zi, xj, zj, s = distance[5 * k], distance[5 * k + 1], distance[5 * k + 2], distance[5 * k + 3], \
-            distance[5 * k + 4]
+    i0 = ints[1 + _DISTANCE]
+    for k in range((ints[2 + _DISTANCE] - i0) // 5):
+        xi, zi, xj, zj, s = (ints[i0 + 5 * k], ints[i0 + 5 * k + 1], ints[i0 + 5 * k + 2], ints[i0 + 5 * k + 3],
+                             ints[i0 + 5 * k + 4])
         dx, dz = x[xj] - x[xi], x[zj] - x[zi]
         dvx, dvz = v[xj] - v[xi], v[zj] - v[zi]
-        phi[row] = dx * dx + dz * dz - x[s] * x[s]
-        _add(A, row, xi, -2.0 * dx, n)
-        _add(A, row, zi, -2.0 * dz, n)
-        _add(A, row, xj, 2.0 * dx, n)
-        _add(A, row, zj, 2.0 * dz, n)
-        A[row, s] += -2.0 * x[s]
-        gamma[row] = -2.0 * (dvx * dvx + dvz * dvz) + 2.0 * v[s] * v[s]
+        buffer[n + row] = dx * dx + dz * dz - x[s] * x[s]
+        _add(buffer, a0, row, xi, -2.0 * dx, n)
+        _add(buffer, a0, row, zi, -2.0 * dz, n)
+        _add(buffer, a0, row, xj, 2.0 * dx, n)
+        _add(buffer, a0, row, zj, 2.0 * dz, n)
+        buffer[a0 + row * n + s] += -2.0 * x[s]
+        buffer[g0 + row] = -2.0 * (dvx * dvx + dvz * dvz) + 2.0 * v[s] * v[s]
         row += 1
 
-    for k in range(angle.shape[0] // 9):
-        r = angle[9 * k:9 * k + 9]
-        ux, uz = x[r[2]] - x[r[0]], x[r[3]] - x[r[1]]
-        wx, wz = x[r[6]] - x[r[4]], x[r[7]] - x[r[5]]
-        dux, duz = v[r[2]] - v[r[0]], v[r[3]] - v[r[1]]
-        dwx, dwz = v[r[6]] - v[r[4]], v[r[7]] - v[r[5]]
-        f, df = x[r[8]], v[r[8]]
+    i0 = ints[1 + _ANGLE]
+    for k in range((ints[2 + _ANGLE] - i0) // 9):
+        r = i0 + 9 * k
+        ux, uz = x[ints[r + 2]] - x[ints[r]], x[ints[r + 3]] - x[ints[r + 1]]
+        wx, wz = x[ints[r + 6]] - x[ints[r + 4]], x[ints[r + 7]] - x[ints[r + 5]]
+        dux, duz = v[ints[r + 2]] - v[ints[r]], v[ints[r + 3]] - v[ints[r + 1]]
+        dwx, dwz = v[ints[r + 6]] - v[ints[r + 4]], v[ints[r + 7]] - v[ints[r + 5]]
+        f, df = x[ints[r + 8]], v[ints[r + 8]]
         c, s = math.cos(f), math.sin(f)
         cross = ux * wz - uz * wx
         dot = ux * wx + uz * wz
         dcross = dux * wz + ux * dwz - duz * wx - uz * dwx
         ddot = dux * wx + ux * dwx + duz * wz + uz * dwz
-        phi[row] = c * cross - s * dot
+        buffer[n + row] = c * cross - s * dot
         # ∂Φ/∂u = c (w_z, -w_x) - s (w_x, w_z);  ∂Φ/∂w = c (-u_z, u_x) - s (u_x, u_z)
         gux, guz = c * wz - s * wx, -c * wx - s * wz
         gwx, gwz = -c * uz - s * ux, c * ux - s * uz
-        _add(A, row, r[0], -gux, n)
-        _add(A, row, r[1], -guz, n)
-        _add(A, row, r[2], gux, n)
-        _add(A, row, r[3], guz, n)
-        _add(A, row, r[4], -gwx, n)
-        _add(A, row, r[5], -gwz, n)
-        _add(A, row, r[6], gwx, n)
-        _add(A, row, r[7], gwz, n)
-        A[row, r[8]] += -s * cross - c * dot
+        _add(buffer, a0, row, ints[r], -gux, n)
+        _add(buffer, a0, row, ints[r + 1], -guz, n)
+        _add(buffer, a0, row, ints[r + 2], gux, n)
+        _add(buffer, a0, row, ints[r + 3], guz, n)
+        _add(buffer, a0, row, ints[r + 4], -gwx, n)
+        _add(buffer, a0, row, ints[r + 5], -gwz, n)
+        _add(buffer, a0, row, ints[r + 6], gwx, n)
+        _add(buffer, a0, row, ints[r + 7], gwz, n)
+        buffer[a0 + row * n + ints[r + 8]] += -s * cross - c * dot
         # velocity-quadratic part of Φ̈ (terms without second derivatives)
         cross_vv = dux * dwz - duz * dwx
         dot_vv = dux * dwx + duz * dwz
         quadratic = (-c * df * df * cross - 2.0 * s * df * dcross + 2.0 * c * cross_vv
                      + s * df * df * dot - 2.0 * c * df * ddot - 2.0 * s * dot_vv)
-        gamma[row] = -quadratic
+        buffer[g0 + row] = -quadratic
         row += 1
 
-    for k in range(parallel.shape[0] // 8):
-        r = parallel[8 * k:8 * k + 8]
-        ux, uz = x[r[2]] - x[r[0]], x[r[3]] - x[r[1]]
-        wx, wz = x[r[6]] - x[r[4]], x[r[7]] - x[r[5]]
-        dux, duz = v[r[2]] - v[r[0]], v[r[3]] - v[r[1]]
-        dwx, dwz = v[r[6]] - v[r[4]], v[r[7]] - v[r[5]]
-        phi[row] = ux * wz - uz * wx
-        _add(A, row, r[0], -wz, n)
-        _add(A, row, r[1], wx, n)
-        _add(A, row, r[2], wz, n)
-        _add(A, row, r[3], -wx, n)
-        _add(A, row, r[4], uz, n)
-        _add(A, row, r[5], -ux, n)
-        _add(A, row, r[6], -uz, n)
-        _add(A, row, r[7], ux, n)
-        gamma[row] = -2.0 * (dux * dwz - duz * dwx)
+    i0 = ints[1 + _PARALLEL]
+    for k in range((ints[2 + _PARALLEL] - i0) // 8):
+        r = i0 + 8 * k
+        ux, uz = x[ints[r + 2]] - x[ints[r]], x[ints[r + 3]] - x[ints[r + 1]]
+        wx, wz = x[ints[r + 6]] - x[ints[r + 4]], x[ints[r + 7]] - x[ints[r + 5]]
+        dux, duz = v[ints[r + 2]] - v[ints[r]], v[ints[r + 3]] - v[ints[r + 1]]
+        dwx, dwz = v[ints[r + 6]] - v[ints[r + 4]], v[ints[r + 7]] - v[ints[r + 5]]
+        buffer[n + row] = ux * wz - uz * wx
+        _add(buffer, a0, row, ints[r], -wz, n)
+        _add(buffer, a0, row, ints[r + 1], wx, n)
+        _add(buffer, a0, row, ints[r + 2], wz, n)
+        _add(buffer, a0, row, ints[r + 3], -wx, n)
+        _add(buffer, a0, row, ints[r + 4], uz, n)
+        _add(buffer, a0, row, ints[r + 5], -ux, n)
+        _add(buffer, a0, row, ints[r + 6], -uz, n)
+        _add(buffer, a0, row, ints[r + 7], ux, n)
+        buffer[g0 + row] = -2.0 * (dux * dwz - duz * dwx)
         row += 1
 
-    for k in range(driver.shape[0] // 2):
-        c, f = driver[2 * k], driver[2 * k + 1]
-        phi[row] = x[c] - tf_values[f, 0]
-        A[row, c] = 1.0
-        phi_t[row] = -tf_values[f, 1]
-        gamma[row] = tf_values[f, 2]
+    i0 = ints[1 + _DRIVER]
+    for k in range((ints[2 + _DRIVER] - i0) // 2):
+        c, f = ints[i0 + 2 * k], ints[i0 + 2 * k + 1]
+        buffer[n + row] = x[c] - buffer[s0 + 3 * f]
+        buffer[a0 + row * n + c] = 1.0
+        buffer[t0 + row] = -buffer[s0 + 3 * f + 1]
+        buffer[g0 + row] = buffer[s0 + 3 * f + 2]
         row += 1
 
     # generalized forces
-    Q[:] = real_section(ints, reals, _Q_CONSTANT)
-    forces = int_section(ints, _POINT_FORCE)
-    for k in range(forces.shape[0] // 4):
-        xi, zi, fx, fz = forces[4 * k], forces[4 * k + 1], forces[4 * k + 2], forces[4 * k + 3]
+    r0 = ints[real_base + 1 + _Q_CONSTANT]
+    for k in range(n):
+        buffer[k] = reals[r0 + k]
+    i0 = ints[1 + _POINT_FORCE]
+    for k in range((ints[2 + _POINT_FORCE] - i0) // 4):
+        xi, zi, fx, fz = ints[i0 + 4 * k], ints[i0 + 4 * k + 1], ints[i0 + 4 * k + 2], ints[i0 + 4 * k + 3]
         if xi < n:
-            Q[xi] += tf_values[fx, 0]
+            buffer[xi] += buffer[s0 + 3 * fx]
         if zi < n:
-            Q[zi] += tf_values[fz, 0]
-    torques = int_section(ints, _TORQUE)
-    for k in range(torques.shape[0] // 2):
-        Q[torques[2 * k]] += tf_values[torques[2 * k + 1], 0]
-    springs = int_section(ints, _SPRING)
-    spring_parameters = real_section(ints, reals, _SPRING_PARAMETERS)
-    for k in range(springs.shape[0] // 4):
-        xi, zi, xj, zj = springs[4 * k], springs[4 * k + 1], springs[4 * k + 2], springs[4 * k + 3]
+            buffer[zi] += buffer[s0 + 3 * fz]
+    i0 = ints[1 + _TORQUE]
+    for k in range((ints[2 + _TORQUE] - i0) // 2):
+        buffer[ints[i0 + 2 * k]] += buffer[s0 + 3 * ints[i0 + 2 * k + 1]]
+    i0 = ints[1 + _SPRING]
+    r0 = ints[real_base + 1 + _SPRING_PARAMETERS]
+    for k in range((ints[2 + _SPRING] - i0) // 4):
+        xi, zi, xj, zj = ints[i0 + 4 * k], ints[i0 + 4 * k + 1], ints[i0 + 4 * k + 2], ints[i0 + 4 * k + 3]
         dx, dz = x[xj] - x[xi], x[zj] - x[zi]
         length = math.sqrt(dx * dx + dz * dz)
         ex, ez = dx / length, dz / length
         rate = ex * (v[xj] - v[xi]) + ez * (v[zj] - v[zi])
-        tension = spring_parameters[3 * k] * (length - spring_parameters[3 * k + 2]) \
-            + spring_parameters[3 * k + 1] * rate
-        _add_force(Q, xi, tension * ex, n)
-        _add_force(Q, zi, tension * ez, n)
-        _add_force(Q, xj, -tension * ex, n)
-        _add_force(Q, zj, -tension * ez, n)
-    actuators = int_section(ints, _ACTUATOR)
-    gains = real_section(ints, reals, _ACTUATOR_GAIN)
-    for k in range(actuators.shape[0]):
-        Q[actuators[k]] += gains[k] * u[k]
+        tension = reals[r0 + 3 * k] * (length - reals[r0 + 3 * k + 2]) + reals[r0 + 3 * k + 1] * rate
+        _add_force(buffer, xi, tension * ex, n)
+        _add_force(buffer, zi, tension * ez, n)
+        _add_force(buffer, xj, -tension * ex, n)
+        _add_force(buffer, zj, -tension * ez, n)
+    i0 = ints[1 + _ACTUATOR]
+    r0 = ints[real_base + 1 + _ACTUATOR_GAIN]
+    for k in range(ints[2 + _ACTUATOR] - i0):
+        buffer[ints[i0 + k]] += reals[r0 + k] * u[k]
 
 
 @njit(cache=True, inline="always")
