@@ -466,8 +466,7 @@ def _schur_solve(M, Q, A, c, schur, qdd, lam):
             y[i] = Q[massive[i]]
         _forward(matrix, dense, y)
         _backward(matrix, dense, y)
-    size = m + n_a
-    reduced = K[:size, :size]
+    reduced = K                             # (m + n_a)², as schur_workspace sizes it
     for a in range(m):
         total = -c[a]
         for t in range(counts[a]):
@@ -714,25 +713,36 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
         if schur[16] == 1:                  # large natural model: band LU of the KKT matrix
             if not _band_kkt(Q, A, rhs[n:n + m], schur, qdd, lam):
                 return SINGULAR
-        elif not (certified and _schur_solve(M, Q, A, rhs[n:n + m], schur, qdd, lam)):
-            for i in range(n):              # the full augmented system
-                for j in range(n):
-                    K[i, j] = M[i, j]
-                rhs[i] = Q[i]
-            for r in range(m):
-                for j in range(n):
-                    K[n + r, j] = A[r, j]
-                    K[j, n + r] = A[r, j]
-                for j in range(m):
-                    K[n + r, n + j] = 0.0
-            if not _solve_in_place(K, rhs):
-                return SINGULAR
-            qdd[:] = rhs[:n]
-            lam[:] = rhs[n:]
+        elif not (certified and _schur_solve(M, Q, A, rhs[n:n + m], schur, qdd, lam)) and \
+                not _full_system(M, Q, A, K, rhs, qdd, lam):
+            return SINGULAR
     for k in range(n):
         if not math.isfinite(qdd[k]):
             return NON_FINITE
     return OK
+
+
+@njit(cache=True)
+def _full_system(M, Q, A, K, rhs, qdd, lam):
+    """q̈, λ of the augmented system [M Aᵀ; A 0][q̈; λ] = [Q; c] (c given in ``rhs[n:]``) by
+    Gaussian elimination with partial pivoting (:func:`_solve_in_place`): the path of
+    :func:`field` when the Schur complement cannot be used.  Returns False when singular."""
+    n, m = qdd.shape[0], lam.shape[0]
+    for i in range(n):
+        for j in range(n):
+            K[i, j] = M[i, j]
+        rhs[i] = Q[i]
+    for r in range(m):
+        for j in range(n):
+            K[n + r, j] = A[r, j]
+            K[j, n + r] = A[r, j]
+        for j in range(m):
+            K[n + r, n + j] = 0.0
+    if not _solve_in_place(K, rhs):
+        return False
+    qdd[:] = rhs[:n]
+    lam[:] = rhs[n:]
+    return True
 
 
 @njit(cache=True)
@@ -947,6 +957,21 @@ def rk4_batch(kind, method, parameters, Q0, QD0, U0, h, steps, every, ints, real
         recorded[v] = count
 
 
+@njit(cache=True, inline="always")
+def _stage_state(q, qd, a, kq, kv, sq, sv):
+    """The RK stage state (sq, sv) = (q + a k_q, q̇ + a k_v)."""
+    for i in range(q.shape[0]):
+        sq[i] = q[i] + a * kq[i]
+        sv[i] = qd[i] + a * kv[i]
+
+
+@njit(cache=True, inline="always")
+def _slope(qd, a, kv, kq):
+    """The stage slope of q: k_q = q̇ + a k_v."""
+    for i in range(qd.shape[0]):
+        kq[i] = qd[i] + a * kv[i]
+
+
 @njit(cache=True)
 def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buffer_size, mass, row_scale, m, mode,
         law, schur):
@@ -980,6 +1005,7 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
     q, qd, u = q0.copy(), qd0.copy(), u0.copy()
     k1q, k1v, k2q, k2v, k3q, k3v, k4q, k4v = (np.empty(n), np.empty(n), np.empty(n), np.empty(n),
                                               np.empty(n), np.empty(n), np.empty(n), np.empty(n))
+    sq, sv = np.empty(n), np.empty(n)
     lam = np.empty(m)
     stage_lam = np.empty(m)
     K = np.empty((n + m, n + m))
@@ -1007,29 +1033,34 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
             recorded += 1
         if step == steps:
             break
-        k1q[:] = qd
-        sq, sv, st = q + 0.5 * h * k1q, qd + 0.5 * h * k1v, t + 0.5 * h
+        half = 0.5 * h
+        for i in range(n):
+            k1q[i] = qd[i]
+        _stage_state(q, qd, half, k1q, k1v, sq, sv)
+        st = t + half
         if mode == LAW:
             computed_torque(law, sq, sv, st, law_K, law_rhs, u)
         status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, k2v, stage_lam,
                        K, rhs, True, schur)
-        k2q[:] = qd + 0.5 * h * k1v
+        _slope(qd, half, k1v, k2q)
         if status == OK:
-            sq, sv = q + 0.5 * h * k2q, qd + 0.5 * h * k2v
+            _stage_state(q, qd, half, k2q, k2v, sq, sv)
             if mode == LAW:
                 computed_torque(law, sq, sv, st, law_K, law_rhs, u)
             status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, k3v,
                            stage_lam, K, rhs, True, schur)
-        k3q[:] = qd + 0.5 * h * k2v
+        _slope(qd, half, k2v, k3q)
         if status == OK:
-            sq, sv, st = q + h * k3q, qd + h * k3v, t + h
+            _stage_state(q, qd, h, k3q, k3v, sq, sv)
+            st = t + h
             if mode != CONSTANT:
                 computed_torque(law, sq, sv, st, law_K, law_rhs, u)
             status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, k4v,
                            stage_lam, K, rhs, True, schur)
-        k4q[:] = qd + h * k3v
+        _slope(qd, h, k3v, k4q)
         if status != OK:
             return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, status, st, sq, sv, u
-        q = q + (h / 6.0) * (k1q + 2.0 * k2q + 2.0 * k3q + k4q)
-        qd = qd + (h / 6.0) * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+        for i in range(n):                  # in place: the loop allocates nothing per step
+            q[i] += (h / 6.0) * (k1q[i] + 2.0 * k2q[i] + 2.0 * k3q[i] + k4q[i])
+            qd[i] += (h / 6.0) * (k1v[i] + 2.0 * k2v[i] + 2.0 * k3v[i] + k4v[i])
     return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, OK, steps * h, q, qd, u
