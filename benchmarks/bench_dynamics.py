@@ -412,11 +412,8 @@ def passed(run: dict, span: float) -> bool:
 
 
 # ------------------------------------------------------------------------------------ MuJoCo
-def mujoco_build(tree: Tree):
-    """MuJoCo model and data of ``tree`` (hinges, connect equalities for the closures, no
-    contacts) and its start state: (model, data, q0, v0, address of a joint's qpos)."""
-    import mujoco
-
+def mujoco_xml(tree: Tree) -> str:
+    """MJCF of ``tree``: hinges, connect equalities for the closures, no contacts."""
     children: dict[str | None, list[Link]] = {}
     for link in tree.links:
         children.setdefault(link.parent, []).append(link)
@@ -453,7 +450,15 @@ def mujoco_build(tree: Tree):
            '<flag contact="disable" energy="enable"/></option><worldbody>'
            + world + "".join(body(root) for root in children[None])
            + f"</worldbody><equality>{equality}</equality></mujoco>")
-    model = mujoco.MjModel.from_xml_string(xml)
+    return xml
+
+
+def mujoco_build(tree: Tree):
+    """MuJoCo model and data of ``tree`` (:func:`mujoco_xml`) and its start state: (model, data,
+    q0, v0, address of a joint's qpos)."""
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_string(mujoco_xml(tree))
     data = mujoco.MjData(model)
     q0, v0 = np.zeros(model.nq), np.zeros(model.nv)
 

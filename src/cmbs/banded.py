@@ -20,10 +20,12 @@ Fagan & Chen 1973; Erisman & Tinney 1975) in O(m b²) instead of forming L⁻¹.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse
-from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from cmbs.jit import njit
+from cmbs.lazy import lazy_module
+
+sparse = lazy_module("scipy.sparse")
+csgraph = lazy_module("scipy.sparse.csgraph")
 
 
 def jacobian_pattern(model, samples: int = 3, seed: int = 7) -> np.ndarray:
@@ -60,7 +62,7 @@ def band_plan(mass: np.ndarray, pattern: np.ndarray) -> tuple[np.ndarray, int]:
     structure[n:, :n] = pattern
     structure[:n, n:] = pattern.T
     structure[np.arange(n + m), np.arange(n + m)] = True
-    order = reverse_cuthill_mckee(scipy.sparse.csr_matrix(structure), symmetric_mode=True).astype(np.int64)
+    order = csgraph.reverse_cuthill_mckee(sparse.csr_matrix(structure), symmetric_mode=True).astype(np.int64)
     position = np.empty_like(order)
     position[order] = np.arange(order.size)
     rows, columns = np.nonzero(structure)

@@ -965,13 +965,6 @@ def _stage_state(q, qd, a, kq, kv, sq, sv):
         sv[i] = qd[i] + a * kv[i]
 
 
-@njit(cache=True, inline="always")
-def _slope(qd, a, kv, kq):
-    """The stage slope of q: k_q = q̇ + a k_v."""
-    for i in range(qd.shape[0]):
-        kq[i] = qd[i] + a * kv[i]
-
-
 @njit(cache=True)
 def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buffer_size, mass, row_scale, m, mode,
         law, schur):
@@ -1003,9 +996,9 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
     FORCE = np.zeros((records, n))
     buffer = np.zeros(buffer_size)
     q, qd, u = q0.copy(), qd0.copy(), u0.copy()
-    k1q, k1v, k2q, k2v, k3q, k3v, k4q, k4v = (np.empty(n), np.empty(n), np.empty(n), np.empty(n),
-                                              np.empty(n), np.empty(n), np.empty(n), np.empty(n))
-    sq, sv = np.empty(n), np.empty(n)
+    kq = np.empty((4, n))                   # the stages' slopes of q and q̇
+    kv = np.empty((4, n))
+    sq, sv = np.empty(n), np.empty(n)       # the stage state
     lam = np.empty(m)
     stage_lam = np.empty(m)
     K = np.empty((n + m, n + m))
@@ -1016,51 +1009,39 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
     recorded = 0
     for step in range(steps + 1):
         t = step * h
-        if mode == LAW or (mode == HELD and step == 0):
-            computed_torque(law, q, qd, t, law_K, law_rhs, u)
-        status = field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, k1v, lam, K, rhs,
-                       True, schur)
-        if status != OK:
-            return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, status, t, q, qd, u
-        if step % every == 0:
-            T[recorded] = t
-            Qs[recorded] = q
-            QDs[recorded] = qd
-            QDDs[recorded] = k1v
-            LAMs[recorded] = lam
-            Us[recorded] = u
-            record_constraints(buffer, n, m, qd, lam, PHI, PHID, FORCE, recorded)
-            recorded += 1
+        st = t
+        for stage in range(4):              # one call site of field: compiled (and inlined) once
+            if stage == 0:
+                for i in range(n):
+                    sq[i] = q[i]
+                    sv[i] = qd[i]
+            else:
+                a = h if stage == 3 else 0.5 * h
+                _stage_state(q, qd, a, kq[stage - 1], kv[stage - 1], sq, sv)
+                st = t + a
+            for i in range(n):
+                kq[stage, i] = sv[i]
+            if mode == LAW or (mode == HELD and (step == 0 if stage == 0 else stage == 3)):
+                computed_torque(law, sq, sv, st, law_K, law_rhs, u)
+            status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, kv[stage],
+                           lam if stage == 0 else stage_lam, K, rhs, True, schur)
+            if status != OK:
+                return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, status, st, sq, sv, u
+            if stage == 0:
+                if step % every == 0:
+                    T[recorded] = t
+                    Qs[recorded] = q
+                    QDs[recorded] = qd
+                    QDDs[recorded] = kv[0]
+                    LAMs[recorded] = lam
+                    Us[recorded] = u
+                    record_constraints(buffer, n, m, qd, lam, PHI, PHID, FORCE, recorded)
+                    recorded += 1
+                if step == steps:
+                    break
         if step == steps:
             break
-        half = 0.5 * h
-        for i in range(n):
-            k1q[i] = qd[i]
-        _stage_state(q, qd, half, k1q, k1v, sq, sv)
-        st = t + half
-        if mode == LAW:
-            computed_torque(law, sq, sv, st, law_K, law_rhs, u)
-        status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, k2v, stage_lam,
-                       K, rhs, True, schur)
-        _slope(qd, half, k1v, k2q)
-        if status == OK:
-            _stage_state(q, qd, half, k2q, k2v, sq, sv)
-            if mode == LAW:
-                computed_torque(law, sq, sv, st, law_K, law_rhs, u)
-            status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, k3v,
-                           stage_lam, K, rhs, True, schur)
-        _slope(qd, half, k2v, k3q)
-        if status == OK:
-            _stage_state(q, qd, h, k3q, k3v, sq, sv)
-            st = t + h
-            if mode != CONSTANT:
-                computed_torque(law, sq, sv, st, law_K, law_rhs, u)
-            status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, k4v,
-                           stage_lam, K, rhs, True, schur)
-        _slope(qd, h, k3v, k4q)
-        if status != OK:
-            return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, status, st, sq, sv, u
         for i in range(n):                  # in place: the loop allocates nothing per step
-            q[i] += (h / 6.0) * (k1q[i] + 2.0 * k2q[i] + 2.0 * k3q[i] + k4q[i])
-            qd[i] += (h / 6.0) * (k1v[i] + 2.0 * k2v[i] + 2.0 * k3v[i] + k4v[i])
+            q[i] += (h / 6.0) * (kq[0, i] + 2.0 * kq[1, i] + 2.0 * kq[2, i] + kq[3, i])
+            qd[i] += (h / 6.0) * (kv[0, i] + 2.0 * kv[1, i] + 2.0 * kv[2, i] + kv[3, i])
     return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, OK, steps * h, q, qd, u

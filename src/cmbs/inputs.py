@@ -6,9 +6,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from cmbs.errors import CmbsError
+from cmbs.lazy import lazy_module
+
+interpolate = lazy_module("scipy.interpolate")
 
 
 @dataclass(frozen=True)
@@ -36,7 +38,7 @@ class SampledInput:
             raise CmbsError(f"sampled input: interpolation must be 'linear' or 'spline', got {self.interpolation!r}")
         object.__setattr__(self, "times", times)
         object.__setattr__(self, "values", values)
-        spline = CubicSpline(times, values, axis=0) if self.interpolation == "spline" and times.size >= 4 else None
+        spline = interpolate.CubicSpline(times, values, axis=0) if self.interpolation == "spline" and times.size >= 4 else None
         if self.interpolation == "spline" and spline is None:
             raise CmbsError("sampled input: spline interpolation needs at least 4 samples")
         object.__setattr__(self, "_spline", spline)

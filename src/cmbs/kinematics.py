@@ -15,12 +15,14 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-import scipy.linalg
-from scipy.optimize import minimize_scalar
 
 from cmbs.errors import ConvergenceError, ModelError
+from cmbs.lazy import lazy_module
 from cmbs.model.model import Model
 from cmbs.trajectory import Trajectory
+
+linalg = lazy_module("scipy.linalg")
+optimize = lazy_module("scipy.optimize")
 
 
 @dataclass(frozen=True)
@@ -67,7 +69,7 @@ def constraint_report(model: Model, q: np.ndarray, t: float = 0.0, *, tolerance:
     holonomic_rank = numerical_rank(A[model.holonomic])[0] if model.nonholonomic.any() else rank
     norms = np.linalg.norm(A, axis=1)
     scaled = A / np.where(norms > 0, norms, 1.0)[:, None]
-    _, _, pivots = scipy.linalg.qr(scaled.T, pivoting=True, mode="economic")
+    _, _, pivots = linalg.qr(scaled.T, pivoting=True, mode="economic")
     redundant = tuple(model.constraint_names[k] for k in sorted(pivots[rank:]))
     return ConstraintReport(n=n, m=m, rank=rank, dof=n - holonomic_rank, velocity_dof=n - rank, redundant=redundant,
                             singular_values=sigma, tolerance=tolerance)
@@ -232,7 +234,7 @@ def singular_configurations(model: Model, trajectory: Trajectory, *, threshold: 
             j = min(segment(t), len(times) - 2)
             return rho_at(q_at(t, j), t)
 
-        best = minimize_scalar(objective, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12}) \
+        best = optimize.minimize_scalar(objective, bounds=(lo, hi), method="bounded", options={"xatol": 1e-12}) \
             if hi > lo else None
         t_min, value = (best.x, best.fun) if best is not None and best.fun < rho[k] else (times[k], rho[k])
         if value < threshold:

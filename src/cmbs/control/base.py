@@ -17,10 +17,12 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from cmbs.errors import CmbsError
+from cmbs.lazy import lazy_module
 from cmbs.trajectory import Trajectory
+
+interpolate = lazy_module("scipy.interpolate")
 
 Law = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
 
@@ -32,7 +34,7 @@ class Reference:
 
     motion: Trajectory
     coordinates: tuple[str, ...]
-    _spline: CubicSpline = field(init=False, repr=False, compare=False)
+    _spline: "interpolate.CubicSpline" = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         unknown = [name for name in self.coordinates if name not in self.motion.names]
@@ -43,7 +45,7 @@ class Reference:
             raise CmbsError("reference: the motion needs at least 4 samples")
         columns = [self.motion.names.index(name) for name in self.coordinates]
         object.__setattr__(self, "coordinates", tuple(self.coordinates))
-        object.__setattr__(self, "_spline", CubicSpline(self.motion.t, self.motion.q[:, columns], axis=0))
+        object.__setattr__(self, "_spline", interpolate.CubicSpline(self.motion.t, self.motion.q[:, columns], axis=0))
 
     def __call__(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         t = min(max(t, self.motion.t[0]), self.motion.t[-1])

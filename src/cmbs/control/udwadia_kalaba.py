@@ -60,14 +60,16 @@ from dataclasses import dataclass
 from typing import Callable, Protocol, Sequence
 
 import numpy as np
-import scipy.linalg
 
 from cmbs.control.base import actuator_map, gain_vector
 from cmbs.dynamics.projection import pseudo_inverse
 from cmbs.errors import CmbsError
+from cmbs.lazy import lazy_module
 from cmbs.model import joints
 from cmbs.model.model import Model
 from cmbs.model.natural import NaturalEquations, point_map
+
+linalg = lazy_module("scipy.linalg")
 
 Desired = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
@@ -409,19 +411,19 @@ class UdwadiaKalabaTracking:
         except np.linalg.LinAlgError:
             raise CmbsError(f"Udwadia-Kalaba control at t={t:.6g}: the mass matrix of model {self.model.name!r} "
                             "is not positive definite on its constraint manifold") from None
-        a = scipy.linalg.cho_solve((L, True), Q_hat, check_finite=False)
-        B = scipy.linalg.solve_triangular(L, A_s.T, lower=True, check_finite=False).T  # A_s L⁻ᵀ
+        a = linalg.cho_solve((L, True), Q_hat, check_finite=False)
+        B = linalg.solve_triangular(L, A_s.T, lower=True, check_finite=False).T  # A_s L⁻ᵀ
         row_scale = _unit_row_scale(B)
         B_unit = B * row_scale[:, None]
         B_unit_pinv, _ = pseudo_inverse(B_unit, self.threshold)
         _, N = pseudo_inverse(B_unit[:m], self.threshold)  # projector onto null(A L⁻ᵀ)
         scaled_force = B_unit_pinv @ (row_scale * (b_s - A_s @ a))
-        qdd = a + scipy.linalg.solve_triangular(L, scaled_force, lower=True, trans="T", check_finite=False)
+        qdd = a + linalg.solve_triangular(L, scaled_force, lower=True, trans="T", check_finite=False)
         force = M @ qdd - Q
 
-        H = N @ scipy.linalg.solve_triangular(L, self.gains, lower=True, check_finite=False)  # N L⁻¹ G
+        H = N @ linalg.solve_triangular(L, self.gains, lower=True, check_finite=False)  # N L⁻¹ G
         H_pinv, _ = pseudo_inverse(H, self.threshold)
-        target = N @ scipy.linalg.solve_triangular(L, force, lower=True, check_finite=False)
+        target = N @ linalg.solve_triangular(L, force, lower=True, check_finite=False)
         u_selected = H_pinv @ target
         residual = float(np.linalg.norm(H @ u_selected - target))
         demanded = N @ B_unit_pinv

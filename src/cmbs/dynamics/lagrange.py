@@ -17,11 +17,13 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-import scipy.linalg
 
 from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters, constraint_velocity
 from cmbs.errors import SingularSystemError
+from cmbs.lazy import lazy_module
 from cmbs.model.model import Model, Terms
+
+linalg = lazy_module("scipy.linalg")
 
 
 @dataclass(frozen=True)
@@ -100,7 +102,7 @@ class KKTSolver(StatelessSolver):
         if self.least_squares:
             solution = np.linalg.lstsq(K, rhs, rcond=None)[0]
         else:
-            solution = scipy.linalg.solve(K, rhs, assume_a="sym", check_finite=False)
+            solution = linalg.solve(K, rhs, assume_a="sym", check_finite=False)
         lam = solution[n:]
         return Accelerations(solution[:n], lam, -terms.A.T @ lam)
 
@@ -109,7 +111,7 @@ class KKTSolver(StatelessSolver):
         scaled = A * self.row_scale[:, None]
         sigma = np.linalg.svd(scaled, compute_uv=False)
         if sigma.size < A.shape[0] or sigma[-1] < self.singular_tolerance * max(sigma[0], 1.0):
-            _, _, pivots = scipy.linalg.qr(scaled.T, pivoting=True, mode="economic")
+            _, _, pivots = linalg.qr(scaled.T, pivoting=True, mode="economic")
             rank = int(np.sum(sigma > self.singular_tolerance * max(sigma[0], 1.0)))
             dependent = [self.model.constraint_names[k] for k in sorted(pivots[rank:])]
             raise SingularSystemError(

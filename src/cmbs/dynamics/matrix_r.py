@@ -25,11 +25,13 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-import scipy.linalg
 
 from cmbs.dynamics.base import Accelerations, check_parameters
 from cmbs.errors import CmbsError, ConvergenceError, SingularSystemError
+from cmbs.lazy import lazy_module
 from cmbs.model.model import Model, Terms
+
+linalg = lazy_module("scipy.linalg")
 
 
 @dataclass(frozen=True)
@@ -88,10 +90,10 @@ def choose_partition(A: np.ndarray, rank_tolerance: float, independent: np.ndarr
     if rank is None:
         sigma = np.linalg.svd(scaled, compute_uv=False)
         rank = int(np.sum(sigma > rank_tolerance * max(sigma[0], 1.0)))
-    _, _, row_pivots = scipy.linalg.qr(scaled.T, pivoting=True, mode="economic")
+    _, _, row_pivots = linalg.qr(scaled.T, pivoting=True, mode="economic")
     rows = np.sort(row_pivots[:rank]).astype(np.int64)
     if independent is None:
-        permutation, _, _ = scipy.linalg.lu(A[rows].T)
+        permutation, _, _ = linalg.lu(A[rows].T)
         dependent = np.sort(np.argmax(permutation, axis=0)[:rank]).astype(np.int64)
     else:
         dependent = np.setdiff1d(np.arange(n), independent)

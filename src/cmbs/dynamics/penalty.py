@@ -22,11 +22,13 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-import scipy.linalg
 
 from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters, constraint_velocity
 from cmbs.errors import ConvergenceError
+from cmbs.lazy import lazy_module
 from cmbs.model.model import Model, Terms
+
+linalg = lazy_module("scipy.linalg")
 
 
 @dataclass(frozen=True)
@@ -58,17 +60,17 @@ class PenaltySolver(StatelessSolver):
         p, A = self.p, terms.A
         target = terms.gamma - 2.0 * p.mu * p.Omega * constraint_velocity(terms, qd) - p.Omega**2 * terms.phi
         matrix = terms.M + p.alpha * (A.T @ A)
-        factor = scipy.linalg.cho_factor(matrix, check_finite=False)
+        factor = linalg.cho_factor(matrix, check_finite=False)
         base = terms.Q + p.alpha * (A.T @ target)
         if p.iterations == 0:
-            qdd = scipy.linalg.cho_solve(factor, base, check_finite=False)
+            qdd = linalg.cho_solve(factor, base, check_finite=False)
             lam = p.alpha * (A @ qdd - target)
             return Accelerations(qdd, lam, -A.T @ lam)
         lam_star = self.lam_star
-        qdd = scipy.linalg.cho_solve(factor, base - A.T @ lam_star, check_finite=False)
+        qdd = linalg.cho_solve(factor, base - A.T @ lam_star, check_finite=False)
         for _ in range(p.iterations):
             lam_star = lam_star + p.alpha * (A @ qdd - target)
-            new = scipy.linalg.cho_solve(factor, base - A.T @ lam_star, check_finite=False)
+            new = linalg.cho_solve(factor, base - A.T @ lam_star, check_finite=False)
             change = np.max(np.abs(new - qdd)) / max(np.max(np.abs(new)), 1.0)
             qdd = new
             if change < p.tolerance:

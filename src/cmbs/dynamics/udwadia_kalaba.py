@@ -25,11 +25,13 @@ from dataclasses import dataclass
 from typing import Callable, ClassVar
 
 import numpy as np
-import scipy.linalg
 
 from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.projection import pseudo_inverse, reference_row_scale
+from cmbs.lazy import lazy_module
 from cmbs.model.model import Model, Terms
+
+linalg = lazy_module("scipy.linalg")
 
 
 @dataclass(frozen=True)
@@ -67,15 +69,15 @@ class UdwadiaKalabaSolver(StatelessSolver):
         else:
             Q = terms.Q
             L = self._constant_factor if self._constant_factor is not None else np.linalg.cholesky(terms.M)
-        a = scipy.linalg.cho_solve((L, True), Q, check_finite=False)
-        B = scipy.linalg.solve_triangular(L, A.T, lower=True, check_finite=False).T  # A L⁻ᵀ
+        a = linalg.cho_solve((L, True), Q, check_finite=False)
+        B = linalg.solve_triangular(L, A.T, lower=True, check_finite=False).T  # A L⁻ᵀ
         B_pinv, null_projector = pseudo_inverse(B, self.p.threshold, self.row_scale * self.mass_scale)
         scaled_force = B_pinv @ (gamma - A @ a)
         if self.p.nonideal is not None:
             c = np.asarray(self.p.nonideal(t, q, qd), dtype=float)
-            scaled_force = scaled_force + null_projector @ scipy.linalg.solve_triangular(L, c, lower=True,
+            scaled_force = scaled_force + null_projector @ linalg.solve_triangular(L, c, lower=True,
                                                                                           check_finite=False)
-        qdd = a + scipy.linalg.solve_triangular(L, scaled_force, lower=True, trans="T", check_finite=False)
+        qdd = a + linalg.solve_triangular(L, scaled_force, lower=True, trans="T", check_finite=False)
         force = terms.M @ qdd - terms.Q  # = Q_c of the original system (ideal + non-ideal)
         A_pinv, _ = pseudo_inverse(A, self.p.threshold, self.row_scale)
         lam = -A_pinv.T @ force

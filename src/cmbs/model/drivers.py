@@ -24,10 +24,12 @@ from typing import Callable, Sequence
 
 from cmbs.jit import njit
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from cmbs.errors import ModelError
+from cmbs.lazy import lazy_module
 from cmbs.model.expressions import Program, evaluate_program, parse_expression
+
+interpolate = lazy_module("scipy.interpolate")
 
 KIND_EXPRESSION, KIND_PIECEWISE, KIND_PYTHON, KIND_UNUSED = 0, 1, 2, 3
 
@@ -97,7 +99,7 @@ class Table(TimeFunction):
         elif self.interpolation == "spline":
             if times.size < 4:
                 raise ModelError(f"spline interpolation needs at least 4 samples, got {times.size}")
-            coefficients = CubicSpline(times, values).c.T.copy()
+            coefficients = interpolate.CubicSpline(times, values).c.T.copy()
         else:
             raise ModelError(f"interpolation must be 'linear' or 'spline', got {self.interpolation!r}")
         object.__setattr__(self, "times", times)

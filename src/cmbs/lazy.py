@@ -1,0 +1,31 @@
+"""Modules imported on first use, so that ``import cmbs`` does not pay for what a run may never
+call (scipy's linalg, interpolate, optimize and sparse take about 0.3 s to import, more than a
+compiled 10 s simulation of a small mechanism).
+
+:func:`lazy_module` is the recipe of the Python documentation for
+:class:`importlib.util.LazyLoader`: the module object exists at once and its code runs at the
+first attribute access.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from types import ModuleType
+
+
+def lazy_module(name: str) -> ModuleType:
+    """The module ``name``, imported when one of its attributes is first read (at once if it was
+    already imported)."""
+    module = sys.modules.get(name)
+    if module is not None:
+        return module
+    spec = importlib.util.find_spec(name)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"no module named {name!r}")
+    loader = importlib.util.LazyLoader(spec.loader)
+    spec.loader = loader
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    loader.exec_module(module)
+    return module
