@@ -33,3 +33,13 @@ def test_lazy_module_returns_an_imported_module_and_rejects_unknown_names():
     assert lazy_module("math") is math
     with pytest.raises(ImportError, match="no_such_module"):
         lazy_module("no_such_module")
+
+
+def test_objects_are_frozen_out_of_the_final_collection_when_numba_is_loaded():
+    """cmbs.jit registers gc.freeze at exit; a handler registered before importing cmbs runs
+    after it (atexit is last-in, first-out) and sees the frozen objects."""
+    probe = ("import atexit, gc; atexit.register(lambda: print('frozen', gc.get_freeze_count() > 0)); "
+             "import cmbs.jit; print('compiled', cmbs.jit.COMPILED)")
+    output = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
+    compiled = "compiled True" in output
+    assert f"frozen {compiled}" in output

@@ -10,6 +10,8 @@ against the compiled kernels, tests/test_jit_fallback.py) and 100-1000× slower.
 
 from __future__ import annotations
 
+import atexit
+import gc
 import os
 from typing import Callable
 
@@ -19,6 +21,14 @@ try:
     import numba as _numba
 except ImportError:
     _numba = None
+
+if _numba is not None:
+    # numba's typing registries are a large graph of objects: the interpreter's final garbage
+    # collection spends about 0.2 s on them at every exit.  The process is ending, so they are
+    # frozen out of that collection (gc.freeze).  Memory is returned to the system as always;
+    # only finalizers of objects left in reference cycles are skipped, which CPython does not
+    # promise to run at exit anyway.
+    atexit.register(gc.freeze)
 
 #: True when the kernels are compiled by numba.
 COMPILED = _numba is not None
