@@ -20,7 +20,8 @@ runs step so close to the singular position that they change branch (θ2 + 2θ1 
 after a warm-up of each configuration family.
 
 Configurations: cmbs RK4 with h = 10 ms ... 0.1 ms on the compiled loops (baumgarte,
-projection, matrix-r); RK45 with rtol = 1e-4 ... 1e-10 (lagrange, matrix-r); generalized-α with
+projection, matrix-r); RK45 with rtol = 1e-4 ... 1e-10 (lagrange, matrix-r) and DOP853 (lagrange,
+compiled); generalized-α with
 h = 10, 2, 1 ms; MuJoCo RK4 and implicitfast with h = 10 ms ... 0.1 ms; Pinocchio RK45 and
 DOP853 (scipy) with rtol = 1e-4 ... 1e-10 and RK4 (Python loop) with h = 10, 2, 1 ms.
 
@@ -108,6 +109,9 @@ def cmbs_configurations(quick: bool) -> list[tuple[str, str, dict, str]]:
         configurations += [(f"cmbs {formulation} RK45", formulation,
                             {"integrator": "rk45", "rtol": tol, "atol": tol, "dt": 0.25}, f"rtol={tol:g}")
                            for tol in tolerances]
+    configurations += [("cmbs lagrange DOP853", "lagrange",
+                        {"integrator": "dop853", "rtol": tol, "atol": tol, "dt": 0.25}, f"rtol={tol:g}")
+                       for tol in tolerances]
     configurations += [("cmbs generalized-alpha", None, {"integrator": "generalized-alpha", "dt": h}, f"h={h:g}")
                        for h in (1e-2, 2e-3, 1e-3)]
     return configurations

@@ -251,7 +251,7 @@ def test_runs_on_the_python_loop_say_why():
     assert compiled.info["compiled"] and "note" not in compiled.info
 
 
-@pytest.mark.parametrize("integrator", ["rk45", "rk23"])
+@pytest.mark.parametrize("integrator", ["rk45", "rk23", "dop853"])
 @pytest.mark.parametrize("name", ["four-bar", "slider-crank-joint", "human"])
 def test_compiled_adaptive_loop_takes_the_python_loops_steps(name, integrator):
     """Same tableau, starting step, controller and dense output as cmbs.integrate.explicit: the

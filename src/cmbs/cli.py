@@ -358,7 +358,8 @@ def build_parser() -> argparse.ArgumentParser:
 
         command.add_argument("--t-end", type=float, required=True, help="final time [s]")
         command.add_argument("--integrator", default="rk45", choices=INTEGRATORS,
-                             help="rk45/rk23 adaptive; rk4, trapezoidal, backward-euler, generalized-alpha fixed step")
+                             help="rk45/rk23/dop853 adaptive; rk4, trapezoidal, backward-euler, generalized-alpha "
+                                  "fixed step")
         command.add_argument("--dt", type=float, default=0.01,
                              help="step of fixed-step integrators, output interval of adaptive ones [s]")
         command.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance (adaptive)")

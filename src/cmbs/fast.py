@@ -99,14 +99,14 @@ def method_of(chosen: Formulation) -> tuple[int, np.ndarray] | None:
 def compiled_plan(model: Model, chosen: Formulation, integrator: str, u: object, project: bool, t_end: float,
                   dt: float) -> tuple | None:
     """(kernel kind, method, parameters, input mode, law) when :func:`rk4` (integrator ``rk4``,
-    t_end a multiple of dt) or :mod:`cmbs.fast_adaptive` (``rk45``/``rk23``, constant inputs)
+    t_end a multiple of dt) or :mod:`cmbs.fast_adaptive` (``rk45``/``rk23``/``dop853``, constant inputs)
     can run the simulation of ``model`` under ``chosen``, else None."""
     kind = supported(model)
     inputs = control(u, model, dt)
     steps = round(t_end / dt)
     if project or inputs is None or kind is None:
         return None
-    if integrator in ("rk45", "rk23"):
+    if integrator in ("rk45", "rk23", "dop853"):
         if inputs[0] != CONSTANT:
             return None
     elif integrator != "rk4" or abs(steps * dt - t_end) > 1e-9 * t_end:

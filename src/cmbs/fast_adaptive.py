@@ -1,12 +1,15 @@
-"""Compiled adaptive Runge-Kutta loop: the rk45 (Dormand-Prince) and rk23 (Bogacki-Shampine)
-runs of :func:`cmbs.simulate` with the formulations of :func:`cmbs.fast.field`, constant inputs.
+"""Compiled adaptive Runge-Kutta loop: the rk45 (Dormand-Prince), rk23 (Bogacki-Shampine) and
+dop853 (Dormand-Prince, 8th order) runs of :func:`cmbs.simulate` with the formulations of
+:func:`cmbs.fast.field`, constant inputs.
 
 The algorithm is that of :func:`cmbs.integrate.explicit.integrate`, step for step: the same
 tableau (passed as arrays from :mod:`cmbs.integrate.tableaus`), Hairer's starting step, the
 scaled RMS error ‖h Σ(b - b̂)_i k_i / (atol + rtol max(|y|, |y_new|))‖ ≤ 1, a rejected step
 shrunk by max(0.2, 0.9 e^(-1/(p+1))), Gustafsson's PI controller for accepted steps
 (0.9 e^(-0.7/(p+1)) e_old^(0.4/(p+1)), growth within [0.2, 5]), a non-finite step retried at a
-tenth, FSAL, and cubic Hermite output at the requested times.  At every output the accelerations,
+tenth, FSAL, and cubic Hermite output at the requested times; for DOP853 its combined error norm
+(:func:`cmbs.integrate.explicit.error_norm`) and its 7th-order continuous extension
+(:func:`cmbs.integrate.explicit.dense_coefficients`).  At every output the accelerations,
 multipliers, |Φ|, |Φ̇| and -Aᵀλ are evaluated at the interpolated state, as the Python path's
 recording does (where that state is singular, q̈ is the interpolant's slope and λ is left 0).
 """
@@ -68,10 +71,61 @@ def _record(kind, method, parameters, t, y, slope, u, ints, reals, buffer, mass,
 
 
 @njit(cache=True)
+def _combination(y, h, weights, stages, count, out, add_y=True):
+    """out = y + h Σ_{j<count} w_j k_j (or without y), over the non-zero weights."""
+    for i in range(out.shape[0]):
+        out[i] = y[i] if add_y else 0.0
+    for j in range(count):
+        if weights[j] != 0.0:
+            factor = h * weights[j]
+            for i in range(out.shape[0]):
+                out[i] += factor * stages[j, i]
+
+
+@njit(cache=True)
+def _dense_coefficients(y, y_new, k1, k_new, h, dense_d, stages, F):
+    """The continuous extension's coefficients F (:func:`cmbs.integrate.explicit.dense_coefficients`)."""
+    d = y.shape[0]
+    for i in range(d):
+        delta = y_new[i] - y[i]
+        F[0, i] = delta
+        F[1, i] = h * k1[i] - delta
+        F[2, i] = 2.0 * delta - h * (k1[i] + k_new[i])
+    for r in range(dense_d.shape[0]):
+        for i in range(d):
+            total = 0.0
+            for j in range(dense_d.shape[1]):
+                total += dense_d[r, j] * stages[j, i]
+            F[3 + r, i] = h * total
+
+
+@njit(cache=True)
+def _dense_value(F, y, x, h, value, slope):
+    """Value and derivative at x = (t - t_n)/h of the continuous extension (factors x and 1 - x
+    alternating from the innermost coefficient, as :func:`cmbs.integrate.explicit._dense`)."""
+    rows = F.shape[0]
+    for i in range(y.shape[0]):
+        total, derivative = 0.0, 0.0
+        for r in range(rows):
+            total += F[rows - 1 - r, i]
+            if r % 2 == 0:
+                derivative = derivative * x + total
+                total *= x
+            else:
+                derivative = derivative * (1.0 - x) - total
+                total *= 1.0 - x
+        value[i] = y[i] + total
+        slope[i] = derivative / h
+
+
+@njit(cache=True)
 def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, reals, buffer_size, mass, row_scale, m,
-             schur, c, a, b, b_error, exponent, start_exponent, first_same_as_last, max_steps):
+             schur, c, a, b, b_error, exponent, start_exponent, first_same_as_last, max_steps, b_error_low, dense_a,
+             dense_c, dense_d):
     """Integrate from t_out[0] to t_out[-1] with the tableau (c, a, b, b_error), the controller's
-    exponent 1/(min(p, p̂) + 1) and the starting step's 1/(p + 1); returns the
+    exponent 1/(min(p, p̂) + 1) and the starting step's 1/(p + 1); ``b_error_low`` (empty if
+    none) the second error estimate and (dense_a, dense_c, dense_d) the continuous extension
+    (empty: cubic Hermite) of :class:`~cmbs.integrate.tableaus.Tableau`; returns the
     outputs (t, q, q̇, q̈, λ, |Φ|, |Φ̇|, -Aᵀλ), the number recorded, the status, the time
     reached, the counters (steps, rejected, evaluations, outputs from the interpolant) and the
     state (q, q̇) the status refers to (where a stage failed, for a failed run)."""
@@ -85,7 +139,13 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
     K = np.empty((n + m, n + m))
     rhs = np.empty(n + m)
     lam = np.empty(m)
-    stages = np.zeros((c.shape[0], d))
+    s = c.shape[0]
+    extra = dense_c.shape[0]
+    stages = np.zeros((s + extra, d))       # the step's stages, then the continuous extension's
+    F = np.zeros((3 + dense_d.shape[0], d))
+    low = np.empty(d)
+    value = np.empty(d)
+    slope = np.empty(d)
     y = np.empty(d)
     y[:n] = q0
     y[n:] = qd0
@@ -123,11 +183,8 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
         h_try = min(h, t_end - t)
         stages[0] = k1
         finite = True
-        for i in range(1, c.shape[0]):
-            work[:] = y
-            for j in range(i):
-                if a[i, j] != 0.0:
-                    work += h_try * a[i, j] * stages[j]
+        for i in range(1, s):
+            _combination(y, h_try, a[i], stages, i, work)
             status = _rhs(kind, method, parameters, work, t + c[i] * h_try, u, ints, reals, buffer, mass, row_scale,
                           lam, K, rhs, schur, stages[i])
             evaluations += 1
@@ -138,10 +195,7 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
                 finite = False
                 break
         if finite:
-            y_new[:] = y
-            for i in range(c.shape[0]):
-                if b[i] != 0.0:
-                    y_new += h_try * b[i] * stages[i]
+            _combination(y, h_try, b, stages, s, y_new)
             for i in range(d):
                 if not math.isfinite(y_new[i]):
                     finite = False
@@ -152,13 +206,20 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
                 continue
             return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, NON_FINITE, t + h_try, steps, rejected, \
                 evaluations, unsolved, y
-        work[:] = 0.0
-        for i in range(c.shape[0]):
-            if b_error[i] != 0.0:
-                work += h_try * b_error[i] * stages[i]
         for i in range(d):
             scale[i] = atol + rtol * max(abs(y[i]), abs(y_new[i]))
-        error = _rms(work, scale)
+        if b_error_low.shape[0] == 0:
+            _combination(y, h_try, b_error, stages, s, work, False)
+            error = _rms(work, scale)
+        else:                                   # DOP853's combined norm
+            _combination(y, 1.0, b_error, stages, s, work, False)
+            _combination(y, 1.0, b_error_low, stages, s, low, False)
+            high_sum, low_sum = 0.0, 0.0
+            for i in range(d):
+                high_sum += (work[i] / scale[i]) ** 2
+                low_sum += (low[i] / scale[i]) ** 2
+            denominator = high_sum + 0.01 * low_sum
+            error = 0.0 if denominator == 0.0 else abs(h_try) * high_sum / math.sqrt(denominator * d)
         if error > 1.0:
             h = h_try * max(0.2, 0.9 * error ** -exponent)
             rejected += 1
@@ -172,7 +233,7 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
         factor_old = error
         t_new = t + h_try
         if first_same_as_last:
-            k_new[:] = stages[c.shape[0] - 1]
+            k_new[:] = stages[s - 1]
         else:
             status = _rhs(kind, method, parameters, y_new, t_new, u, ints, reals, buffer, mass, row_scale, lam, K,
                           rhs, schur, k_new)
@@ -181,14 +242,28 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
                 return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, SINGULAR, t_new, steps, rejected, \
                     evaluations, unsolved, y_new
         steps += 1
+        if extra > 0 and next_out < count and t_out[next_out] <= t_new + 1e-12 * max(1.0, abs(t_new)):
+            for i in range(extra):              # the continuous extension's stages
+                _combination(y, h_try, dense_a[i], stages, s + i, work)
+                status = _rhs(kind, method, parameters, work, t + dense_c[i] * h_try, u, ints, reals, buffer, mass,
+                              row_scale, lam, K, rhs, schur, stages[s + i])
+                evaluations += 1
+                if status != OK:
+                    return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, status, t + dense_c[i] * h_try, \
+                        steps, rejected, evaluations, unsolved, work
+            _dense_coefficients(y, y_new, k1, k_new, h_try, dense_d, stages, F)
         while next_out < count and t_out[next_out] <= t_new + 1e-12 * max(1.0, abs(t_new)):
-            s = (t_out[next_out] - t) / h_try       # cubic Hermite on [t, t_new]
-            h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
-            h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
-            d00, d10 = (6 * s**2 - 6 * s) / h_try, 3 * s**2 - 4 * s + 1
-            d01, d11 = (-6 * s**2 + 6 * s) / h_try, 3 * s**2 - 2 * s
-            value = h00 * y + h10 * h_try * k1 + h01 * y_new + h11 * h_try * k_new
-            slope = d00 * y + d10 * k1 + d01 * y_new + d11 * k_new
+            x = (t_out[next_out] - t) / h_try
+            if extra > 0:
+                _dense_value(F, y, x, h_try, value, slope)
+            else:                               # cubic Hermite on [t, t_new]
+                h00, h10 = 2 * x**3 - 3 * x**2 + 1, x**3 - 2 * x**2 + x
+                h01, h11 = -2 * x**3 + 3 * x**2, x**3 - x**2
+                d00, d10 = (6 * x**2 - 6 * x) / h_try, 3 * x**2 - 4 * x + 1
+                d01, d11 = (-6 * x**2 + 6 * x) / h_try, 3 * x**2 - 2 * x
+                for i in range(d):
+                    value[i] = h00 * y[i] + h10 * h_try * k1[i] + h01 * y_new[i] + h11 * h_try * k_new[i]
+                    slope[i] = d00 * y[i] + d10 * k1[i] + d01 * y_new[i] + d11 * k_new[i]
             unsolved += _record(kind, method, parameters, t_out[next_out], value, slope, u, ints, reals, buffer,
                                 mass, row_scale, K, rhs, schur, next_out, T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE)
             next_out += 1

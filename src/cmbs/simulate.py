@@ -26,13 +26,13 @@ from cmbs.dynamics.projection import pseudo_inverse
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.integrate.explicit import Integration, integrate as integrate_explicit
 from cmbs.integrate.implicit import BACKWARD_EULER, TRAPEZOIDAL, Scheme, generalized_alpha, integrate_index3
-from cmbs.integrate.tableaus import TABLEAUS
+from cmbs.integrate.tableaus import tableau as explicit_method
 from cmbs.kinematics import accelerations as acceleration_analysis
 from cmbs.model.model import Model
 from cmbs.trajectory import Trajectory
 
 Inputs = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
-EXPLICIT = ("rk23", "rk45", "rk4")
+EXPLICIT = ("rk23", "rk45", "dop853", "rk4")
 INDEX3 = {"backward-euler": BACKWARD_EULER, "generalized-alpha": generalized_alpha(0.9)}
 INTEGRATORS = (*EXPLICIT, "trapezoidal", *INDEX3)
 
@@ -109,7 +109,8 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
         integrators bring their own: ``trapezoidal`` works in independent coordinates (matrix R,
         thesis eq. 3.51-3.57), ``backward-euler`` and ``generalized-alpha`` on the index-3 DAE.
     integrator
-        ``rk45`` (Dormand-Prince), ``rk23`` (Bogacki-Shampine): adaptive with ``rtol``/``atol``;
+        ``rk45`` (Dormand-Prince), ``rk23`` (Bogacki-Shampine), ``dop853`` (Dormand-Prince, 8th
+        order, for tight tolerances): adaptive with ``rtol``/``atol``;
         ``rk4``, ``trapezoidal``, ``backward-euler``, ``generalized-alpha`` (ρ∞ = 0.9): fixed
         step ``dt``.
     dt
@@ -125,7 +126,7 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
         (rk4; lagrange, baumgarte or standard projection; constant inputs, or a
         :class:`~cmbs.control.ComputedTorque` law alone or in a
         :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; or matrix-r with constant inputs
-        on a holonomic model (:mod:`cmbs.fast_matrix_r`); rk45/rk23 with lagrange, baumgarte or
+        on a holonomic model (:mod:`cmbs.fast_matrix_r`); rk45/rk23/dop853 with lagrange, baumgarte or
         standard projection and constant inputs (:mod:`cmbs.fast_adaptive`); no projection; no
         Python time functions), True requires it, False keeps the Python loop.
 
@@ -145,7 +146,7 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
         raise CmbsError(f"unknown integrator {integrator!r}; choose one of {', '.join(INTEGRATORS)}")
     if integrator not in EXPLICIT and model.nonholonomic.any():
         raise CmbsError(f"integrator {integrator!r} enforces constraints at position level and cannot impose the "
-                        f"nonholonomic constraints of model {model.name!r}; use rk45, rk23 or rk4")
+                        f"nonholonomic constraints of model {model.name!r}; use rk45, rk23, dop853 or rk4")
     if integrator not in EXPLICIT and formulation is not None:
         raise CmbsError(f"integrator {integrator!r} brings its own formulation (trapezoidal: matrix R in "
                         "independent coordinates, options of matrix-r allowed; backward-euler, "
@@ -250,7 +251,7 @@ def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.
             q, qd = project_state(model, q, qd, t, tolerance=projection_tolerance)
         return np.concatenate([q, qd])
 
-    tableau = TABLEAUS[integrator]
+    tableau = explicit_method(integrator)
     return integrate_explicit(field, np.concatenate([q0, qd0]), times, tableau=tableau, rtol=rtol, atol=atol,
                               step=dt if tableau.b_error is None else None,
                               after_step=after_step if project or solver.adjusts_state else None, progress=bar,
@@ -487,14 +488,23 @@ def _run_compiled_matrix_r(model: Model, solver, chosen: Formulation, inputs: In
     return trajectory
 
 
+def _tableau_extras(tableau) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The second error estimate and the continuous extension (a, c, d) of ``tableau`` as arrays
+    for :func:`cmbs.fast_adaptive.adaptive`, empty where the method has none."""
+    low = tableau.b_error_low if tableau.b_error_low is not None else np.zeros(0)
+    if tableau.dense is None:
+        return low, np.zeros((0, 0)), np.zeros(0), np.zeros((0, 0))
+    return low, tableau.dense.a, tableau.dense.c, tableau.dense.d
+
+
 def _run_compiled_adaptive(model: Model, solver, chosen: Formulation, plan: tuple, inputs: Inputs, q0: np.ndarray,
                            qd0: np.ndarray, times: np.ndarray, started: float, options: dict) -> Trajectory:
-    """The rk45/rk23 loop of :mod:`cmbs.fast_adaptive`; outputs at ``times``."""
+    """The rk45/rk23/dop853 loop of :mod:`cmbs.fast_adaptive`; outputs at ``times``."""
     from cmbs import fast, fast_adaptive
 
     kind, method, parameters, _, _ = plan
     parameters = fast.bound_parameters(method, parameters, solver)
-    tableau = TABLEAUS[options["integrator"]]
+    tableau = explicit_method(options["integrator"])
     _, ints, reals, buffer, mass, schur = fast.workspace(model)
     u = np.array(inputs(0.0, q0, qd0), dtype=float)
     loop_started = time.perf_counter()
@@ -504,7 +514,7 @@ def _run_compiled_adaptive(model: Model, solver, chosen: Formulation, plan: tupl
         options["rtol"], options["atol"], u, ints, reals, buffer.size, mass, np.ascontiguousarray(solver.row_scale),
         model.m, schur, tableau.c, tableau.a, tableau.b, tableau.b_error,
         1.0 / (min(tableau.order, tableau.error_order) + 1), 1.0 / (tableau.order + 1), tableau.first_same_as_last,
-        10_000_000)
+        10_000_000, *_tableau_extras(tableau))
     loop_wall = time.perf_counter() - loop_started
     message = ""
     if status == fast.SINGULAR:

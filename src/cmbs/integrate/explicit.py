@@ -5,8 +5,9 @@ Gustafsson 1991) kept apart.
 After every accepted step an optional ``after_step(t, y) -> y`` may change the state (drift
 projection, recovery of dependent coordinates); the derivative at the new point is then
 re-evaluated.  Output is at the times of ``t_out``, by cubic Hermite interpolation between the
-steps' end points and derivatives (dense output, O(h⁴)), or exactly at the steps for a fixed
-step equal to the output interval.  Failures come back as a status, never as a swallowed
+steps' end points and derivatives (dense output, O(h⁴)), by the method's own continuous
+extension where it has one (DOP853: 7th order, three more evaluations in a step with outputs),
+or exactly at the steps for a fixed step equal to the output interval.  Failures come back as a status, never as a swallowed
 exception.
 """
 
@@ -128,7 +129,7 @@ def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tab
             return fail(f"the state became non-finite at t={t + h_try:.6g}")
         if adaptive:
             scale = atol + rtol * np.maximum(np.abs(y), np.abs(y_new))
-            error = float(np.sqrt(np.mean((h_try * (tableau.b_error @ stages) / scale) ** 2)))
+            error = error_norm(tableau, stages, h_try, scale)
             if error > 1.0:
                 h = h_try * max(0.2, 0.9 * error**-exponent)
                 counters["rejected"] += 1
@@ -153,13 +154,71 @@ def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tab
             end = next_out
             while end < t_out.size and t_out[end] <= t_new + 1e-12 * max(1.0, abs(t_new)):
                 end += 1
-            values, slopes = _hermite(t, y, k1, t_new, y_new, k_new, t_out[next_out:end])
+            if tableau.dense is None:
+                values, slopes = _hermite(t, y, k1, t_new, y_new, k_new, t_out[next_out:end])
+            else:
+                try:
+                    coefficients = dense_coefficients(field, tableau, t, y, h_try, y_new, k_new, stages)
+                except stop_on as error:
+                    return fail(str(error))
+                values, slopes = _dense(coefficients, t, y, h_try, t_out[next_out:end])
             out_y[next_out:end], out_dy[next_out:end] = values, slopes
             next_out = end
         t, y, k1 = t_new, y_new, k_new
         if progress is not None:
             progress(t)
     return Integration(t_out, out_y, out_dy, "success", "", counters)
+
+
+def error_norm(tableau: Tableau, stages: np.ndarray, h: float, scale: np.ndarray) -> float:
+    """The scaled error of a step: ‖h Σ e_i k_i / scale‖_RMS, or for a tableau with a second,
+    low-order estimate (DOP853; Hairer, Nørsett & Wanner §II.10, as dop853.f and scipy)
+    h ‖e5‖² / √(N (‖e5‖² + 0.01 ‖e3‖²)) with e5 = Σ b_error_i k_i / scale and e3 likewise."""
+    if tableau.b_error_low is None:
+        return float(np.sqrt(np.mean((h * (tableau.b_error @ stages) / scale) ** 2)))
+    high = float(np.sum(((tableau.b_error @ stages) / scale) ** 2))
+    low = float(np.sum(((tableau.b_error_low @ stages) / scale) ** 2))
+    denominator = high + 0.01 * low
+    return 0.0 if denominator == 0.0 else abs(h) * high / np.sqrt(denominator * scale.size)
+
+
+def dense_coefficients(f: VectorField, tableau: Tableau, t: float, y: np.ndarray, h: float, y_new: np.ndarray,
+                       f_new: np.ndarray, stages: np.ndarray) -> np.ndarray:
+    """Coefficients F (p, d) of the continuous extension of the step from (t, y) to
+    (t + h, y_new) (Hairer, Nørsett & Wanner §II.6; dop853.f's CONTD8): the extra stages, then
+    F0 = Δy, F1 = h k1 - Δy, F2 = 2Δy - h (k1 + f_new), F3.. = h D K."""
+    dense = tableau.dense
+    count = stages.shape[0]
+    extended = np.zeros((count + dense.c.size, y.size))
+    extended[:count] = stages
+    for i, (a, c) in enumerate(zip(dense.a, dense.c)):
+        extended[count + i] = f(t + c * h, y + h * (a[:count + i] @ extended[:count + i]))
+    delta = y_new - y
+    upper = h * (dense.d @ extended)
+    return np.vstack([delta, h * stages[0] - delta, 2.0 * delta - h * (stages[0] + f_new), upper])
+
+
+def _dense(F: np.ndarray, t0: float, y0: np.ndarray, h: float, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Values and derivatives at ``times`` of the continuous extension with coefficients F:
+    y0 + F0 x + F1 x(1-x) + F2 x²(1-x) + F3 x²(1-x)² + ... (factors x and 1-x alternating),
+    x = (t - t0)/h, evaluated inside out with its derivative."""
+    values = np.empty((times.size, y0.size))
+    slopes = np.empty((times.size, y0.size))
+    for k, time in enumerate(times):
+        x = (time - t0) / h
+        value = np.zeros(y0.size)
+        derivative = np.zeros(y0.size)
+        for i, row in enumerate(F[::-1]):
+            value = value + row
+            if i % 2 == 0:
+                derivative = derivative * x + value
+                value = value * x
+            else:
+                derivative = derivative * (1.0 - x) - value
+                value = value * (1.0 - x)
+        values[k] = y0 + value
+        slopes[k] = derivative / h
+    return values, slopes
 
 
 def _initial_step(f: VectorField, t: float, y: np.ndarray, f0: np.ndarray, tableau: Tableau, rtol: float,

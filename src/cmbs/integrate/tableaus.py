@@ -3,10 +3,16 @@
 ``b_error`` holds b - b̂ (the difference between the propagating solution and the embedded one),
 so the local error estimate is h Σ (b - b̂)_i k_i.  ``first_same_as_last`` (FSAL): the last stage
 is evaluated at the new point and is the next step's first stage.
+
+DOP853 (Dormand & Prince's 8th-order pair, Hairer, Nørsett & Wanner §II.10) also has a 3rd-order
+estimate ``b_error_low`` for its combined error norm and a 7th-order dense output (``dense``):
+three more stages and the interpolation weights.  Its coefficients are read from scipy, which
+ships them with its own DOP853 (``scipy.integrate._ivp.dop853_coefficients``, Hairer's dop853.f).
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +32,20 @@ class Tableau:
     order: int
     error_order: int
     first_same_as_last: bool
+    b_error_low: np.ndarray | None = None
+    dense: "DenseOutput | None" = None
+
+
+@dataclass(frozen=True)
+class DenseOutput:
+    """Continuous extension of a step (Hairer, Nørsett & Wanner §II.6): ``extra`` more stages,
+    stage i at t + c_i h from y + h Σ_j a_ij k_j over all the stages before it (``a`` (e, s + e),
+    ``c`` (e,)), and the weights ``d`` (p - 3, s + e) of the interpolant's upper coefficients
+    (:func:`cmbs.integrate.explicit.dense_coefficients`)."""
+
+    a: np.ndarray
+    c: np.ndarray
+    d: np.ndarray
 
 
 def _tableau(name, c, a, b, b_hat, order, error_order, fsal):
@@ -59,3 +79,24 @@ RK45 = _tableau(
     [5179 / 57600, 0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40], 5, 4, True)
 
 TABLEAUS = {tableau.name: tableau for tableau in (RK4, RK23, RK45)}
+#: every explicit method by name (DOP853 built on first use: importing scipy.integrate takes 0.5 s)
+NAMES = (*TABLEAUS, "dop853")
+
+
+@functools.cache
+def dop853() -> Tableau:
+    """Dormand & Prince (1980), DOP853: 8th order, error estimates of orders 5 and 3, 7th-order
+    dense output; written as 13 stages with the last evaluated at the new point (FSAL)."""
+    from scipy.integrate._ivp import dop853_coefficients as coefficients
+
+    stages = coefficients.N_STAGES + 1
+    return Tableau("dop853", coefficients.C[:stages].copy(), coefficients.A[:stages, :stages].copy(),
+                   np.concatenate([coefficients.B, [0.0]]), coefficients.E5.copy(), 8, 7, True,
+                   b_error_low=coefficients.E3.copy(),
+                   dense=DenseOutput(coefficients.A[stages:].copy(), coefficients.C[stages:].copy(),
+                                     coefficients.D.copy()))
+
+
+def tableau(name: str) -> Tableau:
+    """The explicit method ``name`` (one of :data:`NAMES`)."""
+    return dop853() if name == "dop853" else TABLEAUS[name]
