@@ -187,10 +187,12 @@ def test_compiled_dynamics_equals_the_python_solver(name, formulation):
 def test_projection_takes_the_svd_at_a_singular_position_and_the_schur_path_elsewhere():
     """At θ1 = 90° the slider-crank's A loses rank: the certified Schur path must decline, the
     SVD path gives the Python projection's answer; a regular state is taken by the Schur path."""
-    from cmbs.fast import CompiledDynamics, _projection_by_schur
+    from cmbs.fast import CompiledDynamics, _projection_by_schur, workspace
 
     model = cmbs.load("slider-crank")
     compiled = CompiledDynamics(model, "projection")
+    schur = workspace(model)[5]
+    row_scale = np.ascontiguousarray(compiled.solver.row_scale, dtype=float)
     values = dict(zip(model.coordinate_names, model.q0))
     values.update({"A.x": 0.0, "A.z": 1.0, "C.x": 0.0, "theta1": np.pi / 2, "theta2": -np.pi})
     singular = np.array([values[name] for name in model.coordinate_names])
@@ -199,8 +201,8 @@ def test_projection_takes_the_svd_at_a_singular_position_and_the_schur_path_else
         qd = cmbs.velocities(model, q, qd=np.ones(model.n))
         terms = model.evaluate(q, qd, 0.0)
         qdd, lam = np.empty(model.n), np.empty(model.m)
-        taken = _projection_by_schur(terms.M, terms.Q, terms.A, terms.gamma, compiled._row_scale,
-                                     compiled.formulation.threshold, compiled._schur, qdd, lam)
+        taken = _projection_by_schur(terms.M, terms.Q, terms.A, terms.gamma, row_scale,
+                                     compiled.formulation.threshold, schur, qdd, lam)
         assert taken == schur_expected
         expected = compiled.solver.accelerations(terms, q, qd, 0.0)
         got_qdd, got_lam = compiled.accelerations(q, qd, 0.0)
@@ -302,3 +304,18 @@ def test_undriven_model_no_longer_evaluates_its_drivers_time_functions():
     loaded = kitchen_sink(python_driver=False, loads=True).without_drivers().evaluate(q, qd, 0.7, u).Q
     unloaded = kitchen_sink(python_driver=False, loads=False).without_drivers().evaluate(q, qd, 0.7, u).Q
     assert np.abs(loaded - unloaded).max() > 0.1      # the force and torque functions are still evaluated
+
+
+def test_packed_workspace_unpacks_to_the_same_entries():
+    """CompiledDynamics passes the Schur workspace as three arrays; unpacked, every entry has the
+    original's values, shape and dtype (a chain large enough for the band plan's arrays)."""
+    from cmbs.fast import pack_workspace, unpack_workspace, workspace
+
+    for model in (cmbs.load("four-bar").without_drivers(), cmbs.load("chain", links=30, closed=True)):
+        schur = workspace(model)[5]
+        for original, unpacked in zip(schur, unpack_workspace(*pack_workspace(schur)), strict=True):
+            if isinstance(original, np.ndarray):
+                assert unpacked.dtype == original.dtype and unpacked.shape == original.shape
+                np.testing.assert_array_equal(unpacked, original)
+            else:
+                assert unpacked == original
