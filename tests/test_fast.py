@@ -76,7 +76,7 @@ def test_compiled_loop_equals_python_loop_on_the_human_model():
 
 def test_gram_bounds_enclose_the_extreme_eigenvalues():
     """The cheap certificate of the rank check: trace G and 1/trace G⁻¹ bracket G's spectrum,
-    and a certified A is never one the SVD test calls singular."""
+    and a certified A is never one the SVD test calls singular, also when the bounds are reused."""
     from cmbs.fast import _conditioning, _gram_bounds
 
     rng = np.random.default_rng(1)
@@ -98,10 +98,13 @@ def test_gram_bounds_enclose_the_extreme_eigenvalues():
             rounding = 1e-13 * eigenvalues[-1]
             assert low <= eigenvalues[0] + rounding and eigenvalues[-1] <= high + rounding
             sigma = np.linalg.svd(scaled, compute_uv=False)
+            reference, A0 = np.zeros(3), np.zeros((m, n))
             for tolerance in (1e-4, 1e-2):
-                singular, certified = _conditioning(A, scale, tolerance, gram, factor, rows_of, dense, band)
-                assert singular == (sigma[-1] < tolerance * max(sigma[0], 1.0))
-                assert not (certified and singular)
+                for _ in range(2):              # afresh, then from the reference bounds (same A)
+                    singular, certified = _conditioning(A, scale, tolerance, reference, A0, gram, factor, rows_of,
+                                                        dense, band)
+                    assert singular == (sigma[-1] < tolerance * max(sigma[0], 1.0))
+                    assert not (certified and singular)
 
 
 @pytest.mark.parametrize("kind", ["natural", "joint"])
@@ -319,3 +322,27 @@ def test_packed_workspace_unpacks_to_the_same_entries():
                 np.testing.assert_array_equal(unpacked, original)
             else:
                 assert unpacked == original
+
+
+def test_reused_rank_bounds_bracket_the_singular_values_and_are_refreshed_when_a_moves_far():
+    """Weyl's inequality: bounds kept from a reference A₀ still bracket σ_min² and σ_max² of a
+    nearby A (checked against numpy's SVD); a far A gets fresh Gram bounds."""
+    from cmbs.fast import CompiledDynamics, _bounds, workspace
+
+    model = cmbs.load("four-bar").without_drivers()
+    schur = workspace(model)[5]
+    row_scale = np.ascontiguousarray(CompiledDynamics(model).solver.row_scale, dtype=float)
+    arrays = (schur[27], schur[28], schur[7], schur[8], schur[13], schur[14], schur[15])
+    A0 = np.array(model.evaluate(model.q0, model.qd0, 0.0).A)
+    assert not _bounds(A0, row_scale, *arrays)[2]                  # the first call computes afresh
+    rng = np.random.default_rng(5)
+    for size, reuse_expected in ((1e-4, True), (1e-2, True), (0.5, False)):
+        A = A0 + size * rng.standard_normal(A0.shape) * (A0 != 0)
+        low, high, reused = _bounds(A, row_scale, *arrays)
+        sigma = np.linalg.svd(row_scale[:, None] * A, compute_uv=False)
+        assert reused == reuse_expected
+        assert low <= sigma.min() ** 2 * (1 + 1e-12) and high >= sigma.max() ** 2 * (1 - 1e-12)
+        if not reused:
+            assert _bounds(A, row_scale, *arrays)[2]              # the far A is the new reference
+        schur[27][0] = 0.0
+        _bounds(A0, row_scale, *arrays)                            # back to A₀ as the reference

@@ -249,7 +249,8 @@ def unpack_workspace(floats, integers, layout):
             _matrix(integers, layout, 13), _vector(integers, layout, 14), _matrix(floats, layout, 15), layout[16, 1],
             layout[17, 1], _matrix(floats, layout, 18), _vector(integers, layout, 19), _vector(floats, layout, 20),
             _vector(integers, layout, 21), _vector(integers, layout, 22), _vector(integers, layout, 23),
-            _vector(floats, layout, 24), _vector(integers, layout, 25), _vector(integers, layout, 26))
+            _vector(floats, layout, 24), _vector(integers, layout, 25), _vector(integers, layout, 26),
+            _vector(floats, layout, 27), _matrix(floats, layout, 28))
 
 
 @njit(cache=True)
@@ -434,11 +435,48 @@ def _gram_bounds(A, row_scale, gram, factor, rows_of, start, Z):
     return 1.0 / total, trace
 
 
+#: Largest m·n for which :func:`_bounds` keeps a reference A (its test costs m·n operations).
+BOUNDS_REUSE_SIZE = 1024
+
+
 @njit(cache=True)
-def _conditioning(A, row_scale, tolerance, gram, factor, rows_of, start, Z):
+def _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z):
+    """(λ_low, λ_high, reused): bounds on the extreme eigenvalues of G = (SA)(SA)ᵀ as
+    :func:`_gram_bounds` gives them, from a reference A₀ bounded earlier when A is close to it.
+
+    By Weyl's inequality for singular values (Golub & Van Loan, Cor. 8.6.2), with
+    δ = ‖S(A - A₀)‖_F ≥ ‖S(A - A₀)‖₂: σ_min(SA) ≥ σ_min(SA₀) - δ and σ_max(SA) ≤ σ_max(SA₀) + δ,
+    so (√λ₀_low - δ)² and (√λ₀_high + δ)² are bounds again.  Reused while δ ≤ √λ₀_low / 10 (the
+    lower bound loses at most 19 %); otherwise, or without a valid reference, the Gram bounds
+    are computed afresh (which leaves G in ``gram``: ``reused`` False) and A becomes the
+    reference (``reference`` = (valid, √λ_low, √λ_high), ``A0``) when they prove full rank.  A step moves A little, so most stages of a run skip
+    the Gram matrix, its Cholesky factor and trace G⁻¹."""
+    m, n = A.shape
+    if reference[0] == 1.0:
+        total = 0.0
+        for i in range(m):
+            scale = row_scale[i]
+            for j in range(n):
+                difference = (A[i, j] - A0[i, j]) * scale
+                total += difference * difference
+        delta = math.sqrt(total)
+        if delta <= 0.1 * reference[1]:
+            return (reference[1] - delta) ** 2, (reference[2] + delta) ** 2, True
+    low, high = _gram_bounds(A, row_scale, gram, factor, rows_of, start, Z)
+    reference[0] = 0.0
+    if low > 0.0 and A0.shape[0] == m:
+        for i in range(m):
+            for j in range(n):
+                A0[i, j] = A[i, j]
+        reference[0], reference[1], reference[2] = 1.0, math.sqrt(low), math.sqrt(high)
+    return low, high, False
+
+
+@njit(cache=True)
+def _conditioning(A, row_scale, tolerance, reference, A0, gram, factor, rows_of, start, Z):
     """(singular, certified) for the constraint Jacobian A: ``singular`` when σ_min/σ_max of the
     row-scaled SA is below ``tolerance`` (as KKTSolver's SVD test, with σ_max replaced by 1 when
-    smaller); ``certified`` when cheap bounds already prove it is not (:func:`_gram_bounds`).
+    smaller); ``certified`` when cheap bounds already prove it is not (:func:`_bounds`).
     Only uncertified cases pay for the eigenvalues: Jacobi rotations for up to 12 rows
     (:func:`_gram_extremes`), LAPACK beyond."""
     m, n = A.shape
@@ -446,9 +484,14 @@ def _conditioning(A, row_scale, tolerance, gram, factor, rows_of, start, Z):
         return False, True
     if m > n:
         return True, False
-    low, high = _gram_bounds(A, row_scale, gram, factor, rows_of, start, Z)
+    low, high, reused = _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z)
     if low >= tolerance * tolerance * max(high, 1.0):
         return False, True
+    if reused:                              # the fresh bounds, and G for the eigenvalues
+        reference[0] = 0.0
+        low, high, reused = _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z)
+        if low >= tolerance * tolerance * max(high, 1.0):
+            return False, True
     if m <= 12:
         low, high = _gram_extremes(gram)
     else:
@@ -572,7 +615,8 @@ def schur_workspace(kind: int, mass: np.ndarray, m: int, pattern: np.ndarray | N
     lists (n, m), the Gram's profile (m,) and the Takahashi band (m, b + 1); then the band KKT
     plan (:func:`_band_kkt`): its flag (1: used), half-width b, storage (3b + 1, n + m),
     pivots, right-hand side, the position of each unknown, M's non-zeros (row, column, value)
-    and A's structural non-zeros (row, column)."""
+    and A's structural non-zeros (row, column); last the reference of :func:`_bounds`: (valid,
+    √λ_low, √λ_high) and its A (m, n), empty when m·n > BOUNDS_REUSE_SIZE."""
     n = mass.shape[0]
     flag = 0
     massive = np.arange(n)
@@ -595,7 +639,8 @@ def schur_workspace(kind: int, mass: np.ndarray, m: int, pattern: np.ndarray | N
             np.zeros((m, max(n, 1)), dtype=np.int64), np.zeros(m, dtype=np.int64), np.zeros((m, m)),
             np.zeros((m, m)), massive.astype(np.int64), massless.astype(np.int64), np.zeros(size),
             np.zeros(max(n, m), dtype=np.int64), np.zeros((max(n, 1), max(m, 1)), dtype=np.int64),
-            start, np.zeros((max(m, 1), width + 1)), *band)
+            start, np.zeros((max(m, 1), width + 1)), *band, np.zeros(3),
+            np.zeros((m, n)) if m * n <= BOUNDS_REUSE_SIZE else np.zeros((0, 0)))
 
 
 #: Band KKT solves are used from this many unknowns (n + m) on, when cheaper than the Schur path.
@@ -705,13 +750,18 @@ def _projection_by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     (M̂ + PM - M̂P) q̈ = PQ + M̂A⁺γ holds exactly when P(Mq̈ - Q) = 0 and Aq̈ = γ (Aghili 2005,
     §IV: the two projections of the equation), i.e. when Mq̈ + Aᵀλ = Q, Aq̈ = γ for some λ: the
     Lagrange solution, unique here, with the same multipliers (λ = -(Aᵀ)⁺f_c and f_c = -Aᵀλ).
-    Taken only when the Gram-matrix bounds of :func:`_gram_bounds` certify σ_min(DA) >=
+    Taken only when the Gram-matrix bounds of :func:`_bounds` certify σ_min(DA) >=
     PROJECTION_REGULAR·max(σ_max, 1) and σ_min > ``threshold``; returns False otherwise (near
     singular positions, redundant constraints), and the caller takes the SVD path."""
     m = A.shape[0]
     if m == 0 or m > A.shape[1]:
         return False
-    low, high = _gram_bounds(A, row_scale, schur[7], schur[8], schur[13], schur[14], schur[15])
+    reference, A0, gram, factor, rows_of, start, Z = schur[27], schur[28], schur[7], schur[8], schur[13], schur[14], \
+        schur[15]
+    low, high, reused = _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z)
+    if reused and (low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold):
+        reference[0] = 0.0                  # the fresh bounds before declining
+        low, high, reused = _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z)
     if low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold:
         return False
     if schur[16] == 1:
@@ -752,8 +802,8 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
                 not _projection_by_svd(M, Q, A, gamma, row_scale, parameters, qdd, lam):
             return SINGULAR
     else:
-        singular, certified = _conditioning(A, row_scale, parameters[2], schur[7], schur[8], schur[13], schur[14],
-                                            schur[15])
+        singular, certified = _conditioning(A, row_scale, parameters[2], schur[27], schur[28], schur[7], schur[8],
+                                            schur[13], schur[14], schur[15])
         if check_rank and singular:
             return SINGULAR
         for r in range(m):
@@ -990,7 +1040,7 @@ def _private_copy(schur):
             schur[4].copy(), schur[5].copy(), schur[6].copy(), schur[7].copy(), schur[8].copy(), schur[9],
             schur[10], schur[11].copy(), schur[12], schur[13].copy(), schur[14], schur[15].copy(), schur[16],
             schur[17], schur[18].copy(), schur[19].copy(), schur[20].copy(), schur[21], schur[22], schur[23],
-            schur[24], schur[25], schur[26])
+            schur[24], schur[25], schur[26], schur[27].copy(), schur[28].copy())
 
 
 @njit(cache=True, parallel=True)
