@@ -77,7 +77,7 @@ def test_compiled_loop_equals_python_loop_on_the_human_model():
 def test_gram_bounds_enclose_the_extreme_eigenvalues():
     """The cheap certificate of the rank check: trace G and 1/trace G⁻¹ bracket G's spectrum,
     and a certified A is never one the SVD test calls singular, also when the bounds are reused."""
-    from cmbs.fast import _conditioning, _gram_bounds
+    from cmbs.fast import _conditioning, _gram_bounds, column_rows
 
     rng = np.random.default_rng(1)
     for m in (1, 3, 8, 20):
@@ -89,7 +89,7 @@ def test_gram_bounds_enclose_the_extreme_eigenvalues():
                 A[-1] = A[0] + 10.0 ** -rng.uniform(3, 9) * rng.normal(size=n)
             scale = rng.uniform(0.5, 2.0, size=m)
             gram, factor = np.empty((m, m)), np.empty((m, m))
-            rows_of, dense = np.empty((n, m), dtype=np.int64), np.zeros(m, dtype=np.int64)
+            rows_of, dense = column_rows(None, m, n), np.zeros(m, dtype=np.int64)
             band = np.zeros((m, m))
             low, high = _gram_bounds(A, scale, gram, factor, rows_of, dense, band)
             scaled = A * scale[:, None]
@@ -346,3 +346,27 @@ def test_reused_rank_bounds_bracket_the_singular_values_and_are_refreshed_when_a
             assert _bounds(A, row_scale, *arrays)[2]              # the far A is the new reference
         schur[27][0] = 0.0
         _bounds(A0, row_scale, *arrays)                            # back to A₀ as the reference
+
+
+def test_gram_over_the_structural_pattern_equals_the_dense_product():
+    """With the Jacobian's pattern, G = (SA)(SA)ᵀ is built over each column's structural rows and
+    only within its profile; outside it G stays zero.  Against the dense product, for sparse
+    banded matrices whose pattern also holds entries that happen to be zero."""
+    from cmbs.banded import gram_profile
+    from cmbs.fast import _gram, column_rows
+
+    rng = np.random.default_rng(4)
+    for m, n in ((6, 10), (30, 50)):
+        pattern = np.zeros((m, n), dtype=bool)
+        for i in range(m):
+            first = min(int(i * n / m), n - 3)
+            pattern[i, first:first + 3] = True
+        A = np.where(pattern, rng.normal(size=(m, n)), 0.0)
+        A[pattern & (rng.random(size=(m, n)) < 0.2)] = 0.0          # structural entries that are zero now
+        scale = rng.uniform(0.5, 2.0, size=m)
+        start = gram_profile(pattern)
+        gram = np.zeros((m, m))
+        for _ in range(2):                                            # the second call reuses the workspace
+            _gram(A, scale, gram, column_rows(pattern, m, n), start)
+            scaled = A * scale[:, None]
+            np.testing.assert_allclose(gram, scaled @ scaled.T, rtol=1e-14, atol=1e-14)

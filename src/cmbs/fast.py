@@ -376,29 +376,54 @@ def _backward(L, start, b):
 
 
 @njit(cache=True)
-def _gram(X, scale, gram, rows_of):
+def _gram(X, scale, gram, rows_of, start):
     """G = (SX)(SX)ᵀ into ``gram`` (S = diag(scale)), column by column over the rows each column
-    touches (``rows_of`` is (columns, rows) integer workspace), so a sparse X costs
-    Σ_k nnz(column k)² instead of rows² x columns."""
+    touches, so a sparse X costs Σ_k nnz(column k)² instead of rows² x columns.
+
+    ``rows_of`` (columns, rows + 1): row k holds column k's structural rows after their count
+    (:func:`column_rows`, from the Jacobian's pattern; G then has the profile ``start`` and only
+    that profile is cleared, filled and mirrored: O(m b) for a band), or a count of -1 when there
+    is no pattern: the column is then scanned (O(mn)) and G cleared whole.  Entries of G outside
+    the profile stay zero from the workspace's creation (callers that overwrite G restore them)."""
     m, n = X.shape
+    structured = n > 0 and rows_of[0, 0] >= 0
     for i in range(m):
-        for j in range(m):
+        for j in range(start[i] if structured else 0, i + 1 if structured else m):
             gram[i, j] = 0.0
     for k in range(n):
-        count = 0
-        for i in range(m):
-            if X[i, k] != 0.0:
-                rows_of[k, count] = i
-                count += 1
+        count = rows_of[k, 0]
+        if count < 0:
+            count = 0
+            for i in range(m):
+                if X[i, k] != 0.0:
+                    rows_of[k, 1 + count] = i
+                    count += 1
+            rows_of[k, 0] = -1
         for a in range(count):
-            i = rows_of[k, a]
+            i = rows_of[k, 1 + a]
             xi = X[i, k] * scale[i]
+            if xi == 0.0:
+                continue
             for b in range(a + 1):
-                j = rows_of[k, b]
+                j = rows_of[k, 1 + b]
                 gram[i, j] += xi * X[j, k] * scale[j]
     for i in range(m):
-        for j in range(i):
+        for j in range(start[i] if structured else 0, i):
             gram[j, i] = gram[i, j]
+
+
+def column_rows(pattern: np.ndarray | None, m: int, n: int) -> np.ndarray:
+    """The ``rows_of`` workspace of :func:`_gram`: for each column of A's structural ``pattern``
+    (m, n), its row count and rows; without a pattern, counts of -1 (scan each call)."""
+    rows_of = np.zeros((max(n, 1), m + 1), dtype=np.int64)
+    if pattern is None:
+        rows_of[:, 0] = -1
+        return rows_of
+    for k in range(n):
+        rows = np.flatnonzero(pattern[:, k])
+        rows_of[k, 0] = rows.size
+        rows_of[k, 1:1 + rows.size] = rows
+    return rows_of
 
 
 @njit(cache=True)
@@ -411,7 +436,7 @@ def _gram_bounds(A, row_scale, gram, factor, rows_of, start, Z):
     (:func:`cmbs.banded.inverse_trace`, workspace ``Z``): O(m b²) for a profile of half-width b.
     λ_low = 0 when G is not numerically positive definite."""
     m = A.shape[0]
-    _gram(A, row_scale, gram, rows_of)
+    _gram(A, row_scale, gram, rows_of, start)
     trace = 0.0
     for i in range(m):
         trace += gram[i, i]
@@ -494,6 +519,7 @@ def _conditioning(A, row_scale, tolerance, reference, A0, gram, factor, rows_of,
             return False, True
     if m <= 12:
         low, high = _gram_extremes(gram)
+        gram[:, :] = 0.0                    # the rotations filled it: zero outside the profile again
     else:
         eigenvalues = np.linalg.eigvalsh(gram)  # σ² of the scaled A, ascending
         low, high = eigenvalues[0], eigenvalues[m - 1]
@@ -612,7 +638,7 @@ def schur_workspace(kind: int, mass: np.ndarray, m: int, pattern: np.ndarray | N
     workspaces: X (m, n_p), the reduced matrix (m + n_a)², y (n_p,), A's row non-zeros (m, n)
     and their counts (m,), two Gram matrices (m, m), the index arrays of p and a, a vector
     (m + n_a,), the dense profile (zeros) of a matrix of max(n, m) rows, the Gram's column
-    lists (n, m), the Gram's profile (m,) and the Takahashi band (m, b + 1); then the band KKT
+    lists (:func:`column_rows`), the Gram's profile (m,) and the Takahashi band (m, b + 1); then the band KKT
     plan (:func:`_band_kkt`): its flag (1: used), half-width b, storage (3b + 1, n + m),
     pivots, right-hand side, the position of each unknown, M's non-zeros (row, column, value)
     and A's structural non-zeros (row, column); last the reference of :func:`_bounds`: (valid,
@@ -638,7 +664,7 @@ def schur_workspace(kind: int, mass: np.ndarray, m: int, pattern: np.ndarray | N
     return (matrix, flag, np.zeros((m, massive.size)), np.zeros((size, size)), np.zeros(massive.size),
             np.zeros((m, max(n, 1)), dtype=np.int64), np.zeros(m, dtype=np.int64), np.zeros((m, m)),
             np.zeros((m, m)), massive.astype(np.int64), massless.astype(np.int64), np.zeros(size),
-            np.zeros(max(n, m), dtype=np.int64), np.zeros((max(n, 1), max(m, 1)), dtype=np.int64),
+            np.zeros(max(n, m), dtype=np.int64), column_rows(pattern, m, n),
             start, np.zeros((max(m, 1), width + 1)), *band, np.zeros(3),
             np.zeros((m, n)) if m * n <= BOUNDS_REUSE_SIZE else np.zeros((0, 0)))
 
