@@ -41,6 +41,10 @@ def test_bad_dynamics_options_exit_2(tmp_path, capsys):
                  "--formulation", "projection"]) == 2
     assert main(["simulate", "pendulum", "--t-end", "1", "--out", str(tmp_path / "x.txt")]) == 2
     assert main(["compare", "pendulum", "--t-end", "1", "--formulations", ","]) == 2
+    for tolerance in ("--rtol", "--atol"):
+        assert main(["simulate", "pendulum", "--t-end", "1", "--integrator", "dop853", f"{tolerance}=-1e-8",
+                     "--out", str(tmp_path / "x.npz")]) == 2
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 5 and all(line.startswith("cmbs: error: ") for line in err)
+    assert len(err) == 7 and all(line.startswith("cmbs: error: ") for line in err)
+    assert "rtol must be a finite number > 0, got -1e-08" in err[5] and "atol" in err[6]
     assert list(tmp_path.iterdir()) == []

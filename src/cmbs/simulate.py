@@ -142,6 +142,9 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
         raise CmbsError(f"t_end must be > 0, got {t_end}")
     if not dt > 0:
         raise CmbsError(f"dt must be > 0, got {dt}")
+    for name, value in (("rtol", rtol), ("atol", atol)):
+        if not (value > 0 and np.isfinite(value)):  # a zero or negative scale makes the error norm meaningless
+            raise CmbsError(f"{name} must be a finite number > 0, got {value}")
     if integrator not in INTEGRATORS:
         raise CmbsError(f"unknown integrator {integrator!r}; choose one of {', '.join(INTEGRATORS)}")
     if integrator not in EXPLICIT and model.nonholonomic.any():
