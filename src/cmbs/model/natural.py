@@ -688,6 +688,17 @@ def _add(buffer, a0, row, column, value, n):
         buffer[a0 + row * n + column] += value
 
 
+@njit(cache=True, inline="always")
+def _vector_pair(ints, r, x, v):
+    """The vectors u = j - i and w = l - k of an angle or parallel row whose point coordinates
+    (x_i, z_i, x_j, z_j, x_k, z_k, x_l, z_l) are ``ints[r:r + 8]``, and their rates."""
+    ux, uz = x[ints[r + 2]] - x[ints[r]], x[ints[r + 3]] - x[ints[r + 1]]
+    wx, wz = x[ints[r + 6]] - x[ints[r + 4]], x[ints[r + 7]] - x[ints[r + 5]]
+    dux, duz = v[ints[r + 2]] - v[ints[r]], v[ints[r + 3]] - v[ints[r + 1]]
+    dwx, dwz = v[ints[r + 6]] - v[ints[r + 4]], v[ints[r + 7]] - v[ints[r + 5]]
+    return ux, uz, wx, wz, dux, duz, dwx, dwz
+
+
 @njit(cache=True)
 def _evaluate(q, qd, t, u, ints, reals, buffer):
     """Q, Φ, A, γ, Φ_t of a natural-coordinate model into ``buffer`` (layout of :class:`Terms`;
@@ -761,10 +772,7 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     i0 = ints[1 + _ANGLE]
     for k in range((ints[2 + _ANGLE] - i0) // 9):
         r = i0 + 9 * k
-        ux, uz = x[ints[r + 2]] - x[ints[r]], x[ints[r + 3]] - x[ints[r + 1]]
-        wx, wz = x[ints[r + 6]] - x[ints[r + 4]], x[ints[r + 7]] - x[ints[r + 5]]
-        dux, duz = v[ints[r + 2]] - v[ints[r]], v[ints[r + 3]] - v[ints[r + 1]]
-        dwx, dwz = v[ints[r + 6]] - v[ints[r + 4]], v[ints[r + 7]] - v[ints[r + 5]]
+        ux, uz, wx, wz, dux, duz, dwx, dwz = _vector_pair(ints, r, x, v)
         f, df = x[ints[r + 8]], v[ints[r + 8]]
         c, s = math.cos(f), math.sin(f)
         cross = ux * wz - uz * wx
@@ -795,10 +803,7 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     i0 = ints[1 + _PARALLEL]
     for k in range((ints[2 + _PARALLEL] - i0) // 8):
         r = i0 + 8 * k
-        ux, uz = x[ints[r + 2]] - x[ints[r]], x[ints[r + 3]] - x[ints[r + 1]]
-        wx, wz = x[ints[r + 6]] - x[ints[r + 4]], x[ints[r + 7]] - x[ints[r + 5]]
-        dux, duz = v[ints[r + 2]] - v[ints[r]], v[ints[r + 3]] - v[ints[r + 1]]
-        dwx, dwz = v[ints[r + 6]] - v[ints[r + 4]], v[ints[r + 7]] - v[ints[r + 5]]
+        ux, uz, wx, wz, dux, duz, dwx, dwz = _vector_pair(ints, r, x, v)
         buffer[n + row] = ux * wz - uz * wx
         _add(buffer, a0, row, ints[r], -wz, n)
         _add(buffer, a0, row, ints[r + 1], wx, n)
