@@ -498,6 +498,18 @@ def _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z):
 
 
 @njit(cache=True)
+def _bounds_meeting(A, row_scale, ratio, floor, reference, A0, gram, factor, rows_of, start, Z):
+    """(λ_low, λ_high) of :func:`_bounds`, computed afresh (G then in ``gram``) when reused ones
+    fail the caller's test λ_low >= ratio²·max(λ_high, 1) and λ_low > floor²: a test lost only
+    to the reuse's slack is decided on the fresh bounds."""
+    low, high, reused = _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z)
+    if reused and (low < ratio * ratio * max(high, 1.0) or low <= floor * floor):
+        reference[0] = 0.0
+        low, high, reused = _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z)
+    return low, high
+
+
+@njit(cache=True)
 def _conditioning(A, row_scale, tolerance, reference, A0, gram, factor, rows_of, start, Z):
     """(singular, certified) for the constraint Jacobian A: ``singular`` when σ_min/σ_max of the
     row-scaled SA is below ``tolerance`` (as KKTSolver's SVD test, with σ_max replaced by 1 when
@@ -509,15 +521,10 @@ def _conditioning(A, row_scale, tolerance, reference, A0, gram, factor, rows_of,
         return False, True
     if m > n:
         return True, False
-    low, high, reused = _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z)
+    low, high = _bounds_meeting(A, row_scale, tolerance, 0.0, reference, A0, gram, factor, rows_of, start, Z)
     if low >= tolerance * tolerance * max(high, 1.0):
         return False, True
-    if reused:                              # the fresh bounds, and G for the eigenvalues
-        reference[0] = 0.0
-        low, high, reused = _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z)
-        if low >= tolerance * tolerance * max(high, 1.0):
-            return False, True
-    if m <= 12:
+    if m <= 12:                             # fresh bounds failed: G is in gram for the eigenvalues
         low, high = _gram_extremes(gram)
         gram[:, :] = 0.0                    # the rotations filled it: zero outside the profile again
     else:
@@ -782,12 +789,8 @@ def _projection_by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     m = A.shape[0]
     if m == 0 or m > A.shape[1]:
         return False
-    reference, A0, gram, factor, rows_of, start, Z = schur[27], schur[28], schur[7], schur[8], schur[13], schur[14], \
-        schur[15]
-    low, high, reused = _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z)
-    if reused and (low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold):
-        reference[0] = 0.0                  # the fresh bounds before declining
-        low, high, reused = _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z)
+    low, high = _bounds_meeting(A, row_scale, PROJECTION_REGULAR, threshold, schur[27], schur[28], schur[7], schur[8],
+                                schur[13], schur[14], schur[15])
     if low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold:
         return False
     if schur[16] == 1:

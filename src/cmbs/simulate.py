@@ -26,13 +26,12 @@ from cmbs.dynamics.projection import pseudo_inverse
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.integrate.explicit import Integration, integrate as integrate_explicit
 from cmbs.integrate.implicit import BACKWARD_EULER, TRAPEZOIDAL, Scheme, generalized_alpha, integrate_index3
-from cmbs.integrate.tableaus import tableau as explicit_method
+from cmbs.integrate.tableaus import NAMES as EXPLICIT, tableau as explicit_method
 from cmbs.kinematics import accelerations as acceleration_analysis
 from cmbs.model.model import Model
 from cmbs.trajectory import Trajectory
 
 Inputs = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
-EXPLICIT = ("rk23", "rk45", "dop853", "rk4")
 INDEX3 = {"backward-euler": BACKWARD_EULER, "generalized-alpha": generalized_alpha(0.9)}
 INTEGRATORS = (*EXPLICIT, "trapezoidal", *INDEX3)
 
