@@ -134,7 +134,8 @@ def test_compiled_law_gives_nan_inputs_where_the_python_law_fails(four_bar):
     arrays = fast.law_arrays(law, plant)
     size = plant.n + arrays[7].size + arrays[8].size
     u = np.zeros(plant.n_u)
-    fast.computed_torque(arrays, zeros, zeros, 0.1, np.empty((size, size)), np.empty(size), u)
+    fast.computed_torque(arrays, zeros, zeros, 0.1, np.empty((size, size)), np.empty(size),
+                        np.empty(size, dtype=np.int64), u)
     assert np.isnan(u).all()
 
 

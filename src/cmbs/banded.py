@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cmbs.jit import njit
+from cmbs.jit import njit_borrowing
 from cmbs.lazy import lazy_module
 
 sparse = lazy_module("scipy.sparse")
@@ -70,7 +70,7 @@ def band_plan(mass: np.ndarray, pattern: np.ndarray) -> tuple[np.ndarray, int]:
     return order, width
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def band_factor(AB, width, pivots):
     """LU factorisation with partial pivoting of the band matrix in ``AB`` (LAPACK ``gbtf2``,
     unblocked): lower and upper half-width ``width`` = b, element (i, j) of the matrix at
@@ -106,7 +106,7 @@ def band_factor(AB, width, pivots):
     return True
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def band_solve(AB, width, pivots, b):
     """Solve with the factors of :func:`band_factor`, in place in ``b`` (LAPACK ``gbtrs``)."""
     size = AB.shape[1]
@@ -124,7 +124,7 @@ def band_solve(AB, width, pivots, b):
             b[i] -= AB[diagonal + i - j, j] * b[j]
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def inverse_trace(L, start, Z):
     """trace(G⁻¹) from the lower Cholesky factor L of G (profile ``start``: L[i, k] = 0 for
     k < start[i]) by the Takahashi recurrence, for j >= i,

@@ -22,7 +22,7 @@ from __future__ import annotations
 import functools
 import math
 
-from cmbs.jit import njit, prange
+from cmbs.jit import njit, njit_borrowing, prange
 import numpy as np
 
 from cmbs.banded import band_factor, band_plan, band_solve, gram_profile, inverse_trace, jacobian_pattern
@@ -229,17 +229,17 @@ def pack_workspace(schur: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             np.zeros(0, dtype=np.int64), np.array(layout, dtype=np.int64))
 
 
-@njit(cache=True, inline="always")
+@njit_borrowing(cache=True, inline="always")
 def _matrix(values, layout, k):
     return values[layout[k, 1]:layout[k, 1] + layout[k, 2] * layout[k, 3]].reshape((layout[k, 2], layout[k, 3]))
 
 
-@njit(cache=True, inline="always")
+@njit_borrowing(cache=True, inline="always")
 def _vector(values, layout, k):
     return values[layout[k, 1]:layout[k, 1] + layout[k, 2]]
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def unpack_workspace(floats, integers, layout):
     """The :func:`schur_workspace` tuple again from :func:`pack_workspace`'s arrays (views)."""
     return (_matrix(floats, layout, 0), layout[1, 1], _matrix(floats, layout, 2), _matrix(floats, layout, 3),
@@ -253,7 +253,7 @@ def unpack_workspace(floats, integers, layout):
             _vector(floats, layout, 27), _matrix(floats, layout, 28))
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _field_at(floats, integers, layout, kind, method, parameters, ints, reals, buffer, mass, row_scale, K, rhs, q,
               qd, t, u, qdd, lam):
     """:func:`field` with the workspace packed by :func:`pack_workspace` (the call of
@@ -285,7 +285,7 @@ def law_arrays(law: ComputedTorque | None, model: Model) -> tuple:
             law.solver.partition.dependent.astype(np.int64))
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _evaluate(kind, q, qd, t, u, ints, reals, buffer):
     if kind == KIND_NATURAL:
         _natural_kernel(q, qd, t, u, ints, reals, buffer)
@@ -293,7 +293,7 @@ def _evaluate(kind, q, qd, t, u, ints, reals, buffer):
         _joint_kernel(ints, reals, q, qd, t, u, buffer)
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _gram_extremes(G):
     """Smallest and largest eigenvalue of the small symmetric matrix ``G`` (overwritten) by
     cyclic Jacobi rotations (Golub & Van Loan §8.5): for a few rows this avoids LAPACK's call
@@ -331,7 +331,7 @@ def _gram_extremes(G):
     return smallest, largest
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _cholesky_in_place(L, start):
     """Lower Cholesky factor L Lᵀ = K of the symmetric positive definite K given in ``L``'s lower
     triangle, in place (the upper triangle is not read).  ``start[i]`` is the first column of
@@ -356,7 +356,7 @@ def _cholesky_in_place(L, start):
     return True
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _forward(L, start, b):
     """Solve L x = b in place for the lower triangular L with row profile ``start``."""
     for i in range(L.shape[0]):
@@ -366,7 +366,7 @@ def _forward(L, start, b):
         b[i] = total / L[i, i]
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _backward(L, start, b):
     """Solve Lᵀ x = b in place for the lower triangular L with row profile ``start``."""
     for i in range(L.shape[0] - 1, -1, -1):
@@ -375,7 +375,7 @@ def _backward(L, start, b):
             b[k] -= L[i, k] * b[i]
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _gram(X, scale, gram, rows_of, start):
     """G = (SX)(SX)ᵀ into ``gram`` (S = diag(scale)), column by column over the rows each column
     touches, so a sparse X costs Σ_k nnz(column k)² instead of rows² x columns.
@@ -426,7 +426,7 @@ def column_rows(pattern: np.ndarray | None, m: int, n: int) -> np.ndarray:
     return rows_of
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _gram_bounds(A, row_scale, gram, factor, rows_of, start, Z):
     """Bounds (λ_low, λ_high) on the extreme eigenvalues of the Gram matrix G = (SA)(SA)ᵀ
     (S = diag(row_scale)), left in ``gram``, with λ_low <= λ_min(G) and λ_max(G) <= λ_high:
@@ -464,7 +464,7 @@ def _gram_bounds(A, row_scale, gram, factor, rows_of, start, Z):
 BOUNDS_REUSE_SIZE = 1024
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z):
     """(λ_low, λ_high, reused): bounds on the extreme eigenvalues of G = (SA)(SA)ᵀ as
     :func:`_gram_bounds` gives them, from a reference A₀ bounded earlier when A is close to it.
@@ -497,7 +497,7 @@ def _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z):
     return low, high, False
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _bounds_meeting(A, row_scale, ratio, floor, reference, A0, gram, factor, rows_of, start, Z):
     """(λ_low, λ_high) of :func:`_bounds`, computed afresh (G then in ``gram``) when reused ones
     fail the caller's test λ_low >= ratio²·max(λ_high, 1) and λ_low > floor²: a test lost only
@@ -509,32 +509,41 @@ def _bounds_meeting(A, row_scale, ratio, floor, reference, A0, gram, factor, row
     return low, high
 
 
-@njit(cache=True)
-def _conditioning(A, row_scale, tolerance, reference, A0, gram, factor, rows_of, start, Z):
-    """(singular, certified) for the constraint Jacobian A: ``singular`` when σ_min/σ_max of the
-    row-scaled SA is below ``tolerance`` (as KKTSolver's SVD test, with σ_max replaced by 1 when
-    smaller); ``certified`` when cheap bounds already prove it is not (:func:`_bounds`).
+@njit_borrowing(cache=True)
+def _certify(A, row_scale, tolerance, reference, A0, gram, factor, rows_of, start, Z):
+    """(singular, certified, decided) for the constraint Jacobian A: ``singular`` when σ_min/σ_max
+    of the row-scaled SA is below ``tolerance`` (as KKTSolver's SVD test, with σ_max replaced by
+    1 when smaller); ``certified`` when cheap bounds already prove it is not (:func:`_bounds`).
     Only uncertified cases pay for the eigenvalues: Jacobi rotations for up to 12 rows
-    (:func:`_gram_extremes`), LAPACK beyond."""
+    (:func:`_gram_extremes`); beyond, ``decided`` is False and the caller decides by
+    :func:`_gram_singular` (LAPACK, which creates arrays: not in a borrowing kernel)."""
     m, n = A.shape
     if m == 0:
-        return False, True
+        return False, True, True
     if m > n:
-        return True, False
+        return True, False, True
     low, high = _bounds_meeting(A, row_scale, tolerance, 0.0, reference, A0, gram, factor, rows_of, start, Z)
     if low >= tolerance * tolerance * max(high, 1.0):
-        return False, True
-    if m <= 12:                             # fresh bounds failed: G is in gram for the eigenvalues
-        low, high = _gram_extremes(gram)
-        gram[:, :] = 0.0                    # the rotations filled it: zero outside the profile again
-    else:
-        eigenvalues = np.linalg.eigvalsh(gram)  # σ² of the scaled A, ascending
-        low, high = eigenvalues[0], eigenvalues[m - 1]
+        return False, True, True
+    if m > 12:
+        return False, False, False
+    low, high = _gram_extremes(gram)        # fresh bounds failed: G is in gram
+    gram[:, :] = 0.0                        # the rotations filled it: zero outside the profile again
     smallest, largest = math.sqrt(max(low, 0.0)), math.sqrt(max(high, 0.0))
-    return smallest < tolerance * max(largest, 1.0), False
+    return smallest < tolerance * max(largest, 1.0), False, True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
+def _gram_singular(gram, tolerance):
+    """The singularity test of :func:`_certify` on the Gram matrix ``gram`` = (SA)(SA)ᵀ, by
+    LAPACK's symmetric eigenvalues (σ² of SA)."""
+    eigenvalues = np.linalg.eigvalsh(gram)
+    smallest = math.sqrt(max(eigenvalues[0], 0.0))
+    largest = math.sqrt(max(eigenvalues[eigenvalues.shape[0] - 1], 0.0))
+    return smallest < tolerance * max(largest, 1.0)
+
+
+@njit_borrowing(cache=True, inline="always")
 def _schur_solve(M, Q, A, c, schur, qdd, lam):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c] by block elimination of the coordinates p that carry
     mass (the range-space method, Golub & Van Loan §4.2; Nocedal & Wright §16.2).  Split
@@ -702,7 +711,7 @@ def _band_workspace(kind: int, flag: int, mass: np.ndarray, pattern: np.ndarray 
             a_columns.astype(np.int64))
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _band_kkt(Q, A, c, schur, qdd, lam):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c] by band LU in the reverse Cuthill-McKee order of
     :func:`cmbs.banded.band_plan` (M's non-zeros are constant and listed in the workspace, A's
@@ -735,7 +744,7 @@ def _band_kkt(Q, A, c, schur, qdd, lam):
     return True
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _solve_in_place(K, rhs):
     """Gaussian elimination with partial pivoting on a small dense system; the solution
     overwrites ``rhs``.  Returns False for an exactly singular matrix.  (The pivot search is
@@ -774,7 +783,7 @@ def _solve_in_place(K, rhs):
 PROJECTION_REGULAR = 1e-4
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _projection_by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     """Aghili's standard projection solution at a regular configuration, by the augmented system.
 
@@ -798,7 +807,11 @@ def _projection_by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     return _schur_solve(M, Q, A, gamma, schur, qdd, lam)
 
 
-@njit(cache=True, inline="always")
+#: Status of :func:`_field_borrowed` when the state needs :func:`_field_fallback`.
+FALLBACK = -1
+
+
+@njit_borrowing(cache=True, inline="always")
 def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, qdd, lam, K, rhs,
           check_rank, schur):
     """q̈ and λ at (q, q̇, t, u) into ``qdd``, ``lam``; returns a status code.
@@ -806,56 +819,118 @@ def field(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_
     ``parameters`` = (ξ, ω, singularity tolerance or SVD threshold, mass-regularisation scale s,
     semi-definite flag); ``mass`` is the constant M (natural) or unused (joint: M from buffer);
     ``K`` (n+m, n+m) and ``rhs`` (n+m,) are workspace, ``schur`` that of :func:`schur_workspace`.
-    Lagrange/Baumgarte check the rank of A when ``check_rank`` (:func:`_conditioning`); when A
+    Lagrange/Baumgarte check the rank of A when ``check_rank`` (:func:`_certify`); when A
     is certified well away from singular and M is positive definite they solve by the Schur
     complement (:func:`_schur_solve`: O(nm²) with M's constant factor, against O((n+m)³) for the
     full system), else the full system by Gaussian elimination with partial pivoting.
     Projection takes the same Schur path where A is certified regular (the solutions coincide
     there: :func:`_projection_by_schur`), else the SVD (:func:`_projection_by_svd`).  A state
     whose terms are not finite returns NON_FINITE before any factorisation.
+
+    The common case runs without reference counting (:func:`_field_borrowed`); the SVD and the
+    eigenvalues of a Gram matrix over 12 rows, which create arrays, run in
+    :func:`_field_fallback`.
     """
-    n = q.shape[0]
-    m = lam.shape[0]
-    _evaluate(kind, q, qd, t, u, ints, reals, buffer)
+    status = _field_borrowed(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, qdd, lam,
+                             K, rhs, check_rank, schur)
+    if status == FALLBACK:
+        status = _field_fallback(kind, method, parameters, qd, buffer, mass, row_scale, qdd, lam, K, rhs,
+                                 check_rank, schur)
+    return status
+
+
+@njit_borrowing(cache=True, inline="always")
+def _terms(kind, n, m, buffer, mass):
+    """Views (Q, Φ, A, γ, Φ_t, M) of the terms a kernel wrote into ``buffer``."""
     Q = buffer[:n]
     phi = buffer[n:n + m]
     A = buffer[n + m:n + m + m * n].reshape((m, n))
     gamma = buffer[n + m + m * n:n + 2 * m + m * n]
     phi_t = buffer[n + 2 * m + m * n:n + 3 * m + m * n]
     M = mass if kind == KIND_NATURAL else buffer[n + 3 * m + m * n:n + 3 * m + m * n + n * n].reshape((n, n))
+    return Q, phi, A, gamma, phi_t, M
+
+
+@njit_borrowing(cache=True)
+def _field_borrowed(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, qdd, lam, K, rhs,
+                    check_rank, schur):
+    """:func:`field` up to the paths that create arrays: returns FALLBACK there, with the terms
+    evaluated in ``buffer`` (and, for Lagrange and Baumgarte, the Gram matrix in schur[7])."""
+    n = q.shape[0]
+    m = lam.shape[0]
+    _evaluate(kind, q, qd, t, u, ints, reals, buffer)
+    Q, phi, A, gamma, phi_t, M = _terms(kind, n, m, buffer, mass)
     for k in range(n + 3 * m + m * n if kind == KIND_NATURAL else n + 3 * m + m * n + n * n):
         if not math.isfinite(buffer[k]):    # a state that has blown up: no factorisation sees it
             return NON_FINITE
     if method == PROJECTION:
-        if not _projection_by_schur(M, Q, A, gamma, row_scale, parameters[2], schur, qdd, lam) and \
-                not _projection_by_svd(M, Q, A, gamma, row_scale, parameters, qdd, lam):
-            return SINGULAR
+        if not _projection_by_schur(M, Q, A, gamma, row_scale, parameters[2], schur, qdd, lam):
+            return FALLBACK
     else:
-        singular, certified = _conditioning(A, row_scale, parameters[2], schur[27], schur[28], schur[7], schur[8],
-                                            schur[13], schur[14], schur[15])
+        singular, certified, decided = _certify(A, row_scale, parameters[2], schur[27], schur[28], schur[7],
+                                                schur[8], schur[13], schur[14], schur[15])
+        if not decided:
+            return FALLBACK
         if check_rank and singular:
             return SINGULAR
-        for r in range(m):
-            value = gamma[r]
-            if method == BAUMGARTE:
-                rate = phi_t[r]
-                for j in range(n):
-                    rate += A[r, j] * qd[j]
-                value -= 2.0 * parameters[0] * parameters[1] * rate + parameters[1] * parameters[1] * phi[r]
-            rhs[n + r] = value
-        if schur[16] == 1:                  # large natural model: band LU of the KKT matrix
-            if not _band_kkt(Q, A, rhs[n:n + m], schur, qdd, lam):
-                return SINGULAR
-        elif not (certified and _schur_solve(M, Q, A, rhs[n:n + m], schur, qdd, lam)) and \
-                not _full_system(M, Q, A, K, rhs, qdd, lam):
+        if not _constrained_solve(method, parameters, qd, Q, phi, A, gamma, phi_t, M, K, rhs, certified, schur, qdd,
+                                  lam):
             return SINGULAR
-    for k in range(n):
+    return _finite(qdd)
+
+
+@njit(cache=True)
+def _field_fallback(kind, method, parameters, qd, buffer, mass, row_scale, qdd, lam, K, rhs, check_rank, schur):
+    """The rest of :func:`field` where :func:`_field_borrowed` returned FALLBACK: the projection's
+    SVD, or (Lagrange and Baumgarte, more than 12 constraints, bounds inconclusive) the rank test
+    of A by the eigenvalues of its Gram matrix, then the band or full system."""
+    n = qd.shape[0]
+    m = lam.shape[0]
+    Q, phi, A, gamma, phi_t, M = _terms(kind, n, m, buffer, mass)
+    if method == PROJECTION:
+        if not _projection_by_svd(M, Q, A, gamma, row_scale, parameters, qdd, lam):
+            return SINGULAR
+        return _finite(qdd)
+    scaled = A * row_scale.reshape((m, 1))
+    if check_rank and _gram_singular(scaled @ scaled.T, parameters[2]):
+        return SINGULAR
+    if not _constrained_solve(method, parameters, qd, Q, phi, A, gamma, phi_t, M, K, rhs, False, schur, qdd, lam):
+        return SINGULAR
+    return _finite(qdd)
+
+
+@njit_borrowing(cache=True, inline="always")
+def _finite(qdd):
+    """OK when every q̈ is finite, else NON_FINITE."""
+    for k in range(qdd.shape[0]):
         if not math.isfinite(qdd[k]):
             return NON_FINITE
     return OK
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
+def _constrained_solve(method, parameters, qd, Q, phi, A, gamma, phi_t, M, K, rhs, certified, schur, qdd, lam):
+    """q̈, λ of Lagrange's or Baumgarte's [M Aᵀ; A 0][q̈; λ] = [Q; c], c = γ (Lagrange) or
+    γ - 2ξωΦ̇ - ω²Φ with Φ̇ = Aq̇ + Φ_t (Baumgarte): band LU for large natural models, the Schur
+    complement when A is ``certified`` regular, else the full system.  False when singular."""
+    n = Q.shape[0]
+    m = gamma.shape[0]
+    for r in range(m):
+        value = gamma[r]
+        if method == BAUMGARTE:
+            rate = phi_t[r]
+            for j in range(n):
+                rate += A[r, j] * qd[j]
+            value -= 2.0 * parameters[0] * parameters[1] * rate + parameters[1] * parameters[1] * phi[r]
+        rhs[n + r] = value
+    if schur[16] == 1:                      # large natural model: band LU of the KKT matrix
+        return _band_kkt(Q, A, rhs[n:n + m], schur, qdd, lam)
+    if certified and _schur_solve(M, Q, A, rhs[n:n + m], schur, qdd, lam):
+        return True
+    return _full_system(M, Q, A, K, rhs, qdd, lam)
+
+
+@njit_borrowing(cache=True)
 def _full_system(M, Q, A, K, rhs, qdd, lam):
     """q̈, λ of the augmented system [M Aᵀ; A 0][q̈; λ] = [Q; c] (c given in ``rhs[n:]``) by
     Gaussian elimination with partial pivoting (:func:`_solve_in_place`): the path of
@@ -873,8 +948,10 @@ def _full_system(M, Q, A, K, rhs, qdd, lam):
             K[n + r, n + j] = 0.0
     if not _solve_in_place(K, rhs):
         return False
-    qdd[:] = rhs[:n]
-    lam[:] = rhs[n:]
+    for i in range(n):
+        qdd[i] = rhs[i]
+    for r in range(m):
+        lam[r] = rhs[n + r]
     return True
 
 
@@ -908,7 +985,7 @@ def _projection_by_svd(M, Q, A, gamma, row_scale, parameters, qdd, lam):
     return True
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _lu_in_place(K, pivots):
     """LU factorisation with partial pivoting of the square ``K`` in place (unit lower factor
     below the diagonal); row swaps in ``pivots``.  Returns False for an exactly singular matrix."""
@@ -935,7 +1012,7 @@ def _lu_in_place(K, pivots):
     return True
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _lu_solve(K, pivots, b):
     """Solve K x = b in place with the factors of :func:`_lu_in_place`."""
     size = K.shape[0]
@@ -951,7 +1028,7 @@ def _lu_solve(K, pivots, b):
         b[i] /= K[i, i]
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _lu_solve_transposed(K, pivots, b):
     """Solve Kᵀ x = b in place with the factors of :func:`_lu_in_place` (K = Pᵀ L U)."""
     size = K.shape[0]
@@ -967,8 +1044,8 @@ def _lu_solve_transposed(K, pivots, b):
             b[i], b[pivots[i]] = b[pivots[i]], b[i]
 
 
-@njit(cache=True)
-def computed_torque(law, q, qd, t, K, rhs, u):
+@njit_borrowing(cache=True)
+def computed_torque(law, q, qd, t, K, rhs, pivots, u):
     """The inputs of :class:`~cmbs.control.ComputedTorque` at (q, q̇, t) into ``u``; NaN when its
     linear system is singular (the Python law raises there).
 
@@ -986,8 +1063,8 @@ def computed_torque(law, q, qd, t, K, rhs, u):
         q̈_z = z̈_c,   q̈_d = A_d⁻¹(γ_r - A_z z̈_c),   f = M q̈ - Q₀,
         τ_z = f_z + R_dᵀ f_d = f_z - A_zᵀ A_d⁻ᵀ f_d
 
-    ``law`` is the tuple of :func:`law_arrays`; ``K`` (at least r x r) and ``rhs`` (at least
-    n + r) are workspace.
+    ``law`` is the tuple of :func:`law_arrays`; ``K`` (at least r x r), ``rhs`` (at least
+    n + r) and ``pivots`` (at least r integers) are workspace.
     """
     kind, ints, reals, buffer, mass, m, no_input, columns, rows, kp, kd, breaks, coefficients, gains, dependent = law
     n = q.shape[0]
@@ -1005,7 +1082,6 @@ def computed_torque(law, q, qd, t, K, rhs, u):
         c = columns[b]
         qdd[c] = reference[2] + kd[b] * (reference[1] - qd[c]) + kp[b] * (reference[0] - q[c])
     Ad = K[:r, :r]
-    pivots = np.empty(r, dtype=np.int64)
     for a in range(r):
         row = rows[a]
         total = gamma[row]
@@ -1040,7 +1116,7 @@ def computed_torque(law, q, qd, t, K, rhs, u):
             u[i] += gains[i, b] * force
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def record_constraints(buffer, n, m, qd, lam, PHI, PHID, FORCE, k):
     """Row ``k`` of a loop's records from the terms in ``buffer`` (at the state with velocities
     ``qd``) and the multipliers ``lam``: max |Φ|, max |A q̇ + Φ_t| and f_c = -Aᵀλ."""
@@ -1090,7 +1166,7 @@ def rk4_batch(kind, method, parameters, Q0, QD0, U0, h, steps, every, ints, real
         recorded[v] = count
 
 
-@njit(cache=True, inline="always")
+@njit_borrowing(cache=True, inline="always")
 def _stage_state(q, qd, a, kq, kv, sq, sv):
     """The RK stage state (sq, sv) = (q + a k_q, q̇ + a k_v)."""
     for i in range(q.shape[0]):
@@ -1127,18 +1203,27 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
     PHI = np.zeros(records)
     PHID = np.zeros(records)
     FORCE = np.zeros((records, n))
-    buffer = np.zeros(buffer_size)
     q, qd, u = q0.copy(), qd0.copy(), u0.copy()
-    kq = np.empty((4, n))                   # the stages' slopes of q and q̇
-    kv = np.empty((4, n))
     sq, sv = np.empty(n), np.empty(n)       # the stage state
-    lam = np.empty(m)
-    stage_lam = np.empty(m)
-    K = np.empty((n + m, n + m))
-    rhs = np.empty(n + m)
     r = law[8].shape[0]                     # constraint rows of the law's partition
-    law_K = np.empty((r, r))
-    law_rhs = np.empty(n + r)
+    work = (np.zeros(buffer_size), np.empty((4, n)), np.empty((4, n)), np.empty(m), np.empty(m),
+            np.empty((n + m, n + m)), np.empty(n + m), np.empty((r, r)), np.empty(n + r), np.empty(r, dtype=np.int64))
+    recorded, status, st = _rk4_steps(kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode,
+                                      law, schur, q, qd, u, sq, sv, work, T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE)
+    if status != OK:
+        return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, status, st, sq, sv, u
+    return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, OK, steps * h, q, qd, u
+
+
+@njit_borrowing(cache=True)
+def _rk4_steps(kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law, schur, q, qd, u,
+               sq, sv, work, T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE):
+    """The loop of :func:`rk4` on the arrays it allocated (state q, q̇, u updated in place; stage
+    state sq, sv; ``work`` = terms buffer, the stages' slopes of q and q̇ (4, n), λ at the step
+    and at a stage, the KKT workspace, the law's workspace); returns (records written, status,
+    time of the failed stage).  Borrowing: no reference counting in the loop."""
+    n = q.shape[0]
+    buffer, kq, kv, lam, stage_lam, K, rhs, law_K, law_rhs, law_pivots = work
     recorded = 0
     for step in range(steps + 1):
         t = step * h
@@ -1155,20 +1240,23 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
             for i in range(n):
                 kq[stage, i] = sv[i]
             if mode == LAW or (mode == HELD and (step == 0 if stage == 0 else stage == 3)):
-                computed_torque(law, sq, sv, st, law_K, law_rhs, u)
+                computed_torque(law, sq, sv, st, law_K, law_rhs, law_pivots, u)
             status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, kv[stage],
                            lam if stage == 0 else stage_lam, K, rhs, True, schur)
             if status != OK:
-                return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, status, st, sq, sv, u
+                return recorded, status, st
             if stage == 0:
                 if step % every == 0:
                     T[recorded] = t
-                    Qs[recorded] = q
-                    QDs[recorded] = qd
-                    QDDs[recorded] = kv[0]
-                    LAMs[recorded] = lam
-                    Us[recorded] = u
-                    record_constraints(buffer, n, m, qd, lam, PHI, PHID, FORCE, recorded)
+                    for i in range(n):
+                        Qs[recorded, i] = q[i]
+                        QDs[recorded, i] = qd[i]
+                        QDDs[recorded, i] = kv[0, i]
+                    for i in range(lam.shape[0]):
+                        LAMs[recorded, i] = lam[i]
+                    for i in range(u.shape[0]):
+                        Us[recorded, i] = u[i]
+                    record_constraints(buffer, n, lam.shape[0], qd, lam, PHI, PHID, FORCE, recorded)
                     recorded += 1
                 if step == steps:
                     break
@@ -1177,4 +1265,4 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
         for i in range(n):                  # in place: the loop allocates nothing per step
             q[i] += (h / 6.0) * (kq[0, i] + 2.0 * kq[1, i] + 2.0 * kq[2, i] + kq[3, i])
             qd[i] += (h / 6.0) * (kv[0, i] + 2.0 * kv[1, i] + 2.0 * kv[2, i] + kv[3, i])
-    return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, OK, steps * h, q, qd, u
+    return recorded, OK, steps * h

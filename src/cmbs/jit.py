@@ -37,12 +37,35 @@ VERSION = _numba.__version__ if _numba is not None else "none"
 
 
 def njit(*args, **options) -> Callable:
-    """``numba.njit`` with numba, else a decorator that leaves the function as it is."""
+    """``numba.njit`` with numba, else a decorator that leaves the function as it is.
+
+    The function keeps numba's reference counting (NRT) even when called from a
+    :func:`njit_borrowing` one, so it may create arrays, provided it returns none to such a
+    caller."""
     if _numba is not None:
-        return _numba.njit(*args, **options)
+        return _numba.njit(*args, **{"_nrt": True, **options})
     if len(args) == 1 and callable(args[0]) and not options:
         return args[0]
     return lambda function: function
+
+
+def njit_borrowing(*args, **options) -> Callable:
+    """:func:`njit` without numba's reference counting: for the kernels of the hot paths.
+
+    numba counts the references to every array a compiled function receives, slices or reshapes,
+    with an atomic increment and decrement each time; in a four-bar's forward-dynamics
+    evaluation these cost about a third of the time, and the Python call of a kernel pays them
+    on every argument.  A borrowing function works only on arrays its caller owns: it must not
+    create an array (np.empty, .copy(), np.linalg, a slice assignment that needs a temporary:
+    numba then refuses to compile it, "NRT required but not enabled") and must not keep an
+    array returned by a :func:`njit` callee (that would never be freed: tests/test_borrowing.py
+    checks that the compiled paths free everything they allocate).  It returns scalars or tuples
+    of scalars, never an array, not even a view to Python (which would box it without an owner),
+    unless it is ``inline="always"`` and called from compiled code only: it is then compiled
+    into its caller, with the caller's reference counting.  numba's option is ``_nrt=False``."""
+    if _numba is not None:
+        return _numba.njit(*args, **{**options, "_nrt": False})
+    return njit(*args, **options)
 
 
 #: ``numba.prange`` (parallel loop over independent iterations) with numba, else ``range``.

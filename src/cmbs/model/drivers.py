@@ -22,7 +22,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
-from cmbs.jit import njit
+from cmbs.jit import njit_borrowing
 import numpy as np
 
 from cmbs.errors import ModelError
@@ -153,19 +153,16 @@ def as_time_function(value: object) -> TimeFunction:
     raise ModelError(f"expected a number, expression or function of t, got {value!r}")
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def evaluate_piecewise(breaks, coefficients, t):
-    """Piecewise cubic ``sum_k c_k (t - t_i)^(3-k)`` (scipy PPoly layout, flattened rows)."""
+    """(f, f', f'') of the piecewise cubic ``f = sum_k c_k (t - t_i)^(3-k)`` (scipy PPoly layout,
+    flattened rows), as a tuple: the compiled kernels that call it allocate nothing."""
     pieces = breaks.shape[0] - 1
     i = np.searchsorted(breaks, t, side="right") - 1
     i = min(max(i, 0), pieces - 1)
     s = t - breaks[i]
     c3, c2, c1, c0 = coefficients[4 * i], coefficients[4 * i + 1], coefficients[4 * i + 2], coefficients[4 * i + 3]
-    out = np.empty(3)
-    out[0] = ((c3 * s + c2) * s + c1) * s + c0
-    out[1] = (3.0 * c3 * s + 2.0 * c2) * s + c1
-    out[2] = 6.0 * c3 * s + 2.0 * c2
-    return out
+    return ((c3 * s + c2) * s + c1) * s + c0, (3.0 * c3 * s + 2.0 * c2) * s + c1, 6.0 * c3 * s + 2.0 * c2
 
 
 @dataclass(frozen=True)
@@ -233,7 +230,7 @@ class TimeFunctionPack:
                    depth, tuple(python), tuple(functions))
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def evaluate_time_functions(table, ops, reals, t, stack, out):
     """Fill ``out[k] = (f_k, f_k', f_k'')`` for the compiled kinds (Python and unused ones are
     skipped)."""

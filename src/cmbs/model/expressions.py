@@ -21,7 +21,7 @@ import math
 import re
 from dataclasses import dataclass
 
-from cmbs.jit import njit
+from cmbs.jit import njit_borrowing
 import numpy as np
 
 from cmbs.errors import ExpressionError
@@ -183,7 +183,7 @@ def parse_expression(text: str) -> Program:
     return _Parser(text).parse()
 
 
-@njit(cache=True, inline="always")
+@njit_borrowing(cache=True, inline="always")
 def _taylor_power(a0, a1, a2, b0, b1, b2):
     """(a^b, d/dt, d²/dt²) for Taylor triples a, b; constant exponents avoid log(a)."""
     if b1 == 0.0 and b2 == 0.0:
@@ -208,9 +208,9 @@ def _taylor_power(a0, a1, a2, b0, b1, b2):
     return p0, p0 * e1, p0 * (e2 + e1 * e1)
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def evaluate_program(ops, constants, t, stack):
-    """Evaluate a stack program at time ``t``: returns the top slot ``(f, f', f'')``.
+    """Evaluate a stack program at time ``t``: returns the top slot ``(f, f', f'')`` as a tuple.
 
     Each binary/unary rule is the product/chain rule to second order, e.g. for ``c = a·b``:
     ``c' = a'b + ab'``, ``c'' = a''b + 2a'b' + ab''``.
@@ -268,4 +268,4 @@ def evaluate_program(ops, constants, t, stack):
                 c1 = a1 / (2.0 * r)
                 c2 = a2 / (2.0 * r) - a1 * a1 / (4.0 * r * r * r)
             stack[top, 0], stack[top, 1], stack[top, 2] = c0, c1, c2
-    return stack[0]
+    return stack[0, 0], stack[0, 1], stack[0, 2]

@@ -44,7 +44,7 @@ import math
 from dataclasses import dataclass
 from typing import Sequence
 
-from cmbs.jit import njit
+from cmbs.jit import njit, njit_borrowing
 import numpy as np
 
 from cmbs.errors import ModelError
@@ -74,7 +74,7 @@ _WORK_PER_LINK = 10      # work per link: θ, θ̇, (cos θ, sin θ), O (2), a_O
 # Work layout from offset ``wk`` (n links): θ [wk, wk+n), θ̇ [wk+n, wk+2n), (cos θ, sin θ) pairs
 # [wk+2n, wk+4n), O pairs [wk+4n, wk+6n), a_O pairs [wk+6n, wk+8n), Jx, Jz [wk+8n, wk+10n).
 
-@njit(cache=True, inline="always")
+@njit_borrowing(cache=True, inline="always")
 def _kinematics(ip, rp, q, qd, W, wk):
     """Absolute angles θ, rates θ̇, (cos θ, sin θ), frame origins O and their bias accelerations."""
     n = ip[I_N]
@@ -117,7 +117,7 @@ def _kinematics(ip, rp, q, qd, W, wk):
         W[o_a + 2 * k + 1] = az
 
 
-@njit(cache=True, inline="always")
+@njit_borrowing(cache=True, inline="always")
 def _column(ip, j, px, pz, W, wk):
     """Column j of the Jacobians of point (px, pz) and of the link angle, for joint j on its path."""
     n = ip[I_N]
@@ -128,7 +128,7 @@ def _column(ip, j, px, pz, W, wk):
     return W[o_cs], W[o_cs + 1], 0.0
 
 
-@njit(cache=True, inline="always")
+@njit_borrowing(cache=True, inline="always")
 def _point(ip, link, lx, lz, W, wk):
     """Position and bias acceleration of a point with local (lx, lz) on ``link`` (-1: ground)."""
     if link < 0:
@@ -142,7 +142,7 @@ def _point(ip, link, lx, lz, W, wk):
     return W[o_O] + rx, W[o_O + 1] + rz, W[o_a] - w2 * rx, W[o_a + 1] - w2 * rz
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _evaluate_kernel(ip, rp, q, qd, t, u, buf):
     """Fill a :class:`~cmbs.model.model.Terms` buffer: Q, Φ, A, γ, Φ_t, M, then the scratch.
 
@@ -247,7 +247,7 @@ def _evaluate_kernel(ip, rp, q, qd, t, u, buf):
         buf[o_gam + r] = buf[s0 + 3 * f + 2]
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _point_kinematics_kernel(ip, rp, q, qd, link, lx, lz, work, J):
     """Position, bias acceleration J̇q̇ and Jacobian J (2, n) of the point (lx, lz) of ``link``."""
     _kinematics(ip, rp, q, qd, work, 0)

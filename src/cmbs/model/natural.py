@@ -35,7 +35,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from cmbs.jit import njit
+from cmbs.jit import njit_borrowing
 import numpy as np
 
 from cmbs.errors import ModelError
@@ -681,14 +681,14 @@ class NaturalEquations:
         return self._extended(q)[self.point_xz]
 
 
-@njit(cache=True, inline="always")
+@njit_borrowing(cache=True, inline="always")
 def _add(buffer, a0, row, column, value, n):
     """A[row, column] += value where A is row-major at ``buffer[a0:]`` (constant columns skipped)."""
     if column < n:
         buffer[a0 + row * n + column] += value
 
 
-@njit(cache=True, inline="always")
+@njit_borrowing(cache=True, inline="always")
 def _vector_pair(ints, r, x, v):
     """The vectors u = j - i and w = l - k of an angle or parallel row whose point coordinates
     (x_i, z_i, x_j, z_j, x_k, z_k, x_l, z_l) are ``ints[r:r + 8]``, and their rates."""
@@ -699,7 +699,7 @@ def _vector_pair(ints, r, x, v):
     return ux, uz, wx, wz, dux, duz, dwx, dwz
 
 
-@njit(cache=True)
+@njit_borrowing(cache=True)
 def _evaluate(q, qd, t, u, ints, reals, buffer):
     """Q, Φ, A, γ, Φ_t of a natural-coordinate model into ``buffer`` (layout of :class:`Terms`;
     its scratch holds the time-function rows, their stack, and the extended x = (q, constants),
@@ -858,7 +858,7 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
         buffer[ints[i0 + k]] += reals[r0 + k] * u[k]
 
 
-@njit(cache=True, inline="always")
+@njit_borrowing(cache=True, inline="always")
 def _add_force(Q, index, value, n):
     if index < n:
         Q[index] += value

@@ -1,0 +1,84 @@
+"""The compiled paths free every array they allocate.
+
+The hot kernels run without numba's reference counting (:func:`cmbs.jit.njit_borrowing`).  A
+borrowing kernel that kept an array returned by a counted callee, or a view whose owner it did
+not hold, would leak it or free it twice; numba's allocation statistics catch the first:
+after each path has run once (compiling and warming its caches), running it again and dropping
+the results must leave as many frees as allocations, for the data and for their owners
+(meminfos).  The statistics are switched on at interpreter start (NUMBA_NRT_STATS), so the
+paths run in a subprocess.
+"""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from cmbs import jit
+
+SCRIPT = textwrap.dedent("""
+    import gc
+    import json
+
+    import numpy as np
+    from numba.core.runtime import rtsys
+
+    import cmbs
+    from cmbs.control import ComputedTorque, Reference
+    from cmbs.fast import CompiledDynamics
+
+    four_bar = cmbs.load("four-bar").without_drivers()
+    slider = cmbs.load("slider-crank")
+    driven = cmbs.load("four-bar")
+    motion = cmbs.kinematic_analysis(driven, np.linspace(0.0, 0.2, 201))
+    law = ComputedTorque(four_bar, Reference(motion, ("alpha",)), kp=100.0, kd=20.0)
+    joint = cmbs.load("slider-crank-joint", gravity=9.81)
+    singular = slider.q0.copy()
+    singular[slider.coordinate_index("theta1")] = np.pi / 2        # crank and rod upright: rank 4
+    singular = cmbs.assemble(slider, singular, fixed=["theta1"])
+
+    def paths():
+        yield "rk4 lagrange", lambda: cmbs.simulate(four_bar, t_end=0.05, integrator="rk4", dt=1e-3)
+        yield "rk4 baumgarte, joint", lambda: cmbs.simulate(joint, t_end=0.05, integrator="rk4", dt=1e-3,
+                                                            formulation="baumgarte")
+        yield "rk4 projection through the singular position (SVD)", lambda: cmbs.simulate(
+            slider, t_end=1.0, integrator="rk4", dt=1e-3, formulation="projection")
+        yield "rk4 lagrange stopped at the singular position", lambda: cmbs.simulate(
+            slider, t_end=1.0, integrator="rk4", dt=1e-3)
+        yield "rk4 computed torque", lambda: cmbs.simulate(four_bar, t_end=0.05, integrator="rk4", dt=1e-3, u=law)
+        yield "dop853", lambda: cmbs.simulate(four_bar, t_end=0.05, integrator="dop853")
+        yield "matrix R", lambda: cmbs.simulate(four_bar, t_end=0.05, integrator="rk4", dt=1e-3,
+                                                formulation="matrix-r")
+        yield "batched sweep", lambda: cmbs.sweep(four_bar, [cmbs.Variant(), cmbs.Variant()], t_end=0.05,
+                                                  dt=1e-3)
+        compiled = CompiledDynamics(slider, "projection")      # its SVD at the singular position
+        yield "CompiledDynamics", lambda: compiled.accelerations(singular, np.zeros(slider.n), 0.0)
+
+    unbalanced = {}
+    for name, run in paths():
+        result = run()
+        assert "compiled" not in getattr(result, "info", {}) or result.info["compiled"], name
+        del result
+        gc.collect()
+        before = rtsys.get_allocation_stats()
+        result = run()
+        del result
+        gc.collect()
+        after = rtsys.get_allocation_stats()
+        allocated, freed = after.alloc - before.alloc, after.free - before.free
+        owners, owners_freed = after.mi_alloc - before.mi_alloc, after.mi_free - before.mi_free
+        if allocated != freed or owners != owners_freed or allocated == 0:
+            unbalanced[name] = [allocated, freed, owners, owners_freed]
+    print(json.dumps(unbalanced))
+""")
+
+
+@pytest.mark.skipif(not jit.COMPILED, reason="numba's statistics: numba is not installed")
+def test_compiled_paths_free_every_array_they_allocate():
+    environment = {**os.environ, "NUMBA_NRT_STATS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    done = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, env=environment,
+                          timeout=1500)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().splitlines()[-1] == "{}", done.stdout
