@@ -747,9 +747,10 @@ def _band_kkt(Q, A, c, schur, qdd, lam):
 @njit_borrowing(cache=True)
 def _solve_in_place(K, rhs):
     """Gaussian elimination with partial pivoting on a small dense system; the solution
-    overwrites ``rhs``.  Returns False for an exactly singular matrix.  (The pivot search is
-    that of :func:`_lu_in_place`; eliminating into the right-hand side directly avoids the pivot
-    array, whose allocation costs 13 % of a four-bar stage.)"""
+    overwrites ``rhs`` and K is destroyed (its diagonal ends holding the pivots' reciprocals:
+    one division per column).  Returns False for an exactly singular matrix.  (The pivot search
+    is that of :func:`_lu_in_place`; eliminating into the right-hand side directly avoids the
+    pivot array, whose allocation costs 13 % of a four-bar stage.)"""
     size = rhs.shape[0]
     for column in range(size):
         pivot = column
@@ -760,21 +761,23 @@ def _solve_in_place(K, rhs):
                 pivot = row
         if largest == 0.0:
             return False
-        if pivot != column:
-            for k in range(size):
+        if pivot != column:                 # columns left of ``column`` are no longer read
+            for k in range(column, size):
                 K[column, k], K[pivot, k] = K[pivot, k], K[column, k]
             rhs[column], rhs[pivot] = rhs[pivot], rhs[column]
+        inverse = 1.0 / K[column, column]
+        K[column, column] = inverse
         for row in range(column + 1, size):
-            factor = K[row, column] / K[column, column]
+            factor = K[row, column] * inverse
             if factor != 0.0:
-                for k in range(column, size):
+                for k in range(column + 1, size):
                     K[row, k] -= factor * K[column, k]
                 rhs[row] -= factor * rhs[column]
     for row in range(size - 1, -1, -1):
         total = rhs[row]
         for k in range(row + 1, size):
             total -= K[row, k] * rhs[k]
-        rhs[row] = total / K[row, row]
+        rhs[row] = total * K[row, row]
     return True
 
 
@@ -783,7 +786,7 @@ def _solve_in_place(K, rhs):
 PROJECTION_REGULAR = 1e-4
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def _projection_by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     """Aghili's standard projection solution at a regular configuration, by the augmented system.
 
@@ -908,7 +911,7 @@ def _finite(qdd):
     return OK
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def _constrained_solve(method, parameters, qd, Q, phi, A, gamma, phi_t, M, K, rhs, certified, schur, qdd, lam):
     """q̈, λ of Lagrange's or Baumgarte's [M Aᵀ; A 0][q̈; λ] = [Q; c], c = γ (Lagrange) or
     γ - 2ξωΦ̇ - ω²Φ with Φ̇ = Aq̇ + Φ_t (Baumgarte): band LU for large natural models, the Schur
