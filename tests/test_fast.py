@@ -105,7 +105,8 @@ def test_gram_bounds_enclose_the_extreme_eigenvalues():
                                                             rows_of, dense, band)
                     if not decided:             # over 12 rows, bounds inconclusive: LAPACK decides
                         assert m > 12 and not certified
-                        singular = _gram_singular(scaled @ scaled.T, tolerance)
+                        np.testing.assert_allclose(gram, scaled @ scaled.T, rtol=1e-13, atol=1e-13)
+                        singular = _gram_singular(gram, tolerance)
                     assert singular == (sigma[-1] < tolerance * max(sigma[0], 1.0))
                     assert not (certified and singular)
 
@@ -214,6 +215,34 @@ def test_projection_takes_the_svd_at_a_singular_position_and_the_schur_path_else
         got_qdd, got_lam = compiled.accelerations(q, qd, 0.0)
         np.testing.assert_allclose(got_qdd, expected.qdd, rtol=0, atol=1e-9 * max(1.0, np.abs(expected.qdd).max()))
         np.testing.assert_allclose(got_lam, expected.lam, rtol=0, atol=1e-9 * max(1.0, np.abs(expected.lam).max()))
+
+
+def test_over_twelve_dependent_constraints_are_found_by_the_counted_fallback():
+    """A hanging 7-link chain whose every link is constrained twice: 14 rows of rank 7.  Beyond
+    12 rows the compiled rank test leaves the Jacobi rotations for LAPACK (``_field_fallback``,
+    on the Gram matrix the bounds left); it must stop as the Python solver does, while the
+    projection (SVD) gives the Python solver's accelerations."""
+    from cmbs.errors import SingularSystemError
+    from cmbs.fast import CompiledDynamics
+    from cmbs.model.natural import NaturalModelBuilder
+
+    builder = NaturalModelBuilder("chain-twice", gravity=(0.0, -9.81))
+    builder.add_point("P0", 0.0, 0.0, fixed=True)
+    for k in range(1, 8):
+        builder.add_point(f"P{k}", 0.8 * k, -0.6 * k)
+        builder.add_segment(f"link{k}", f"P{k - 1}", f"P{k}", mass=1.0, com=(0.5, 0.0), inertia=1 / 12, length=1.0)
+        builder.add_segment(f"link{k}-again", f"P{k - 1}", f"P{k}", mass=0.0, length=1.0)
+    model = builder.build()
+    assert (model.n, model.m) == (14, 14)
+    qd = np.zeros(model.n)
+    with pytest.raises(SingularSystemError, match="dependent:"):
+        CompiledDynamics(model, "lagrange").accelerations(model.q0, qd)
+    with pytest.raises(SingularSystemError, match="dependent:"):
+        cmbs.formulation("lagrange").bind(model).accelerations(model.evaluate(model.q0, qd), model.q0, qd, 0.0)
+    qdd, _ = CompiledDynamics(model, "projection").accelerations(model.q0, qd)
+    expected = cmbs.formulation("projection").bind(model).accelerations(model.evaluate(model.q0, qd), model.q0, qd,
+                                                                        0.0)
+    np.testing.assert_allclose(qdd, expected.qdd, rtol=1e-9, atol=1e-9)
 
 
 def test_compiled_dynamics_names_the_constraints_at_a_singular_position_and_checks_sizes():

@@ -474,8 +474,9 @@ def _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z):
     so (√λ₀_low - δ)² and (√λ₀_high + δ)² are bounds again.  Reused while δ ≤ √λ₀_low / 10 (the
     lower bound loses at most 19 %); otherwise, or without a valid reference, the Gram bounds
     are computed afresh (which leaves G in ``gram``: ``reused`` False) and A becomes the
-    reference (``reference`` = (valid, √λ_low, √λ_high), ``A0``) when they prove full rank.  A step moves A little, so most stages of a run skip
-    the Gram matrix, its Cholesky factor and trace G⁻¹."""
+    reference (``reference`` = (valid, √λ_low, √λ_high), ``A0``) when they prove full rank.
+    A step moves A little, so most stages of a run skip the Gram matrix, its Cholesky factor and
+    trace G⁻¹."""
     m, n = A.shape
     if reference[0] == 1.0:
         total = 0.0
@@ -515,8 +516,9 @@ def _certify(A, row_scale, tolerance, reference, A0, gram, factor, rows_of, star
     of the row-scaled SA is below ``tolerance`` (as KKTSolver's SVD test, with σ_max replaced by
     1 when smaller); ``certified`` when cheap bounds already prove it is not (:func:`_bounds`).
     Only uncertified cases pay for the eigenvalues: Jacobi rotations for up to 12 rows
-    (:func:`_gram_extremes`); beyond, ``decided`` is False and the caller decides by
-    :func:`_gram_singular` (LAPACK, which creates arrays: not in a borrowing kernel)."""
+    (:func:`_gram_extremes`); beyond, ``decided`` is False, G is left in ``gram`` (the bounds
+    that failed were fresh) and the caller decides by :func:`_gram_singular` (LAPACK, which
+    creates arrays: not in a borrowing kernel)."""
     m, n = A.shape
     if m == 0:
         return False, True, True
@@ -858,7 +860,8 @@ def _terms(kind, n, m, buffer, mass):
 def _field_borrowed(kind, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, qdd, lam, K, rhs,
                     check_rank, schur):
     """:func:`field` up to the paths that create arrays: returns FALLBACK there, with the terms
-    evaluated in ``buffer`` (and, for Lagrange and Baumgarte, the Gram matrix in schur[7])."""
+    evaluated in ``buffer`` (and, for Lagrange and Baumgarte, the Gram matrix G = (SA)(SA)ᵀ of
+    the fresh bounds in schur[7])."""
     n = q.shape[0]
     m = lam.shape[0]
     _evaluate(kind, q, qd, t, u, ints, reals, buffer)
@@ -885,8 +888,9 @@ def _field_borrowed(kind, method, parameters, q, qd, t, u, ints, reals, buffer, 
 @njit(cache=True)
 def _field_fallback(kind, method, parameters, qd, buffer, mass, row_scale, qdd, lam, K, rhs, check_rank, schur):
     """The rest of :func:`field` where :func:`_field_borrowed` returned FALLBACK: the projection's
-    SVD, or (Lagrange and Baumgarte, more than 12 constraints, bounds inconclusive) the rank test
-    of A by the eigenvalues of its Gram matrix, then the band or full system."""
+    SVD, or (Lagrange and Baumgarte, more than 12 constraints, fresh bounds inconclusive) the rank
+    test of A by the eigenvalues of the Gram matrix those bounds left in schur[7], then the band
+    or full system."""
     n = qd.shape[0]
     m = lam.shape[0]
     Q, phi, A, gamma, phi_t, M = _terms(kind, n, m, buffer, mass)
@@ -894,8 +898,7 @@ def _field_fallback(kind, method, parameters, qd, buffer, mass, row_scale, qdd, 
         if not _projection_by_svd(M, Q, A, gamma, row_scale, parameters, qdd, lam):
             return SINGULAR
         return _finite(qdd)
-    scaled = A * row_scale.reshape((m, 1))
-    if check_rank and _gram_singular(scaled @ scaled.T, parameters[2]):
+    if check_rank and _gram_singular(schur[7], parameters[2]):
         return SINGULAR
     if not _constrained_solve(method, parameters, qd, Q, phi, A, gamma, phi_t, M, K, rhs, False, schur, qdd, lam):
         return SINGULAR
