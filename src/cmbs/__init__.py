@@ -16,7 +16,6 @@ from pathlib import Path
 from cmbs.dynamics import (Baumgarte, Lagrange, MatrixR, Penalty, Projection, UdwadiaKalaba, formulation)
 from cmbs.errors import CmbsError, ConvergenceError, ExpressionError, ModelError, SingularSystemError
 from cmbs.inputs import SampledInput
-from cmbs.inverse import InverseDynamics, inverse_dynamics
 from cmbs.kinematics import (ConstraintReport, accelerations, assemble, constraint_report, kinematic_analysis,
                              singular_configurations, velocities)
 from cmbs.model.drivers import Constant, Expression, PythonFunction, Table
@@ -27,6 +26,18 @@ from cmbs.sweep import SweepResult, Variant, grid, sweep
 from cmbs.trajectory import Trajectory
 
 __version__ = "0.1.0"
+
+_ON_FIRST_USE = {"InverseDynamics": "cmbs.inverse", "inverse_dynamics": "cmbs.inverse"}
+
+
+def __getattr__(name: str) -> object:
+    """Names whose modules are imported on first use (PEP 562), so that a simulation does not
+    import what it never calls."""
+    if name in _ON_FIRST_USE:
+        import importlib
+
+        return getattr(importlib.import_module(_ON_FIRST_USE[name]), name)
+    raise AttributeError(f"module 'cmbs' has no attribute {name!r}")
 
 
 def load(name_or_path: str | Path, **parameters: object) -> Model:

@@ -22,10 +22,6 @@ from __future__ import annotations
 import numpy as np
 
 from cmbs.jit import njit_borrowing
-from cmbs.lazy import lazy_module
-
-sparse = lazy_module("scipy.sparse")
-csgraph = lazy_module("scipy.sparse.csgraph")
 
 
 def jacobian_pattern(model, samples: int = 3, seed: int = 7) -> np.ndarray:
@@ -56,13 +52,15 @@ def band_plan(mass: np.ndarray, pattern: np.ndarray) -> tuple[np.ndarray, int]:
     """Reverse Cuthill-McKee order of the KKT matrix of a constant ``mass`` (n, n) and a Jacobian
     ``pattern`` (m, n), and its half-bandwidth b in that order.  ``order[k]`` is the original
     index (coordinates 0..n-1, then constraint rows n..n+m-1) at position k."""
+    from scipy.sparse import csgraph, csr_matrix   # here: importing scipy.sparse takes about 10 ms
+
     n, m = mass.shape[0], pattern.shape[0]
     structure = np.zeros((n + m, n + m), dtype=bool)
     structure[:n, :n] = mass != 0.0
     structure[n:, :n] = pattern
     structure[:n, n:] = pattern.T
     structure[np.arange(n + m), np.arange(n + m)] = True
-    order = csgraph.reverse_cuthill_mckee(sparse.csr_matrix(structure), symmetric_mode=True).astype(np.int64)
+    order = csgraph.reverse_cuthill_mckee(csr_matrix(structure), symmetric_mode=True).astype(np.int64)
     position = np.empty_like(order)
     position[order] = np.arange(order.size)
     rows, columns = np.nonzero(structure)

@@ -21,19 +21,21 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import TYPE_CHECKING
 
-from cmbs.jit import njit, njit_borrowing, prange
+from cmbs.jit import interpreted, njit, njit_borrowing, prange
 import numpy as np
 
 from cmbs.banded import band_factor, band_plan, band_solve, gram_profile, inverse_trace, jacobian_pattern
-from cmbs.control.base import ZeroOrderHold
-from cmbs.control.computed_torque import ComputedTorque
 from cmbs.dynamics import Baumgarte, Formulation, Lagrange, Projection
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.model.drivers import evaluate_piecewise
 from cmbs.model.joints import JointEquations, _evaluate_kernel as _joint_kernel
 from cmbs.model.model import Model
 from cmbs.model.natural import NaturalEquations, _evaluate as _natural_kernel
+
+if TYPE_CHECKING:
+    from cmbs.control.computed_torque import ComputedTorque
 
 KIND_NATURAL, KIND_JOINT = 0, 1
 LAGRANGE, BAUMGARTE, PROJECTION = 0, 1, 2
@@ -76,6 +78,9 @@ def control(u: object, model: Model, dt: float) -> tuple[int, ComputedTorque | N
     fault wrapper, another law, another period) is Python's."""
     if not callable(u):
         return CONSTANT, None
+    from cmbs.control.base import ZeroOrderHold   # here: a run with constant inputs does not import
+    from cmbs.control.computed_torque import ComputedTorque   # the control package
+
     mode, law = (HELD, u.law) if type(u) is ZeroOrderHold and u.period == dt else (LAW, u)
     if type(law) is not ComputedTorque or supported(law.model) is None or law.model.n != model.n \
             or law.model.n_u != model.n_u:
@@ -1162,13 +1167,15 @@ def rk4_batch(kind, method, parameters, Q0, QD0, U0, h, steps, every, ints, real
     recorded q, q̇ and |Φ|max into Qs (N, records, n), QDs and PHIs (N, records), its status
     and the number of records it reached."""
     for v in prange(Q0.shape[0]):
-        result = rk4(kind, method, parameters, Q0[v], QD0[v], h, steps, every, U0[v], ints, reals, buffer_size, mass,
-                     row_scale, m, CONSTANT, law, schur)
-        count = result[9]
-        Qs[v, :count] = result[1][:count]
-        QDs[v, :count] = result[2][:count]
-        PHIs[v, :count] = result[6][:count]
-        statuses[v] = result[10]
+        records, work = _rk4_arrays(Q0.shape[1], m, U0.shape[1], steps // every + 1, buffer_size, law[8].shape[0])
+        q, qd, u, sq, sv = Q0[v].copy(), QD0[v].copy(), U0[v].copy(), np.empty(Q0.shape[1]), np.empty(Q0.shape[1])
+        count, status, _, _, _ = _rk4_steps(kind, method, parameters, h, steps, every, ints, reals, mass, row_scale,
+                                            CONSTANT, law, _private_copy(schur), q, qd, u, sq, sv, work, records, 0, 0,
+                                            0)
+        Qs[v, :count] = records[1][:count]
+        QDs[v, :count] = records[2][:count]
+        PHIs[v, :count] = records[6][:count]
+        statuses[v] = status
         recorded[v] = count
 
 
@@ -1181,8 +1188,22 @@ def _stage_state(q, qd, a, kq, kv, sq, sv):
 
 
 @njit(cache=True)
-def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buffer_size, mass, row_scale, m, mode,
-        law, schur):
+def _rk4_arrays(n, m, n_u, records, buffer_size, r):
+    """The records (t, q, q̇, q̈, λ, u, |Φ|max, |Φ̇|max, f_c) of an RK4 run and its workspace
+    (terms buffer, the stages' slopes of q and q̇, λ at the step and at a stage, the KKT system,
+    the computed-torque law's system of ``r`` constraint rows and its pivots).  Plain numpy:
+    the Python driver :func:`rk4` calls it interpreted, which loads no compiled code."""
+    records = (np.zeros(records), np.zeros((records, n)), np.zeros((records, n)), np.zeros((records, n)),
+               np.zeros((records, m)), np.zeros((records, n_u)), np.zeros(records), np.zeros(records),
+               np.zeros((records, n)))
+    work = (np.zeros(buffer_size), np.empty((4, n)), np.empty((4, n)), np.empty(m), np.empty(m),
+            np.empty((n + m, n + m)), np.empty(n + m), np.empty((r, r)), np.empty(n + r), np.empty(r, dtype=np.int64))
+    return records, work
+
+
+def rk4(kind: int, method: int, parameters: np.ndarray, q0: np.ndarray, qd0: np.ndarray, h: float, steps: int,
+        every: int, u0: np.ndarray, ints: np.ndarray, reals: np.ndarray, buffer_size: int, mass: np.ndarray,
+        row_scale: np.ndarray, m: int, mode: int, law: tuple, schur: tuple) -> tuple:
     """Fixed-step RK4 for ``steps`` steps of size ``h`` from t = 0; records (t, q, q̇, q̈, λ, u,
     |Φ|max, |Φ̇|max, f_c = -Aᵀλ) every ``every`` steps.  Returns the records, the number recorded and a status
     code with the time, state and inputs it refers to (for a failed run: where the formulation
@@ -1196,45 +1217,59 @@ def rk4(kind, method, parameters, q0, qd0, h, steps, every, u0, ints, reals, buf
     step's first three stages.  The recorded u at t_n is the input applied from t_n on (the
     held value, as the hold returns it when :func:`cmbs.simulate` records the run), with q̈, λ
     evaluated with it.
+
+    The loop runs first without the paths that create arrays (:func:`_rk4_steps_borrowed`, whose
+    compiled code is about half the size, so a process loads it in half the time); at the first
+    stage that needs the SVD or the eigenvalue rank test it goes on from that stage in
+    :func:`_rk4_steps`, which has them: the same stages, the same results.
     """
     n = q0.shape[0]
-    schur = _private_copy(schur)
-    records = steps // every + 1
-    T = np.zeros(records)
-    Qs = np.zeros((records, n))
-    QDs = np.zeros((records, n))
-    QDDs = np.zeros((records, n))
-    LAMs = np.zeros((records, m))
-    Us = np.zeros((records, u0.shape[0]))
-    PHI = np.zeros(records)
-    PHID = np.zeros(records)
-    FORCE = np.zeros((records, n))
-    q, qd, u = q0.copy(), qd0.copy(), u0.copy()
-    sq, sv = np.empty(n), np.empty(n)       # the stage state
-    r = law[8].shape[0]                     # constraint rows of the law's partition
-    work = (np.zeros(buffer_size), np.empty((4, n)), np.empty((4, n)), np.empty(m), np.empty(m),
-            np.empty((n + m, n + m)), np.empty(n + m), np.empty((r, r)), np.empty(n + r), np.empty(r, dtype=np.int64))
-    recorded, status, st = _rk4_steps(kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode,
-                                      law, schur, q, qd, u, sq, sv, work, T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE)
+    records, work = interpreted(_rk4_arrays)(n, m, u0.shape[0], steps // every + 1, buffer_size, law[8].shape[0])
+    q, qd, u, sq, sv = q0.copy(), qd0.copy(), u0.copy(), np.empty(n), np.empty(n)
+    arguments = (kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law,
+                 interpreted(_private_copy)(schur), q, qd, u, sq, sv, work, records)
+    recorded, status, st, step, stage = _rk4_steps_borrowed(*arguments, 0, 0, 0)
+    if status == FALLBACK:
+        recorded, status, st, _, _ = _rk4_steps(*arguments, step, stage, recorded)
     if status != OK:
-        return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, status, st, sq, sv, u
-    return T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE, recorded, OK, steps * h, q, qd, u
+        return *records, recorded, status, st, sq, sv, u
+    return *records, recorded, OK, steps * h, q, qd, u
+
+
+@njit_borrowing(cache=True)
+def _rk4_steps_borrowed(kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law, schur, q,
+                        qd, u, sq, sv, work, records, start_step, start_stage, recorded):
+    """:func:`_rk4_loop` with :func:`_field_borrowed`: stops with FALLBACK at the first stage that
+    needs :func:`_field_fallback`."""
+    return _rk4_loop(False, kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law,
+                     schur, q, qd, u, sq, sv, work, records, start_step, start_stage, recorded)
 
 
 @njit_borrowing(cache=True)
 def _rk4_steps(kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law, schur, q, qd, u,
-               sq, sv, work, T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE):
-    """The loop of :func:`rk4` on the arrays it allocated (state q, q̇, u updated in place; stage
-    state sq, sv; ``work`` = terms buffer, the stages' slopes of q and q̇ (4, n), λ at the step
-    and at a stage, the KKT workspace, the law's workspace); returns (records written, status,
-    time of the failed stage).  Borrowing: no reference counting in the loop."""
+               sq, sv, work, records, start_step, start_stage, recorded):
+    """:func:`_rk4_loop` with the whole :func:`field`."""
+    return _rk4_loop(True, kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law, schur,
+                     q, qd, u, sq, sv, work, records, start_step, start_stage, recorded)
+
+
+@njit_borrowing(cache=True, inline="always")
+def _rk4_loop(with_fallback, kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law,
+              schur, q, qd, u, sq, sv, work, records, start_step, start_stage, recorded):
+    """The loop of :func:`rk4` on the arrays :func:`_rk4_arrays` allocated (state q, q̇, u
+    updated in place; stage state sq, sv; ``work``), from stage ``start_stage`` of step
+    ``start_step`` with ``recorded`` records written (the earlier stages of that step left their
+    slopes and λ in ``work``).  The stages call :func:`field` if ``with_fallback``, else
+    :func:`_field_borrowed`; the callers pass a constant, so numba compiles only that call.
+    Returns (records written, status, time, step and stage of the failed stage).  Borrowing: no
+    reference counting in the loop."""
     n = q.shape[0]
     buffer, kq, kv, lam, stage_lam, K, rhs, law_K, law_rhs, law_pivots = work
-    recorded = 0
-    for step in range(steps + 1):
+    T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE = records
+    for step in range(start_step, steps + 1):
         t = step * h
         st = t
-        for stage in range(4):              # one call site of field: compiled (and inlined) once
+        for stage in range(start_stage if step == start_step else 0, 4):  # one call site of the field
             if stage == 0:
                 for i in range(n):
                     sq[i] = q[i]
@@ -1247,10 +1282,14 @@ def _rk4_steps(kind, method, parameters, h, steps, every, ints, reals, mass, row
                 kq[stage, i] = sv[i]
             if mode == LAW or (mode == HELD and (step == 0 if stage == 0 else stage == 3)):
                 computed_torque(law, sq, sv, st, law_K, law_rhs, law_pivots, u)
-            status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale, kv[stage],
-                           lam if stage == 0 else stage_lam, K, rhs, True, schur)
+            if with_fallback:
+                status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale,
+                               kv[stage], lam if stage == 0 else stage_lam, K, rhs, True, schur)
+            else:
+                status = _field_borrowed(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass,
+                                         row_scale, kv[stage], lam if stage == 0 else stage_lam, K, rhs, True, schur)
             if status != OK:
-                return recorded, status, st
+                return recorded, status, st, step, stage
             if stage == 0:
                 if step % every == 0:
                     T[recorded] = t
@@ -1271,4 +1310,4 @@ def _rk4_steps(kind, method, parameters, h, steps, every, ints, reals, mass, row
         for i in range(n):                  # in place: the loop allocates nothing per step
             q[i] += (h / 6.0) * (kq[0, i] + 2.0 * kq[1, i] + 2.0 * kq[2, i] + kq[3, i])
             qd[i] += (h / 6.0) * (kv[0, i] + 2.0 * kv[1, i] + 2.0 * kv[2, i] + kv[3, i])
-    return recorded, OK, steps * h
+    return recorded, OK, steps * h, steps, 0

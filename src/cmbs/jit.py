@@ -23,11 +23,16 @@ except ImportError:
     _numba = None
 
 if _numba is not None:
-    # numba's typing registries are a large graph of objects: the interpreter's final garbage
-    # collection spends about 0.2 s on them at every exit.  The process is ending, so they are
-    # frozen out of that collection (gc.freeze).  Memory is returned to the system as always;
-    # only finalizers of objects left in reference cycles are skipped, which CPython does not
-    # promise to run at exit anyway.
+    # numba's typing registries are a large graph of objects, which every full garbage
+    # collection walks: about 20 ms each while a process starts (more once numba's target is
+    # initialised), and 0.2 s in the interpreter's final collection at exit.  The objects alive
+    # now (numpy's, numba's, and those the program made before importing cmbs: module-level
+    # objects, which live as long as the process) are moved out of the collector's reach
+    # (gc.freeze), and so is everything at exit.  A reference cycle among the frozen objects that
+    # becomes garbage is kept until exit; memory is returned to the system at exit as always, and
+    # only finalizers of objects left in cycles are skipped there, which CPython does not promise
+    # to run at exit anyway.
+    gc.freeze()
     atexit.register(gc.freeze)
 
 #: True when the kernels are compiled by numba.
@@ -66,6 +71,12 @@ def njit_borrowing(*args, **options) -> Callable:
     if _numba is not None:
         return _numba.njit(*args, **{**options, "_nrt": False})
     return njit(*args, **options)
+
+
+def interpreted(kernel: Callable) -> Callable:
+    """The Python function a kernel was compiled from (the kernel itself without numba): for a
+    one-off call from Python of a plain-numpy kernel, which then loads no compiled code."""
+    return getattr(kernel, "py_func", kernel)
 
 
 #: ``numba.prange`` (parallel loop over independent iterations) with numba, else ``range``.

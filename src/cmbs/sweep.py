@@ -26,7 +26,6 @@ from __future__ import annotations
 import json
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from itertools import product
 from pathlib import Path
@@ -295,6 +294,8 @@ def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> 
 def _run_processes(model: str | Model, settings: RunSettings, variants: list[Variant], workers: int) -> list[dict]:
     if workers <= 1 or len(variants) == 1:
         return [run_variant(model, settings, variant) for variant in variants]
+    from concurrent.futures import ProcessPoolExecutor   # here: multiprocessing takes ~5 ms to import
+
     with ProcessPoolExecutor(max_workers=workers) as pool:
         return list(pool.map(run_variant, [model] * len(variants), [settings] * len(variants), variants,
                              chunksize=max(1, len(variants) // (4 * workers))))

@@ -265,10 +265,8 @@ class Model:
         return terms
 
     def _at(self, q: np.ndarray, qd: np.ndarray | None, t: float, u: np.ndarray | None) -> Terms:
-        q = np.asarray(q, dtype=float)
-        qd = np.zeros(self.n) if qd is None else np.asarray(qd, dtype=float)
-        u = None if u is None else np.asarray(u, dtype=float)
-        return self.evaluate(q, qd, float(t), u)
+        qd = np.zeros(self.n) if qd is None else _writable(qd)
+        return self.evaluate(_writable(q), qd, float(t), None if u is None else _writable(u))
 
     def mass_matrix(self, q: np.ndarray) -> np.ndarray:
         """M(q), (n, n)."""
@@ -316,6 +314,13 @@ class Model:
     def point_positions(self, q: np.ndarray) -> np.ndarray:
         """(n_points, 2) positions (x, z) of :attr:`point_names`."""
         return self.equations.point_positions(np.asarray(q, dtype=float))
+
+
+def _writable(values: object) -> np.ndarray:
+    """``values`` as a float array that can be written (read-only ones, such as a model's q0,
+    are copied): numba compiles, and a process loads, a separate kernel for read-only arrays."""
+    array = np.asarray(values, dtype=float)
+    return array if array.flags.writeable else array.copy()
 
 
 class WrappedEquations:
