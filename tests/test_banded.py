@@ -13,10 +13,10 @@ def _band_storage(K, order, width):
     """K permuted by ``order`` in the storage of band_factor."""
     P = K[np.ix_(order, order)]
     size = K.shape[0]
-    AB = np.zeros((3 * width + 1, size))
+    AB = np.zeros((size, 3 * width + 1))
     for i in range(size):
         for j in range(max(0, i - width), min(size, i + width + 1)):
-            AB[2 * width + i - j, j] = P[i, j]
+            AB[j, 2 * width + i - j] = P[i, j]
     return AB, P
 
 

@@ -72,18 +72,22 @@ def band_plan(mass: np.ndarray, pattern: np.ndarray) -> tuple[np.ndarray, int]:
 def band_factor(AB, width, pivots):
     """LU factorisation with partial pivoting of the band matrix in ``AB`` (LAPACK ``gbtf2``,
     unblocked): lower and upper half-width ``width`` = b, element (i, j) of the matrix at
-    ``AB[2b + i - j, j]``, rows 0..b-1 of AB free for the fill (AB has 3b + 1 rows).  In place;
-    row interchanges in ``pivots``.  Returns False at an exactly zero pivot column."""
-    size = AB.shape[1]
+    ``AB[j, 2b + i - j]``, entries 0..b-1 of each row of AB free for the fill (AB is (size,
+    3b + 1)): each matrix column is a contiguous row of AB, as in LAPACK's column-major band
+    storage.  In place; row interchanges in ``pivots``.  Returns False at an exactly zero pivot
+    column."""
+    size = AB.shape[0]
     diagonal = 2 * width
     last = 0                                # last column touched by the U factor so far
-    for j in range(size):
+    for j in range(size):                   # views from the diagonal down: indices from 0 (faster)
         below = min(width, size - 1 - j)
+        column = AB[j, diagonal:diagonal + below + 1]
         pivot = 0
-        largest = abs(AB[diagonal, j])
+        largest = abs(column[0])
         for i in range(1, below + 1):
-            if abs(AB[diagonal + i, j]) > largest:
-                largest = abs(AB[diagonal + i, j])
+            value = abs(column[i])
+            if value > largest:
+                largest = value
                 pivot = i
         pivots[j] = j + pivot
         if largest == 0.0:
@@ -91,35 +95,42 @@ def band_factor(AB, width, pivots):
         last = max(last, min(j + width + pivot, size - 1))
         if pivot != 0:                      # swap rows j and j + pivot in columns j..last
             for c in range(j, last + 1):
-                a, b = diagonal + j - c, diagonal + j + pivot - c
-                AB[a, c], AB[b, c] = AB[b, c], AB[a, c]
-        inverse = 1.0 / AB[diagonal, j]
+                row = AB[c]
+                a = diagonal + j - c
+                row[a], row[a + pivot] = row[a + pivot], row[a]
+        inverse = 1.0 / column[0]
         for i in range(1, below + 1):
-            AB[diagonal + i, j] *= inverse
+            column[i] *= inverse
         for c in range(j + 1, last + 1):    # rank-one update of the trailing block
-            top = AB[diagonal + j - c, c]
+            offset = diagonal + j - c
+            target = AB[c, offset:offset + below + 1]
+            top = target[0]
             if top != 0.0:
                 for i in range(1, below + 1):
-                    AB[diagonal + j + i - c, c] -= AB[diagonal + i, j] * top
+                    target[i] -= column[i] * top
     return True
 
 
 @njit_borrowing(cache=True)
 def band_solve(AB, width, pivots, b):
     """Solve with the factors of :func:`band_factor`, in place in ``b`` (LAPACK ``gbtrs``)."""
-    size = AB.shape[1]
+    size = AB.shape[0]
     diagonal = 2 * width
-    for j in range(size - 1):
+    for j in range(size - 1):               # L
         below = min(width, size - 1 - j)
         p = pivots[j]
         if p != j:
             b[j], b[p] = b[p], b[j]
+        value = b[j]
+        column = AB[j]
         for i in range(1, below + 1):
-            b[j + i] -= AB[diagonal + i, j] * b[j]
-    for j in range(size - 1, -1, -1):
-        b[j] /= AB[diagonal, j]
+            b[j + i] -= column[diagonal + i] * value
+    for j in range(size - 1, -1, -1):       # U, column j above the diagonal
+        column = AB[j]
+        value = b[j] / column[diagonal]
+        b[j] = value
         for i in range(max(0, j - diagonal), j):
-            b[i] -= AB[diagonal + i - j, j] * b[j]
+            b[i] -= column[diagonal + i - j] * value
 
 
 @njit_borrowing(cache=True)

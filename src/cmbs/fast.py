@@ -465,7 +465,8 @@ def _gram_bounds(A, row_scale, gram, factor, rows_of, start, Z):
     return 1.0 / total, trace
 
 
-#: Largest m·n for which :func:`_bounds` keeps a reference A (its test costs m·n operations).
+#: Largest m·n for which :func:`_bounds` keeps a reference A without A's structure (its test then
+#: costs m·n operations; with the structure, one per structural non-zero).
 BOUNDS_REUSE_SIZE = 1024
 
 
@@ -481,14 +482,16 @@ def _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z):
     are computed afresh (which leaves G in ``gram``: ``reused`` False) and A becomes the
     reference (``reference`` = (valid, √λ_low, √λ_high), ``A0``) when they prove full rank.
     A step moves A little, so most stages of a run skip the Gram matrix, its Cholesky factor and
-    trace G⁻¹."""
+    trace G⁻¹.  With A's structure (``rows_of`` of :func:`column_rows`), δ and the copy into A₀
+    run over the structural non-zeros only: the entries outside are zero in A and A₀ alike."""
     m, n = A.shape
+    structured = n > 0 and rows_of[0, 0] >= 0
     if reference[0] == 1.0:
         total = 0.0
-        for i in range(m):
-            scale = row_scale[i]
-            for j in range(n):
-                difference = (A[i, j] - A0[i, j]) * scale
+        for j in range(n):
+            for a in range(rows_of[j, 0] if structured else m):
+                i = rows_of[j, 1 + a] if structured else a
+                difference = (A[i, j] - A0[i, j]) * row_scale[i]
                 total += difference * difference
         delta = math.sqrt(total)
         if delta <= 0.1 * reference[1]:
@@ -496,8 +499,9 @@ def _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z):
     low, high = _gram_bounds(A, row_scale, gram, factor, rows_of, start, Z)
     reference[0] = 0.0
     if low > 0.0 and A0.shape[0] == m:
-        for i in range(m):
-            for j in range(n):
+        for j in range(n):
+            for a in range(rows_of[j, 0] if structured else m):
+                i = rows_of[j, 1 + a] if structured else a
                 A0[i, j] = A[i, j]
         reference[0], reference[1], reference[2] = 1.0, math.sqrt(low), math.sqrt(high)
     return low, high, False
@@ -665,7 +669,7 @@ def schur_workspace(kind: int, mass: np.ndarray, m: int, pattern: np.ndarray | N
     plan (:func:`_band_kkt`): its flag (1: used), half-width b, storage (3b + 1, n + m),
     pivots, right-hand side, the position of each unknown, M's non-zeros (row, column, value)
     and A's structural non-zeros (row, column); last the reference of :func:`_bounds`: (valid,
-    √λ_low, √λ_high) and its A (m, n), empty when m·n > BOUNDS_REUSE_SIZE."""
+    √λ_low, √λ_high) and its A (m, n), empty without ``pattern`` when m·n > BOUNDS_REUSE_SIZE."""
     n = mass.shape[0]
     flag = 0
     massive = np.arange(n)
@@ -689,11 +693,13 @@ def schur_workspace(kind: int, mass: np.ndarray, m: int, pattern: np.ndarray | N
             np.zeros((m, m)), massive.astype(np.int64), massless.astype(np.int64), np.zeros(size),
             np.zeros(max(n, m), dtype=np.int64), column_rows(pattern, m, n),
             start, np.zeros((max(m, 1), width + 1)), *band, np.zeros(3),
-            np.zeros((m, n)) if m * n <= BOUNDS_REUSE_SIZE else np.zeros((0, 0)))
+            np.zeros((m, n)) if m * n <= BOUNDS_REUSE_SIZE or pattern is not None else np.zeros((0, 0)))
 
 
-#: Band KKT solves are used from this many unknowns (n + m) on, when cheaper than the Schur path.
-BAND_MINIMUM_SIZE = 60
+#: Band KKT solves are used from this many unknowns (n + m) on, when cheaper than the Schur path
+#: (measured: the band LU wins from about 22 unknowns, a pinned 8-link chain; the cost estimate
+#: of :func:`_band_workspace` chooses between the two).
+BAND_MINIMUM_SIZE = 20
 
 
 def _band_workspace(kind: int, flag: int, mass: np.ndarray, pattern: np.ndarray | None, m: int,
@@ -712,7 +718,7 @@ def _band_workspace(kind: int, flag: int, mass: np.ndarray, pattern: np.ndarray 
     position[order] = np.arange(n + m)
     mass_rows, mass_columns = np.nonzero(mass)
     a_rows, a_columns = np.nonzero(pattern) if pattern is not None else (np.zeros(0, int), np.zeros(0, int))
-    return (use, width, np.zeros((3 * width + 1, n + m)), np.zeros(n + m, dtype=np.int64), np.zeros(n + m),
+    return (use, width, np.zeros((n + m, 3 * width + 1)), np.zeros(n + m, dtype=np.int64), np.zeros(n + m),
             position, mass_rows.astype(np.int64), mass_columns.astype(np.int64),
             np.ascontiguousarray(mass[mass_rows, mass_columns], dtype=float), a_rows.astype(np.int64),
             a_columns.astype(np.int64))
@@ -731,12 +737,12 @@ def _band_kkt(Q, A, c, schur, qdd, lam):
     AB[:, :] = 0.0
     for k in range(mass_rows.shape[0]):
         i, j = position[mass_rows[k]], position[mass_columns[k]]
-        AB[diagonal + i - j, j] = mass_values[k]
+        AB[j, diagonal + i - j] = mass_values[k]
     for k in range(a_rows.shape[0]):
         value = A[a_rows[k], a_columns[k]]
         i, j = position[n + a_rows[k]], position[a_columns[k]]
-        AB[diagonal + i - j, j] = value
-        AB[diagonal + j - i, i] = value
+        AB[j, diagonal + i - j] = value
+        AB[i, diagonal + j - i] = value
     for i in range(n):
         rhs[position[i]] = Q[i]
     for r in range(m):
