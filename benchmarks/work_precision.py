@@ -17,12 +17,13 @@ checked against Pinocchio with scipy's DOP853 at 1e-12 (the difference is printe
 below ten times it is not resolved).  Not RK45 at 1e-12: on the slider-crank such tight index-1
 runs step so close to the singular position that they change branch (θ2 + 2θ1 = 0.43 rad at
 1 s instead of 0; docs/formulations.md).  Wall: the whole call (cmbs.simulate; the other tools' loop), one run
-after a warm-up of each configuration family.
+after a warm-up run of the same configuration (cmbs, MuJoCo; it loads the compiled code that
+configuration takes).
 
-Configurations: cmbs RK4 with h = 10 ms ... 0.1 ms on the compiled loops (baumgarte,
+Configurations: cmbs RK4 with h = 10, 6.25, 5, 3.125, 2, 1, 0.5, 0.2, 0.1 ms on the compiled loops (baumgarte,
 projection, matrix-r); RK45 with rtol = 1e-4 ... 1e-10 (lagrange, matrix-r) and DOP853 (lagrange,
 compiled); generalized-α with
-h = 10, 2, 1 ms; MuJoCo RK4 and implicitfast with h = 10 ms ... 0.1 ms; Pinocchio RK45 and
+h = 10, 2, 1 ms; MuJoCo RK4 and implicitfast with the same steps; Pinocchio RK45 and
 DOP853 (scipy) with rtol = 1e-4 ... 1e-10 and RK4 (Python loop) with h = 10, 2, 1 ms.
 
 For each accuracy level 1e-3 ... 1e-9: the fastest configuration of cmbs and of each tool that
@@ -55,7 +56,7 @@ SPAN = 1.0
 QUARTERS = np.array([0.25, 0.5, 0.75, 1.0])   # error = max |Δθ1| over these times (one time can be lucky)
 REFERENCE_STEP = 2.5e-5     # matrix R, RK4 (compiled): keeps the slider-crank's branch; error ~1e-13
 LEVELS = [10.0 ** -k for k in range(3, 10)]
-STEPS = [1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4]
+STEPS = [1e-2, 1 / 160, 5e-3, 1 / 320, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4]   # each a divisor of a quarter of SPAN
 TOLERANCES = [1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10]
 
 MECHANISMS = {
@@ -119,11 +120,8 @@ def cmbs_configurations(quick: bool) -> list[tuple[str, str, dict, str]]:
 
 def run_cmbs(model, tree, quick: bool, reference: float) -> list[dict]:
     rows = []
-    warmed = set()
     for family, formulation, options, setting in cmbs_configurations(quick):
-        if family not in warmed:           # compile / warm the family once
-            cmbs.simulate(model, t_end=0.01, formulation=formulation, **{**options, "dt": min(options["dt"], 0.01)})
-            warmed.add(family)
+        cmbs.simulate(model, t_end=SPAN, formulation=formulation, **options)  # warm: compiled code loaded
         run, wall = timed(lambda: cmbs.simulate(model, t_end=SPAN, formulation=formulation, **options))
         ok = run.info["status"] == "success" and abs(run.t[-1] - SPAN) < 1e-9
         error = deviation(quarter_angles(model, tree, run), reference) if ok else None

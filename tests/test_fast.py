@@ -446,3 +446,18 @@ def test_loop_goes_on_with_the_svd_from_the_stage_that_needs_it(every):
     assert resumed[9] == count and resumed[10] == compiled.OK
     for got, expected in zip(resumed[:9], full_records):
         np.testing.assert_array_equal(got, expected)
+
+
+def test_workspace_is_built_once_per_model_and_released_with_it():
+    """The compiled workspace of a model is kept while the model lives (the same schur tuple on
+    the second call, a new terms buffer each time) and dropped when the model is collected."""
+    import gc
+
+    model = cmbs.load("chain", links=5, closed=True)
+    first, second = compiled.workspace(model), compiled.workspace(model)
+    assert first[5] is second[5] and first[3] is not second[3]
+    key = id(model)
+    assert key in compiled._WORKSPACES
+    del model, first, second
+    gc.collect()
+    assert key not in compiled._WORKSPACES

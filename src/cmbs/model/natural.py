@@ -658,7 +658,7 @@ class NaturalEquations:
         """T + V at every row of q, q̇ (k, n), vectorised: T = ½ q̇ᵀ M q̇ (M constant) and V as in
         :meth:`potential_energy`."""
         q_ext = np.concatenate([q, np.broadcast_to(self.constants, (q.shape[0], self.constants.size))], axis=1)
-        energy = 0.5 * np.einsum("ki,ij,kj->k", qd, self.mass, qd) - q_ext @ self.gravity_ext
+        energy = 0.5 * np.sum((qd @ self.mass) * qd, axis=1) - q_ext @ self.gravity_ext
         rows, parameters = self.springs
         if rows.size:
             d = q_ext[:, rows[:, 2:4]] - q_ext[:, rows[:, 0:2]]
