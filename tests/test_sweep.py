@@ -48,6 +48,26 @@ def test_process_pool_equals_serial_and_the_batched_path(four_bar):
     np.testing.assert_allclose(batched.q, serial.q, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("path", ["batched", "serial", "processes"])
+def test_progress_bar_counts_every_variant_and_changes_no_result(four_bar, capsys, monkeypatch, path):
+    """With ``progress`` the bar on stderr reaches N/N; the batched path then runs in blocks of
+    variants (here blocks of 8 of 20), which must give the one-call batch's numbers exactly."""
+    import importlib
+
+    monkeypatch.setattr(importlib.import_module("cmbs.sweep"), "PROGRESS_BLOCKS", 3)
+    variants = _initial_states(four_bar, 20 if path == "batched" else 3)
+    options = {"batched": {}, "serial": {"batched": False, "workers": 1},
+               "processes": {"batched": False, "workers": 2}}[path]
+    quiet = sweep(four_bar, variants, t_end=0.1, dt=1e-3, every=10, **options)
+    capsys.readouterr()
+    shown = sweep(four_bar, variants, t_end=0.1, dt=1e-3, every=10, progress=True, **options)
+    bar = capsys.readouterr().err
+    assert f"{len(variants)}/{len(variants)}" in bar and "sweep four-bar" in bar
+    assert shown.info["mode"] == ("batched" if path == "batched" else "processes")
+    np.testing.assert_array_equal(shown.q, quiet.q)
+    np.testing.assert_array_equal(shown.status, quiet.status)
+
+
 def test_parameter_grid_and_mass_faults_run_through_simulate():
     """The slider-crank's crank speed and gravity on a grid; a heavier crank changes the motion
     exactly as mass_fault + simulate does."""
@@ -143,10 +163,10 @@ def cluster(tmp_path):
         log.close()
 
 
-def test_dask_sweep_equals_the_serial_run_and_survives_a_killed_worker(cluster):
+def test_dask_sweep_equals_the_serial_run_and_survives_a_killed_worker(cluster, capsys):
     """Eight penalty runs (Python loop, a fraction of a second each) on two workers; one worker
     is killed once tasks are running: its tasks run again on the other, nothing is lost, and
-    every variant equals the serial run."""
+    every variant equals the serial run; the progress bar counts all eight."""
     import os
     import threading
     import time
@@ -157,8 +177,9 @@ def test_dask_sweep_equals_the_serial_run_and_survives_a_killed_worker(cluster):
     options = dict(t_end=0.4, dt=1e-3, every=20, formulation="penalty")
     serial = sweep(model, variants, workers=1, **options)
     done = {}
+    capsys.readouterr()
     thread = threading.Thread(target=lambda: done.setdefault("result", sweep(model, variants, scheduler=address,
-                                                                             **options)))
+                                                                             progress=True, **options)))
     thread.start()
     with distributed.Client(address, timeout=30) as client:
         pids = client.run(os.getpid)        # worker address -> process id
@@ -178,6 +199,7 @@ def test_dask_sweep_equals_the_serial_run_and_survives_a_killed_worker(cluster):
     assert result.info["mode"] == "dask" and list(result.status) == ["success"] * 8
     np.testing.assert_array_equal(result.q, serial.q)
     np.testing.assert_array_equal(result.energy, serial.energy)
+    assert "8/8" in capsys.readouterr().err
 
 
 def test_dask_sweep_names_an_unreachable_scheduler(four_bar):
@@ -220,6 +242,18 @@ def test_sweep_command_initial_speeds_are_consistent_and_batched(tmp_path, capsy
         run = simulate(model, t_end=0.1, dt=1e-3, integrator="rk4", qd0=result.qd[v, 0])
         np.testing.assert_allclose(result.q[v], run.q, rtol=0, atol=1e-12)
     assert result.constraint_error.max() < 1e-9
+
+
+def test_sweep_command_progress_flag(capsys):
+    """``--progress`` draws the bar on stderr (off by default when stderr is not a terminal)."""
+    from cmbs.cli import main
+
+    arguments = ["sweep", "four-bar", "--undriven", "--speed", "alpha=0,1", "--t-end", "0.05", "--dt", "1e-3",
+                 "--integrator", "rk4"]
+    assert main(arguments) == 0
+    assert "2/2" not in capsys.readouterr().err
+    assert main([*arguments, "--progress"]) == 0
+    assert "2/2" in capsys.readouterr().err
 
 
 def test_sweep_command_mistakes_exit_2_with_one_line(tmp_path, capsys):

@@ -4,6 +4,7 @@ speeds, run by :func:`cmbs.sweep.sweep` (batched, local processes or a Dask clus
 from __future__ import annotations
 
 import argparse
+import sys
 from itertools import product
 from typing import Callable
 
@@ -31,6 +32,8 @@ def add_sweep_command(commands, model_command: Callable, dynamics_options: Calla
     command.add_argument("--every", type=int, default=1, help="record every N-th step of --dt (default 1)")
     command.add_argument("--workers", type=int, help="local worker processes (default: the CPUs; 1: this process)")
     command.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run on this Dask scheduler")
+    command.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                         help="progress bar on stderr (default: when stderr is a terminal)")
     command.add_argument("--coordinate", help="coordinate of the figure (default: the first)")
     command.add_argument("--out", help="sweep result (.npz)")
     command.add_argument("--plot", help="figure: the coordinate in every variant, energy changes (.png, .pdf, .svg)")
@@ -131,7 +134,8 @@ def _sweep(args: argparse.Namespace) -> int:
                               f"{_listing(nominal.coordinate_names)}")
     result = sweep(target, variants, t_end=args.t_end, formulation=args.formulation, integrator=args.integrator,
                    dt=args.dt, rtol=args.rtol, atol=args.atol, project=args.project, every=args.every,
-                   workers=args.workers, scheduler=args.scheduler)
+                   workers=args.workers, scheduler=args.scheduler,
+                   progress=sys.stderr.isatty() if args.progress is None else args.progress)
     failed = int(np.count_nonzero(result.status != "success"))
     print(f"{nominal.name}: {len(result)} variants, {result.info['mode']} ({result.info['workers']} "
           f"{'scheduler' if result.info['mode'] == 'dask' else 'workers'}), {result.info['wall_time']:.3g} s wall, "
