@@ -423,17 +423,16 @@ def test_loop_goes_on_with_the_svd_from_the_stage_that_needs_it(every):
     solver = chosen.bind(model)
     parameters = compiled.bound_parameters(method, parameters, solver)
     _, ints, reals, buffer, mass, schur = compiled.workspace(model)
-    steps, h, n = 1200, 1e-3, model.n
+    steps, h = 1200, 1e-3
     law = compiled.law_arrays(law, model)
     row_scale = np.ascontiguousarray(solver.row_scale)
     u0 = np.zeros(model.n_u)
 
     def arguments():
-        records, work = compiled._rk4_arrays(n, model.m, model.n_u, steps // every + 1, buffer.size,
-                                             law[8].shape[0])
+        state, records, work = compiled._rk4_arrays(np.array(model.q0), np.array(model.qd0), u0, model.m,
+                                                    steps // every + 1, buffer.size, law[8].shape[0])
         return (kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law,
-                compiled._private_copy(schur), np.array(model.q0), np.array(model.qd0), u0.copy(), np.empty(n),
-                np.empty(n), work, records), records
+                compiled._private_copy(schur), *state, work, records), records
 
     lean, _ = arguments()
     recorded, status, t_stop, step, stage = compiled._rk4_steps_borrowed(*lean, 0, 0, 0)

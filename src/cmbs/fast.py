@@ -407,7 +407,7 @@ def _gram(X, scale, gram, rows_of, start):
     is no pattern: the column is then scanned (O(mn)) and G cleared whole.  Entries of G outside
     the profile stay zero from the workspace's creation (callers that overwrite G restore them)."""
     m, n = X.shape
-    structured = n > 0 and rows_of[0, 0] >= 0
+    structured = _structured(rows_of, n)
     for i in range(m):
         for j in range(start[i] if structured else 0, i + 1 if structured else m):
             gram[i, j] = 0.0
@@ -431,6 +431,13 @@ def _gram(X, scale, gram, rows_of, start):
     for i in range(m):
         for j in range(start[i] if structured else 0, i):
             gram[j, i] = gram[i, j]
+
+
+@njit_borrowing(cache=True, inline="always")
+def _structured(rows_of, n):
+    """True when ``rows_of`` (:func:`column_rows`) lists A's structural rows, False when its
+    counts are -1 (no pattern: the columns are scanned)."""
+    return n > 0 and rows_of[0, 0] >= 0
 
 
 def column_rows(pattern: np.ndarray | None, m: int, n: int) -> np.ndarray:
@@ -501,7 +508,7 @@ def _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z):
     trace G⁻¹.  With A's structure (``rows_of`` of :func:`column_rows`), δ and the copy into A₀
     run over the structural non-zeros only: the entries outside are zero in A and A₀ alike."""
     m, n = A.shape
-    structured = n > 0 and rows_of[0, 0] >= 0
+    structured = _structured(rows_of, n)
     if reference[0] == 1.0:
         total = 0.0
         for j in range(n):
@@ -1189,8 +1196,9 @@ def rk4_batch(kind, method, parameters, Q0, QD0, U0, h, steps, every, ints, real
     recorded q, q̇ and |Φ|max into Qs (N, records, n), QDs and PHIs (N, records), its status
     and the number of records it reached."""
     for v in prange(Q0.shape[0]):
-        records, work = _rk4_arrays(Q0.shape[1], m, U0.shape[1], steps // every + 1, buffer_size, law[8].shape[0])
-        q, qd, u, sq, sv = Q0[v].copy(), QD0[v].copy(), U0[v].copy(), np.empty(Q0.shape[1]), np.empty(Q0.shape[1])
+        state, records, work = _rk4_arrays(Q0[v], QD0[v], U0[v], m, steps // every + 1, buffer_size,
+                                           law[8].shape[0])
+        q, qd, u, sq, sv = state
         count, status, _, _, _ = _rk4_steps(kind, method, parameters, h, steps, every, ints, reals, mass, row_scale,
                                             CONSTANT, law, _private_copy(schur), q, qd, u, sq, sv, work, records, 0, 0,
                                             0)
@@ -1210,17 +1218,21 @@ def _stage_state(q, qd, a, kq, kv, sq, sv):
 
 
 @njit(cache=True)
-def _rk4_arrays(n, m, n_u, records, buffer_size, r):
-    """The records (t, q, q̇, q̈, λ, u, |Φ|max, |Φ̇|max, f_c) of an RK4 run and its workspace
-    (terms buffer, the stages' slopes of q and q̇, λ at the step and at a stage, the KKT system,
-    the computed-torque law's system of ``r`` constraint rows and its pivots).  Plain numpy:
-    the Python driver :func:`rk4` calls it interpreted, which loads no compiled code."""
+def _rk4_arrays(q0, qd0, u0, m, records, buffer_size, r):
+    """The arrays of an RK4 run from (q0, q̇0) with inputs u0: its state (q, q̇, u, copies; the
+    stage state), its records (t, q, q̇, q̈, λ, u, |Φ|max, |Φ̇|max, f_c) and its workspace (terms
+    buffer, the stages' slopes of q and q̇, λ at the step and at a stage, the KKT system, the
+    computed-torque law's system of ``r`` constraint rows and its pivots).  Plain numpy: the
+    Python driver :func:`rk4` calls it interpreted, which loads no compiled code; :func:`rk4_batch`
+    compiled, once per variant."""
+    n, n_u = q0.shape[0], u0.shape[0]
+    state = (q0.copy(), qd0.copy(), u0.copy(), np.empty(n), np.empty(n))
     records = (np.zeros(records), np.zeros((records, n)), np.zeros((records, n)), np.zeros((records, n)),
                np.zeros((records, m)), np.zeros((records, n_u)), np.zeros(records), np.zeros(records),
                np.zeros((records, n)))
     work = (np.zeros(buffer_size), np.empty((4, n)), np.empty((4, n)), np.empty(m), np.empty(m),
             np.empty((n + m, n + m)), np.empty(n + m), np.empty((r, r)), np.empty(n + r), np.empty(r, dtype=np.int64))
-    return records, work
+    return state, records, work
 
 
 def rk4(kind: int, method: int, parameters: np.ndarray, q0: np.ndarray, qd0: np.ndarray, h: float, steps: int,
@@ -1245,9 +1257,9 @@ def rk4(kind: int, method: int, parameters: np.ndarray, q0: np.ndarray, qd0: np.
     stage that needs the SVD or the eigenvalue rank test it goes on from that stage in
     :func:`_rk4_steps`, which has them: the same stages, the same results.
     """
-    n = q0.shape[0]
-    records, work = interpreted(_rk4_arrays)(n, m, u0.shape[0], steps // every + 1, buffer_size, law[8].shape[0])
-    q, qd, u, sq, sv = q0.copy(), qd0.copy(), u0.copy(), np.empty(n), np.empty(n)
+    state, records, work = interpreted(_rk4_arrays)(q0, qd0, u0, m, steps // every + 1, buffer_size,
+                                                    law[8].shape[0])
+    q, qd, u, sq, sv = state
     arguments = (kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law,
                  interpreted(_private_copy)(schur), q, qd, u, sq, sv, work, records)
     recorded, status, st, step, stage = _rk4_steps_borrowed(*arguments, 0, 0, 0)

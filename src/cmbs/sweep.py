@@ -303,20 +303,22 @@ def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> 
 
 def _run_processes(model: str | Model, settings: RunSettings, variants: list[Variant], workers: int,
                    bar: tqdm) -> list[dict]:
-    outputs = []
     if workers <= 1 or len(variants) == 1:
-        for variant in variants:
-            outputs.append(run_variant(model, settings, variant))
-            bar.update(1)
-        return outputs
+        return _counted((run_variant(model, settings, variant) for variant in variants), bar)
     from concurrent.futures import ProcessPoolExecutor   # here: multiprocessing takes ~5 ms to import
 
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        for output in pool.map(run_variant, [model] * len(variants), [settings] * len(variants), variants,
-                               chunksize=max(1, len(variants) // (4 * workers))):
-            outputs.append(output)           # in the variants' order, as they arrive
-            bar.update(1)
-    return outputs
+        return _counted(pool.map(run_variant, [model] * len(variants), [settings] * len(variants), variants,
+                                 chunksize=max(1, len(variants) // (4 * workers))), bar)
+
+
+def _counted(outputs: Iterable[dict], bar: tqdm) -> list[dict]:
+    """The variants' ``outputs`` as a list, in their order, counting each on ``bar`` as it arrives."""
+    collected = []
+    for output in outputs:
+        collected.append(output)
+        bar.update(1)
+    return collected
 
 
 def _run_dask(model: str | Model, settings: RunSettings, variants: list[Variant], scheduler: str,
@@ -381,7 +383,7 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
     PHIs = np.full((count, records), np.nan)
     statuses, recorded = np.zeros(count, dtype=np.int64), np.zeros(count, dtype=np.int64)
     row_scale, law = np.ascontiguousarray(solver.row_scale), fast.law_arrays(None, model)
-    block = count if bar.disable else max(1, -(-count // PROGRESS_BLOCKS), 4 * _threads())
+    block = count if bar.disable else max(-(-count // PROGRESS_BLOCKS), 4 * _threads())
     for a in range(0, count, block):        # each variant is independent: blocks change nothing
         b = min(a + block, count)
         fast.rk4_batch(kind, method, parameters, Q0[a:b], QD0[a:b], U0[a:b], settings.dt, steps, settings.every,
