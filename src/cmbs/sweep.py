@@ -6,7 +6,10 @@ with a leading variant dimension, on one common time grid).  It chooses how to r
 ``batched``
     Variants that differ only in the initial state and constant inputs, on a run the compiled
     loop takes (:mod:`cmbs.fast`: rk4; lagrange, baumgarte or standard projection), run as one
-    compiled call parallel over the variants (:func:`cmbs.fast.rk4_batch`, numba threads).
+    compiled call parallel over the variants (numba threads): natural-coordinate models under
+    lagrange or baumgarte in blocks of eight variants that share each stage's bookkeeping
+    (:func:`cmbs.fast_lanes.rk4_lanes`), other runs one variant at a time
+    (:func:`cmbs.fast.rk4_batch`); both give the numbers of :func:`cmbs.fast.rk4` bit for bit.
 ``processes``
     Anything else (library-model parameters, mass faults, other formulations and integrators)
     runs :func:`cmbs.simulate` once per variant, in a local pool of worker processes
@@ -369,7 +372,7 @@ PROGRESS_BLOCKS = 50
 
 def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], plan: tuple,
                  bar: tqdm) -> list[dict]:
-    from cmbs import fast
+    from cmbs import fast, fast_lanes
 
     method, parameters, solver, steps = plan
     kind, ints, reals, buffer, mass, schur = fast.workspace(model)
@@ -384,11 +387,17 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
     statuses, recorded = np.zeros(count, dtype=np.int64), np.zeros(count, dtype=np.int64)
     row_scale, law = np.ascontiguousarray(solver.row_scale), fast.law_arrays(None, model)
     block = count if bar.disable else max(-(-count // PROGRESS_BLOCKS), 4 * _threads())
+    lanes = fast_lanes.lane_plan(kind, method, schur, model.m, model.n)
     for a in range(0, count, block):        # each variant is independent: blocks change nothing
         b = min(a + block, count)
-        fast.rk4_batch(kind, method, parameters, Q0[a:b], QD0[a:b], U0[a:b], settings.dt, steps, settings.every,
-                       ints, reals, buffer.size, mass, row_scale, model.m, law, schur, Qs[a:b], QDs[a:b], PHIs[a:b],
-                       statuses[a:b], recorded[a:b])
+        if lanes is None:
+            fast.rk4_batch(kind, method, parameters, Q0[a:b], QD0[a:b], U0[a:b], settings.dt, steps, settings.every,
+                           ints, reals, buffer.size, mass, row_scale, model.m, law, schur, Qs[a:b], QDs[a:b],
+                           PHIs[a:b], statuses[a:b], recorded[a:b])
+        else:
+            fast_lanes.rk4_lanes(method, parameters, Q0[a:b], QD0[a:b], U0[a:b], settings.dt, steps, settings.every,
+                                 ints, reals, buffer.size, mass, row_scale, model.m, law, schur, lanes, Qs[a:b],
+                                 QDs[a:b], PHIs[a:b], statuses[a:b], recorded[a:b])
         bar.update(b - a)
     reasons = {fast.SINGULAR: "singular system (rank of A)", fast.NON_FINITE: "the motion diverged"}
     outputs = []

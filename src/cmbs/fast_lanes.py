@@ -1,0 +1,491 @@
+"""Batched RK4 in lanes: LANES variants of one natural-coordinate model advance together.
+
+The batched sweep (:func:`cmbs.sweep`) runs thousands of variants of one small mechanism, and a
+four-bar stage costs a single run more in bookkeeping (reading the model's index arrays, finding
+A's non-zeros, passing the workspace, branching on the formulation) than in arithmetic.  Here a
+block of LANES variants shares that bookkeeping: at every stage the model terms of the block
+(:func:`cmbs.model.natural_lanes.evaluate_lanes`), the rank certificate, the Baumgarte
+right-hand side and the Schur-complement solve run once for the block with the lane index
+innermost, on lane-major arrays (..., LANES), over the structural non-zeros of A known in
+advance.
+
+Every lane performs the operations :func:`cmbs.fast.rk4` performs for its variant (Lagrange or
+Baumgarte), in the same order: the results are bit for bit those of the one-variant loop
+(tests/test_lanes.py).  The common path of a stage is that of :func:`cmbs.fast.field` when the
+rank certificate of A holds (:func:`cmbs.fast._certify`, with its reference bounds kept per lane
+exactly as the one-variant loop keeps them) and M_pp⁻¹ is constant (natural coordinates):
+the block elimination of :func:`cmbs.fast._schur_solve`.  A variant whose stage leaves that path
+(terms or q̈ not finite, a certificate that does not hold, a factorisation that fails) leaves
+its lane at that step and finishes in :func:`cmbs.fast._rk4_steps` from the start of the step,
+with the state and certificate reference it had then: the same stages again, the same results,
+including a stop at a singular position.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cmbs.fast import (BAUMGARTE, CONSTANT, KIND_NATURAL, LAGRANGE, OK, _gram_bounds, _private_copy, _rk4_arrays,
+                       _rk4_steps, _structured)
+from cmbs.jit import njit, njit_borrowing, prange
+from cmbs.model.natural_lanes import LANES, evaluate_lanes, extended_size
+#: Lane states.
+RUNNING, LEAVING, LEFT = 0, 1, 2
+
+
+def lane_plan(kind: int, method: int, schur: tuple, m: int, n: int) -> tuple | None:
+    """The sparsity plan of :func:`_schur_lanes` for :func:`rk4_lanes`, or None when lanes cannot
+    run the batch.
+
+    Lanes take natural-coordinate models (kind) under Lagrange or Baumgarte whose massive block
+    M_pp is positive definite (the Schur path's flag 1), that are not solved by band LU, with
+    1 <= m <= n constraints and A's structural pattern known (``schur`` of
+    :func:`cmbs.fast.schur_workspace` built with it).
+
+    The plan lists, each as [count, items...] along its last axis: the massive non-zeros of each
+    row of A, as positions in M_pp's coordinates in increasing order (where
+    :func:`cmbs.fast._schur_solve` finds them by scanning A's values); for each entry of
+    X = M_pp⁻¹A_pᵀ, the non-zeros of its row of A whose M_pp⁻¹ entry is not zero; for each entry
+    of y = M_pp⁻¹Q_p, the non-zero entries of its row of M_pp⁻¹; for each entry (a, b <= a) of
+    A_pX, the non-zeros of row a of A whose X[b] is not structurally zero; for each massive q̈,
+    the rows of X not structurally zero in it.  The terms left out are products with an exact
+    zero, ±0, and the sums they leave start at +0 (or at y, itself such a sum): a sum that starts
+    at +0 never becomes -0, and adding ±0 to it changes nothing, so the sums over the plan are
+    bit for bit the dense ones (for finite A and Q, which a running lane has)."""
+    if kind != KIND_NATURAL or method not in (LAGRANGE, BAUMGARTE) or schur[1] != 1 or schur[16] == 1:
+        return None
+    inverse, rows_of, massive = schur[0], schur[13], schur[9]
+    if m == 0 or m > n or not _structured(rows_of, n) or schur[28].shape[0] != m:
+        return None
+    n_p = massive.size
+    rows = [[] for _ in range(m)]
+    for i, j in enumerate(massive):
+        for r in rows_of[j, 1:1 + rows_of[j, 0]]:
+            rows[r].append(i)
+    x_terms = [[[column for column in rows[r] if inverse[i, column] != 0.0] for i in range(n_p)] for r in range(m)]
+    x_nonzero = [[bool(x_terms[r][i]) for i in range(n_p)] for r in range(m)]
+    y_terms = [[j for j in range(n_p) if inverse[i, j] != 0.0] for i in range(n_p)]
+    reduced_terms = [[[column for column in rows[a] if x_nonzero[b][column]] for b in range(m)] for a in range(m)]
+    q_terms = [[a for a in range(m) if x_nonzero[a][i]] for i in range(n_p)]
+    return (_lists(rows, m, n_p), _lists(x_terms, (m, n_p), n_p), _lists(y_terms, n_p, n_p),
+            _lists(reduced_terms, (m, m), n_p), _lists(q_terms, n_p, m))
+
+
+def _lists(nested: list, shape: int | tuple, longest: int) -> np.ndarray:
+    """Nested lists of indices as an int64 array of ``shape`` + (longest + 1,): each list's
+    length, then its items."""
+    table = np.zeros((*np.atleast_1d(shape), longest + 1), dtype=np.int64)
+    for index in np.ndindex(*np.atleast_1d(shape)):
+        items = nested
+        for k in index:
+            items = items[k]
+        table[index][0] = len(items)
+        table[index][1:1 + len(items)] = items
+    return table
+
+
+@njit(cache=True, parallel=True)
+def rk4_lanes(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, buffer_size, mass, row_scale, m, law,
+              schur, plan, Qs, QDs, PHIs, statuses, recorded):
+    """:func:`cmbs.fast.rk4_batch` (same arguments without the kernel kind, plus the
+    :func:`lane_plan`; same outputs and results) in blocks of LANES variants, parallel over the
+    blocks (numba threads).  A last block with fewer variants fills its other lanes with copies
+    of its first variant, whose outputs are not kept."""
+    N, n = Q0.shape
+    records_total = steps // every + 1
+    for block in prange((N + LANES - 1) // LANES):
+        base = block * LANES
+        count = min(LANES, N - base)
+        state, work, exits = _lane_arrays(n, m, schur[9].shape[0], schur[10].shape[0], U0.shape[1], buffer_size,
+                                          extended_size(ints, n))
+        q, qd, U = state
+        for w in range(LANES):
+            v = base + (w if w < count else 0)
+            q[w] = Q0[v]
+            qd[w] = QD0[v]
+            U[w] = U0[v]
+        _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, _private_copy(schur), plan,
+                    state, work, exits, base, count, Qs, QDs, PHIs)
+        lanes, left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0 = exits
+        for w in range(count):
+            v = base + w
+            if lanes[w] != LEFT:
+                statuses[v] = OK
+                recorded[v] = records_total
+                continue
+            single, records, scalar = _rk4_arrays(resume_q[w], resume_qd[w], U0[v], m, records_total, buffer_size,
+                                                  law[8].shape[0])
+            own = _private_copy(schur)
+            own[27][:] = resume_reference[w]
+            own[28][:, :] = resume_A0[w]
+            done, status, _, _, _ = _rk4_steps(KIND_NATURAL, method, parameters, h, steps, every, ints, reals, mass,
+                                               row_scale, CONSTANT, law, own, single[0], single[1], single[2],
+                                               single[3], single[4], scalar, records, left_at[w], 0, records_before[w])
+            first = records_before[w]
+            Qs[v, first:done] = records[1][first:done]
+            QDs[v, first:done] = records[2][first:done]
+            PHIs[v, first:done] = records[6][first:done]
+            statuses[v] = status
+            recorded[v] = done
+
+
+@njit(cache=True)
+def _lane_arrays(n, m, n_p, n_a, n_u, buffer_size, n_ext):
+    """The arrays of a block, in three groups.  State, per lane (rows): q, q̇ and the inputs.
+    Work: a one-state terms buffer (its scratch holds the time functions), the extended
+    coordinates and velocities (n_ext, LANES), per lane the stage state and the slopes of the four
+    stages, lane-major (lanes last) the terms (Q, Φ, A, γ, Φ_t in a terms buffer's order), the
+    Schur workspace (X, y, the reduced matrix and right-hand side), c of Aq̈ = c, λ, q̈, the
+    certificate's reference (valid, √λ_low, √λ_high) and A₀ with their values at the step's
+    start, the lanes' accumulators (5, LANES) and one lane's A.  Exits: the lane states and, for
+    a lane that left, its step, the records written before it and the state and reference its
+    one-variant run resumes from."""
+    size = m + n_a
+    W = LANES
+    state = (np.zeros((W, n)), np.zeros((W, n)), np.zeros((W, n_u)))
+    work = (np.zeros(buffer_size), np.zeros((n_ext, W)), np.zeros((n_ext, W)), np.zeros((W, n)), np.zeros((W, n)),
+            np.zeros((4, W, n)), np.zeros((4, W, n)), np.zeros((n + 3 * m + m * n, W)), np.zeros((m, n_p, W)),
+            np.zeros((n_p, W)), np.zeros((size, size, W)), np.zeros((size, W)), np.zeros((m, W)), np.zeros((m, W)),
+            np.zeros((n, W)), np.zeros((3, W)), np.zeros((m, n, W)), np.zeros((3, W)), np.zeros((m, n, W)),
+            np.zeros((5, W)), np.zeros((m, n)))
+    exits = (np.zeros(W, dtype=np.int64), np.zeros(W, dtype=np.int64), np.zeros(W, dtype=np.int64),
+             np.zeros((W, n)), np.zeros((W, n)), np.zeros((W, 3)), np.zeros((W, m, n)))
+    return state, work, exits
+
+
+@njit_borrowing(cache=True, error_model="numpy")
+def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, schur, plan, state, work, exits, base,
+                count, Qs, QDs, PHIs):
+    """The RK4 loop of :func:`cmbs.fast._rk4_loop` (constant inputs, the whole run from t = 0)
+    for the block's lanes; writes the records of lanes ``0..count-1`` (variants ``base + w``)
+    while they run, and for each lane that leaves, its step, records and resume state.
+    Borrowing: the block's arrays come from :func:`_lane_arrays`."""
+    q, qd, U = state
+    (buffer, x, v, sq, sv, kq, kv, terms, X, y, reduced, z, c, lam, qdd, reference, A0, start_reference, start_A0,
+     scratch, single_A) = work
+    lanes = exits[0]
+    n = q.shape[1]
+    m = lam.shape[0]
+    a0 = n + m
+    Q = terms[:n]
+    phi = terms[n:a0]
+    A = terms[a0:a0 + m * n].reshape((m, n, LANES))
+    gamma = terms[a0 + m * n:a0 + m * n + m]
+    phi_t = terms[a0 + m * n + m:a0 + m * n + 2 * m]
+    recorded = 0
+    for step in range(steps + 1):
+        t = step * h
+        st = t
+        before = recorded
+        _copy(reference, start_reference)
+        _copy(A0.reshape((m * n, LANES)), start_A0.reshape((m * n, LANES)))
+        for stage in range(4):
+            if stage == 0:
+                _copy(q, sq)
+                _copy(qd, sv)
+            else:
+                a = h if stage == 3 else 0.5 * h
+                for w in range(LANES):
+                    for i in range(n):
+                        sq[w, i] = q[w, i] + a * kq[stage - 1, w, i]
+                        sv[w, i] = qd[w, i] + a * kv[stage - 1, w, i]
+                st = t + a
+            _copy(sv, kq[stage])
+            evaluate_lanes(sq, sv, st, U, ints, reals, buffer, x, v, terms)
+            _finite_lanes(terms, lanes, scratch[0])
+            _certify_lanes(A, row_scale, parameters[2], reference, A0, schur, lanes, single_A, scratch)
+            for r in range(m):
+                for w in range(LANES):
+                    c[r, w] = gamma[r, w]
+            if method == BAUMGARTE:
+                _baumgarte_lanes(parameters, sv, phi, A, phi_t, c)
+            _schur_lanes(schur[0], Q, A, c, schur[9], schur[10], plan, X, y, reduced, z, qdd, lam, lanes,
+                         scratch[1:])
+            _finite_lanes(qdd, lanes, scratch[0])
+            for w in range(LANES):
+                for i in range(n):
+                    kv[stage, w, i] = qdd[i, w]
+            if _leave(exits, step, q, qd, start_reference, start_A0, before, count):
+                return
+            if stage == 0:
+                if step % every == 0:
+                    for w in range(count):
+                        if lanes[w] == RUNNING:
+                            largest = 0.0
+                            for r in range(m):
+                                largest = max(largest, abs(phi[r, w]))
+                            PHIs[base + w, recorded] = largest
+                            for i in range(n):
+                                Qs[base + w, recorded, i] = q[w, i]
+                                QDs[base + w, recorded, i] = qd[w, i]
+                    recorded += 1
+                if step == steps:
+                    break
+        if step == steps:
+            break
+        for w in range(LANES):
+            for i in range(n):
+                q[w, i] += (h / 6.0) * (kq[0, w, i] + 2.0 * kq[1, w, i] + 2.0 * kq[2, w, i] + kq[3, w, i])
+                qd[w, i] += (h / 6.0) * (kv[0, w, i] + 2.0 * kv[1, w, i] + 2.0 * kv[2, w, i] + kv[3, w, i])
+
+
+@njit_borrowing(cache=True, error_model="numpy", inline="always")
+def _copy(source, target):
+    """target[:, :] = source for 2-D arrays, element by element (a slice assignment may need a
+    temporary)."""
+    for i in range(source.shape[0]):
+        for k in range(source.shape[1]):
+            target[i, k] = source[i, k]
+
+
+@njit_borrowing(cache=True, error_model="numpy", inline="always")
+def _certify_lanes(A, row_scale, tolerance, reference, A0, schur, lanes, single_A, scratch):
+    """The rank certificate of :func:`cmbs.fast._certify` per running lane (1 <= m <= n): its
+    bounds reused from the lane's reference while ‖S(A - A₀)‖_F <= √λ₀_low / 10, else fresh
+    (:func:`cmbs.fast._gram_bounds` on the lane's A) with the reference renewed, exactly as
+    :func:`cmbs.fast._bounds_meeting` keeps it; a lane whose bounds do not certify
+    σ_min >= tolerance·max(σ_max, 1) leaves."""
+    m, n, _ = A.shape
+    rows_of = schur[13]
+    total = scratch[4]
+    for w in range(LANES):
+        total[w] = 0.0
+    for j in range(n):                      # δ² over the structural non-zeros, in _bounds's order
+        for a in range(rows_of[j, 0]):
+            i = rows_of[j, 1 + a]
+            for w in range(LANES):
+                difference = (A[i, j, w] - A0[i, j, w]) * row_scale[i]
+                total[w] += difference * difference
+    for w in range(LANES):
+        if lanes[w] != RUNNING:
+            continue
+        reused = False
+        low, high = 0.0, 0.0
+        if reference[0, w] == 1.0:
+            delta = math.sqrt(total[w])
+            if delta <= 0.1 * reference[1, w]:
+                low, high = (reference[1, w] - delta) ** 2, (reference[2, w] + delta) ** 2
+                reused = True
+        if reused and (low < tolerance * tolerance * max(high, 1.0) or low <= 0.0):
+            reference[0, w] = 0.0
+            reused = False
+        if not reused:
+            for i in range(m):
+                for j in range(n):
+                    single_A[i, j] = A[i, j, w]
+            low, high = _gram_bounds(single_A, row_scale, schur[7], schur[8], rows_of, schur[14], schur[15])
+            reference[0, w] = 0.0
+            if low > 0.0:
+                for j in range(n):
+                    for a in range(rows_of[j, 0]):
+                        i = rows_of[j, 1 + a]
+                        A0[i, j, w] = A[i, j, w]
+                reference[0, w], reference[1, w], reference[2, w] = 1.0, math.sqrt(low), math.sqrt(high)
+        if not low >= tolerance * tolerance * max(high, 1.0):
+            lanes[w] = LEAVING
+
+
+@njit_borrowing(cache=True, error_model="numpy", inline="always")
+def _baumgarte_lanes(parameters, sv, phi, A, phi_t, c):
+    """c -= 2ξωΦ̇ + ω²Φ with Φ̇ = Aq̇ + Φ_t, per lane (:func:`cmbs.fast._constrained_solve`)."""
+    m, n, _ = A.shape
+    for r in range(m):
+        for w in range(LANES):
+            rate = phi_t[r, w]
+            for j in range(n):
+                rate += A[r, j, w] * sv[w, j]
+            c[r, w] -= 2.0 * parameters[0] * parameters[1] * rate + parameters[1] * parameters[1] * phi[r, w]
+
+
+@njit_borrowing(cache=True, error_model="numpy", inline="always")
+def _schur_lanes(inverse, Q, A, c, massive, massless, plan, X, y, reduced, z, qdd, lam, lanes, pivot):
+    """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c] per lane by the block elimination of
+    :func:`cmbs.fast._schur_solve` with the constant ``inverse`` = M_pp⁻¹ (its flag 1), the same
+    operations in the same order, less the products with a structural zero (``plan`` of
+    :func:`lane_plan`: bit for bit the same sums); the reduced system by Cholesky without
+    massless coordinates, else by :func:`_eliminate_lanes`.  A lane whose factorisation fails
+    leaves."""
+    row_terms, x_terms, y_terms, reduced_terms, q_terms = plan
+    m = c.shape[0]
+    n_p = massive.shape[0]
+    n_a = massless.shape[0]
+    for r in range(m):                      # X = M_pp⁻¹ A_pᵀ
+        for i in range(n_p):
+            for w in range(LANES):
+                X[r, i, w] = 0.0
+            for k in range(x_terms[r, i, 0]):
+                column = x_terms[r, i, 1 + k]
+                for w in range(LANES):
+                    X[r, i, w] += inverse[i, column] * A[r, massive[column], w]
+    for i in range(n_p):                    # y = M_pp⁻¹ Q_p
+        for w in range(LANES):
+            y[i, w] = 0.0
+        for k in range(y_terms[i, 0]):
+            j = y_terms[i, 1 + k]
+            for w in range(LANES):
+                y[i, w] += inverse[i, j] * Q[massive[j], w]
+    for a in range(m):
+        for w in range(LANES):
+            z[a, w] = -c[a, w]
+        for k in range(row_terms[a, 0]):
+            column = row_terms[a, 1 + k]
+            for w in range(LANES):
+                z[a, w] += A[a, massive[column], w] * y[column, w]
+        for b in range(a + 1):
+            for w in range(LANES):
+                reduced[a, b, w] = 0.0
+            for k in range(reduced_terms[a, b, 0]):
+                column = reduced_terms[a, b, 1 + k]
+                for w in range(LANES):
+                    reduced[a, b, w] += A[a, massive[column], w] * X[b, column, w]
+            for w in range(LANES):
+                reduced[b, a, w] = reduced[a, b, w]
+        for j in range(n_a):
+            for w in range(LANES):
+                reduced[a, m + j, w] = -A[a, massless[j], w]
+                reduced[m + j, a, w] = A[a, massless[j], w]
+    for j in range(n_a):
+        for w in range(LANES):
+            z[m + j, w] = Q[massless[j], w]
+        for i in range(n_a):
+            for w in range(LANES):
+                reduced[m + j, m + i, w] = 0.0
+    if n_a == 0:
+        _cholesky_lanes(reduced, z, lanes, pivot[0])
+    else:
+        _eliminate_lanes(reduced, z, lanes, pivot[0], pivot[1], pivot[2])
+    for a in range(m):
+        for w in range(LANES):
+            lam[a, w] = z[a, w]
+    for j in range(n_a):
+        for w in range(LANES):
+            qdd[massless[j], w] = z[m + j, w]
+    for i in range(n_p):
+        for w in range(LANES):
+            qdd[massive[i], w] = y[i, w]
+        for k in range(q_terms[i, 0]):
+            a = q_terms[i, 1 + k]
+            for w in range(LANES):
+                qdd[massive[i], w] -= X[a, i, w] * lam[a, w]
+
+
+@njit_borrowing(cache=True, error_model="numpy", inline="always")
+def _cholesky_lanes(L, b, lanes, pivot):
+    """Solve L Lᵀ x = b per lane in place, the dense Cholesky factorisation and the two triangular
+    solves of :func:`cmbs.fast._cholesky_in_place`, :func:`cmbs.fast._forward` and
+    :func:`cmbs.fast._backward` (a dense profile); a lane with a non-positive pivot leaves."""
+    size = b.shape[0]
+    for j in range(size):
+        for w in range(LANES):
+            pivot[w] = L[j, j, w]
+        for k in range(j):
+            for w in range(LANES):
+                pivot[w] -= L[j, k, w] * L[j, k, w]
+        for w in range(LANES):
+            if not pivot[w] > 0.0 and lanes[w] == RUNNING:
+                lanes[w] = LEAVING
+            pivot[w] = math.sqrt(pivot[w])
+            L[j, j, w] = pivot[w]
+        for i in range(j + 1, size):
+            for w in range(LANES):
+                total = L[i, j, w]
+                for k in range(j):
+                    total -= L[i, k, w] * L[j, k, w]
+                L[i, j, w] = total / pivot[w]
+    for i in range(size):
+        for w in range(LANES):
+            total = b[i, w]
+            for k in range(i):
+                total -= L[i, k, w] * b[k, w]
+            b[i, w] = total / L[i, i, w]
+    for i in range(size - 1, -1, -1):
+        for w in range(LANES):
+            b[i, w] /= L[i, i, w]
+            for k in range(i):
+                b[k, w] -= L[i, k, w] * b[i, w]
+
+
+@njit_borrowing(cache=True, error_model="numpy", inline="always")
+def _eliminate_lanes(K, rhs, lanes, largest, chosen, scale):
+    """:func:`cmbs.fast._solve_in_place` per lane on the lane-major K (size, size, LANES) and rhs
+    (size, LANES): Gaussian elimination with partial pivoting, each lane choosing its own pivot
+    rows, and the same operations in the same order (an update whose factor is 0, which the
+    one-lane code skips, leaves the entries as they are).  A lane with an exactly singular
+    matrix leaves."""
+    size = rhs.shape[0]
+    for column in range(size):
+        for w in range(LANES):
+            largest[w] = abs(K[column, column, w])
+            chosen[w] = column
+        for row in range(column + 1, size):
+            for w in range(LANES):
+                value = abs(K[row, column, w])
+                if value > largest[w]:
+                    largest[w] = value
+                    chosen[w] = row
+        for w in range(LANES):
+            if largest[w] == 0.0 and lanes[w] == RUNNING:
+                lanes[w] = LEAVING
+            pivot = int(chosen[w])
+            if pivot != column:             # columns left of ``column`` are no longer read
+                for k in range(column, size):
+                    K[column, k, w], K[pivot, k, w] = K[pivot, k, w], K[column, k, w]
+                rhs[column, w], rhs[pivot, w] = rhs[pivot, w], rhs[column, w]
+        for w in range(LANES):
+            scale[w] = 1.0 / K[column, column, w]
+            K[column, column, w] = scale[w]
+        for row in range(column + 1, size):
+            for w in range(LANES):
+                factor = K[row, column, w] * scale[w]
+                if factor != 0.0:
+                    for k in range(column + 1, size):
+                        K[row, k, w] -= factor * K[column, k, w]
+                    rhs[row, w] -= factor * rhs[column, w]
+    for row in range(size - 1, -1, -1):
+        for w in range(LANES):
+            total = rhs[row, w]
+            for k in range(row + 1, size):
+                total -= K[row, k, w] * rhs[k, w]
+            rhs[row, w] = total * K[row, row, w]
+
+
+@njit_borrowing(cache=True, error_model="numpy", inline="always")
+def _finite_lanes(values, lanes, bad):
+    """A running lane with a value (rows of the lane-major ``values``) that is not finite leaves:
+    the terms, as :func:`cmbs.fast._field_borrowed` checks them before any factorisation, and
+    q̈ (:func:`cmbs.fast._finite`)."""
+    for w in range(LANES):
+        bad[w] = 0.0
+    for i in range(values.shape[0]):
+        for w in range(LANES):
+            bad[w] += values[i, w] - values[i, w]       # 0 when finite, NaN otherwise
+    for w in range(LANES):
+        if lanes[w] == RUNNING and bad[w] != 0.0:
+            lanes[w] = LEAVING
+
+
+@njit_borrowing(cache=True, error_model="numpy")
+def _leave(exits, step, q, qd, start_reference, start_A0, records_before_step, count):
+    """Lanes LEAVING at a stage of ``step`` keep what their one-variant run resumes from (in
+    ``exits``): the step, the records written before it, the state and certificate reference at
+    the step's start; they are then LEFT (computed on, never read).  True when none of the
+    block's ``count`` variants runs any more."""
+    lanes, left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0 = exits
+    running = False
+    for w in range(LANES):
+        if lanes[w] == LEAVING:
+            lanes[w] = LEFT
+            left_at[w] = step
+            records_before[w] = records_before_step
+            for i in range(q.shape[1]):
+                resume_q[w, i] = q[w, i]
+                resume_qd[w, i] = qd[w, i]
+            for k in range(3):
+                resume_reference[w, k] = start_reference[k, w]
+            for i in range(start_A0.shape[0]):
+                for j in range(start_A0.shape[1]):
+                    resume_A0[w, i, j] = start_A0[i, j, w]
+        running = running or (w < count and lanes[w] == RUNNING)
+    return not running
