@@ -53,7 +53,7 @@ def _assert_identical(lanes, single):
         np.testing.assert_array_equal(a, b)
 
 
-@pytest.mark.parametrize("formulation", ["lagrange", "baumgarte"])
+@pytest.mark.parametrize("formulation", ["lagrange", "baumgarte", "projection"])
 def test_four_bar_lanes_equal_the_one_variant_loop_bit_for_bit(formulation):
     """11 variants: a full block of 8 and a last block of 3 (its other lanes are padding)."""
     model = cmbs.load("four-bar").without_drivers()
@@ -103,6 +103,17 @@ def test_variants_reaching_the_singular_position_leave_their_lanes():
     _assert_identical(lanes, single)
 
 
+def test_projection_variants_leave_their_lanes_for_the_svd_through_the_singular_position():
+    """The same slider-crank under the projection: the variants near the singular position leave
+    their lanes for the one-variant loop's SVD there and run to the end through it."""
+    model = cmbs.load("slider-crank").without_drivers()
+    QD0 = _initial_velocities(model, np.linspace(1.0, 3.0, 9), "theta1")
+    lanes, single = _both(model, QD0, make_formulation("projection"), steps=600, every=5)
+    assert set(lanes[3]) == {fast.OK} and set(lanes[4]) == {600 // 5 + 1}
+    assert np.sum(lanes[0][:, -1, 4] > np.pi / 2) >= 5      # from 45° through 90°
+    _assert_identical(lanes, single)
+
+
 def test_a_diverging_run_leaves_its_lanes_as_non_finite():
     """Baumgarte with h·ω = 5, outside RK4's stability interval: every variant blows up."""
     model = cmbs.load("four-bar").without_drivers()
@@ -112,11 +123,10 @@ def test_a_diverging_run_leaves_its_lanes_as_non_finite():
     _assert_identical(lanes, single)
 
 
-def test_lanes_take_small_natural_models_under_lagrange_or_baumgarte_only():
+def test_lanes_take_small_natural_models_only():
     four_bar = cmbs.load("four-bar")
     kind, _, _, _, _, schur = fast.workspace(four_bar)
     assert fast_lanes.lane_plan(kind, fast.LAGRANGE, schur, four_bar.m, four_bar.n) is not None
-    assert fast_lanes.lane_plan(kind, fast.PROJECTION, schur, four_bar.m, four_bar.n) is None
     joint = cmbs.load("slider-crank-joint")
     kind, _, _, _, _, schur = fast.workspace(joint)
     assert fast_lanes.lane_plan(kind, fast.LAGRANGE, schur, joint.m, joint.n) is None

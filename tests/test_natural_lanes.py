@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import cmbs
-from cmbs.model.natural import _evaluate
-from cmbs.model.natural_lanes import LANES, evaluate_lanes, extended_size
+from cmbs.model.natural import _evaluate, layout
+from cmbs.model.natural_lanes import LANES, evaluate_lanes
 
 KITCHEN_SINK = Path(__file__).parent / "data" / "kitchen-sink.toml"
 
@@ -28,7 +28,7 @@ def test_lane_terms_equal_the_one_state_kernel_bit_for_bit(source):
     size = n + 3 * m + m * n
     terms = np.full((size, LANES), np.nan)
     lanes_buffer = model.new_terms().buffer
-    x = np.zeros((extended_size(equations.ints, n), LANES))
+    x = np.zeros((layout(equations.ints, n, lanes_buffer.size)[2], LANES))
     evaluate_lanes(q, qd, t, U, equations.ints, equations.reals, lanes_buffer, x, np.zeros_like(x), terms)
     for w in range(LANES):
         buffer = model.new_terms().buffer

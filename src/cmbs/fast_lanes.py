@@ -9,16 +9,17 @@ right-hand side and the Schur-complement solve run once for the block with the l
 innermost, on lane-major arrays (..., LANES), over the structural non-zeros of A known in
 advance.
 
-Every lane performs the operations :func:`cmbs.fast.rk4` performs for its variant (Lagrange or
-Baumgarte), in the same order: the results are bit for bit those of the one-variant loop
-(tests/test_lanes.py).  The common path of a stage is that of :func:`cmbs.fast.field` when the
-rank certificate of A holds (:func:`cmbs.fast._certify`, with its reference bounds kept per lane
-exactly as the one-variant loop keeps them) and M_pp⁻¹ is constant (natural coordinates):
-the block elimination of :func:`cmbs.fast._schur_solve`.  A variant whose stage leaves that path
-(terms or q̈ not finite, a certificate that does not hold, a factorisation that fails) leaves
-its lane at that step and finishes in :func:`cmbs.fast._rk4_steps` from the start of the step,
-with the state and certificate reference it had then: the same stages again, the same results,
-including a stop at a singular position.
+Every lane performs the operations :func:`cmbs.fast.rk4` performs for its variant (Lagrange,
+Baumgarte or the standard projection), in the same order: the results are bit for bit those of
+the one-variant loop (tests/test_lanes.py).  The common path of a stage is that of
+:func:`cmbs.fast.field` where the rank certificate of A holds (:func:`cmbs.fast._certify`, or the
+projection's regularity test of :func:`cmbs.fast._projection_by_schur`, with the reference bounds
+kept per lane exactly as the one-variant loop keeps them) and M_pp⁻¹ is constant (natural
+coordinates): the block elimination of :func:`cmbs.fast._schur_solve`.  A variant whose stage
+leaves that path (terms or q̈ not finite, a certificate that does not hold, a factorisation that
+fails) leaves its lanes at that step and finishes in :func:`cmbs.fast._rk4_steps` from the start
+of the step, with the state and certificate reference it had then: the same stages again, the
+same results, including a stop at a singular position or the projection's SVD through it.
 """
 
 from __future__ import annotations
@@ -27,10 +28,11 @@ import math
 
 import numpy as np
 
-from cmbs.fast import (BAUMGARTE, CONSTANT, KIND_NATURAL, LAGRANGE, OK, _gram_bounds, _private_copy, _rk4_arrays,
-                       _rk4_steps, _structured)
+from cmbs.fast import (BAUMGARTE, CONSTANT, KIND_NATURAL, LAGRANGE, OK, PROJECTION, PROJECTION_REGULAR, _gram_bounds,
+                       _private_copy, _rk4_arrays, _rk4_steps, _structured)
 from cmbs.jit import njit, njit_borrowing, prange
-from cmbs.model.natural_lanes import LANES, evaluate_lanes, extended_size
+from cmbs.model.natural import layout
+from cmbs.model.natural_lanes import LANES, evaluate_lanes
 #: Lane states.
 RUNNING, LEAVING, LEFT = 0, 1, 2
 
@@ -39,7 +41,8 @@ def lane_plan(kind: int, method: int, schur: tuple, m: int, n: int) -> tuple | N
     """The sparsity plan of :func:`_schur_lanes` for :func:`rk4_lanes`, or None when lanes cannot
     run the batch.
 
-    Lanes take natural-coordinate models (kind) under Lagrange or Baumgarte whose massive block
+    Lanes take natural-coordinate models (kind) under Lagrange, Baumgarte or the standard
+    projection (the compiled field's methods) whose massive block
     M_pp is positive definite (the Schur path's flag 1), that are not solved by band LU, with
     1 <= m <= n constraints and A's structural pattern known (``schur`` of
     :func:`cmbs.fast.schur_workspace` built with it).
@@ -54,7 +57,7 @@ def lane_plan(kind: int, method: int, schur: tuple, m: int, n: int) -> tuple | N
     zero, ±0, and the sums they leave start at +0 (or at y, itself such a sum): a sum that starts
     at +0 never becomes -0, and adding ±0 to it changes nothing, so the sums over the plan are
     bit for bit the dense ones (for finite A and Q, which a running lane has)."""
-    if kind != KIND_NATURAL or method not in (LAGRANGE, BAUMGARTE) or schur[1] != 1 or schur[16] == 1:
+    if kind != KIND_NATURAL or method not in (LAGRANGE, BAUMGARTE, PROJECTION) or schur[1] != 1 or schur[16] == 1:
         return None
     inverse, rows_of, massive = schur[0], schur[13], schur[9]
     if m == 0 or m > n or not _structured(rows_of, n) or schur[28].shape[0] != m:
@@ -99,7 +102,7 @@ def rk4_lanes(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, buf
         base = block * LANES
         count = min(LANES, N - base)
         state, work, exits = _lane_arrays(n, m, schur[9].shape[0], schur[10].shape[0], U0.shape[1], buffer_size,
-                                          extended_size(ints, n))
+                                          layout(ints, n, buffer_size)[2])
         q, qd, U = state
         for w in range(LANES):
             v = base + (w if w < count else 0)
@@ -195,7 +198,12 @@ def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, sch
             _copy(sv, kq[stage])
             evaluate_lanes(sq, sv, st, U, ints, reals, buffer, x, v, terms)
             _finite_lanes(terms, lanes, scratch[0])
-            _certify_lanes(A, row_scale, parameters[2], reference, A0, schur, lanes, single_A, scratch)
+            if method == PROJECTION:
+                _certify_lanes(A, row_scale, PROJECTION_REGULAR, parameters[2], True, reference, A0, schur, lanes,
+                               single_A, scratch)
+            else:
+                _certify_lanes(A, row_scale, parameters[2], 0.0, False, reference, A0, schur, lanes, single_A,
+                               scratch)
             for r in range(m):
                 for w in range(LANES):
                     c[r, w] = gamma[r, w]
@@ -241,12 +249,15 @@ def _copy(source, target):
 
 
 @njit_borrowing(cache=True, error_model="numpy", inline="always")
-def _certify_lanes(A, row_scale, tolerance, reference, A0, schur, lanes, single_A, scratch):
-    """The rank certificate of :func:`cmbs.fast._certify` per running lane (1 <= m <= n): its
-    bounds reused from the lane's reference while ‖S(A - A₀)‖_F <= √λ₀_low / 10, else fresh
-    (:func:`cmbs.fast._gram_bounds` on the lane's A) with the reference renewed, exactly as
-    :func:`cmbs.fast._bounds_meeting` keeps it; a lane whose bounds do not certify
-    σ_min >= tolerance·max(σ_max, 1) leaves."""
+def _certify_lanes(A, row_scale, ratio, floor, projection, reference, A0, schur, lanes, single_A, scratch):
+    """The rank certificate per running lane (1 <= m <= n): the bounds of
+    :func:`cmbs.fast._bounds_meeting` on σ(SA), reused from the lane's reference while
+    ‖S(A - A₀)‖_F <= √λ₀_low / 10, else fresh (:func:`cmbs.fast._gram_bounds` on the lane's A)
+    with the reference renewed, exactly as the one-variant field keeps it.  A lane leaves unless
+    its bounds certify σ_min >= ratio·max(σ_max, 1): the test of :func:`cmbs.fast._certify`
+    (Lagrange and Baumgarte: ``ratio`` their tolerance, ``floor`` 0) or, with ``projection``,
+    that of :func:`cmbs.fast._projection_by_schur` (``ratio`` PROJECTION_REGULAR, and σ_min above
+    the SVD threshold ``floor``)."""
     m, n, _ = A.shape
     rows_of = schur[13]
     total = scratch[4]
@@ -268,7 +279,7 @@ def _certify_lanes(A, row_scale, tolerance, reference, A0, schur, lanes, single_
             if delta <= 0.1 * reference[1, w]:
                 low, high = (reference[1, w] - delta) ** 2, (reference[2, w] + delta) ** 2
                 reused = True
-        if reused and (low < tolerance * tolerance * max(high, 1.0) or low <= 0.0):
+        if reused and (low < ratio * ratio * max(high, 1.0) or low <= floor * floor):
             reference[0, w] = 0.0
             reused = False
         if not reused:
@@ -283,7 +294,11 @@ def _certify_lanes(A, row_scale, tolerance, reference, A0, schur, lanes, single_
                         i = rows_of[j, 1 + a]
                         A0[i, j, w] = A[i, j, w]
                 reference[0, w], reference[1, w], reference[2, w] = 1.0, math.sqrt(low), math.sqrt(high)
-        if not low >= tolerance * tolerance * max(high, 1.0):
+        if projection:
+            holds = not (low < ratio * ratio * max(high, 1.0) or low <= floor * floor)
+        else:
+            holds = low >= ratio * ratio * max(high, 1.0)
+        if not holds:
             lanes[w] = LEAVING
 
 

@@ -7,7 +7,7 @@ with a leading variant dimension, on one common time grid).  It chooses how to r
     Variants that differ only in the initial state and constant inputs, on a run the compiled
     loop takes (:mod:`cmbs.fast`: rk4; lagrange, baumgarte or standard projection), run as one
     compiled call parallel over the variants (numba threads): natural-coordinate models under
-    lagrange or baumgarte in blocks of eight variants that share each stage's bookkeeping
+    lagrange, baumgarte or projection in blocks of eight variants that share each stage's bookkeeping
     (:func:`cmbs.fast_lanes.rk4_lanes`), other runs one variant at a time
     (:func:`cmbs.fast.rk4_batch`); both give the numbers of :func:`cmbs.fast.rk4` bit for bit.
 ``processes``

@@ -699,6 +699,25 @@ def _vector_pair(ints, r, x, v):
     return ux, uz, wx, wz, dux, duz, dwx, dwz
 
 
+@njit_borrowing(cache=True, inline="always")
+def layout(ints, n, size):
+    """Where the kernel's data and outputs are, for n coordinates and a terms buffer of ``size``:
+    (start of the real-section offsets in ``ints``, first constant in ``reals``, n_ext = n +
+    constant point coordinates, m, and in the buffer the offsets of A, γ, Φ_t, the scratch's
+    time functions and the extended x, v at its end)."""
+    real_base = ints[0] + 2
+    c0, c1 = ints[real_base + 1 + _CONSTANTS], ints[real_base + 2 + _CONSTANTS]
+    n_ext = n + c1 - c0
+    m = ((ints[2 + _RIGID] - ints[1 + _RIGID]) // 4 + (ints[2 + _DISTANCE] - ints[1 + _DISTANCE]) // 5
+         + (ints[2 + _ANGLE] - ints[1 + _ANGLE]) // 9 + (ints[2 + _PARALLEL] - ints[1 + _PARALLEL]) // 8
+         + (ints[2 + _DRIVER] - ints[1 + _DRIVER]) // 2)
+    a0 = n + m
+    g0 = a0 + m * n
+    t0 = g0 + m
+    s0 = t0 + m
+    return real_base, c0, n_ext, m, a0, g0, t0, s0, size - 2 * n_ext
+
+
 @njit_borrowing(cache=True)
 def _evaluate(q, qd, t, u, ints, reals, buffer):
     """Q, Φ, A, γ, Φ_t of a natural-coordinate model into ``buffer`` (layout of :class:`Terms`;
@@ -709,17 +728,7 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     views: each view costs numba an atomic reference count, which at a four-bar's size made up
     most of the call."""
     n = q.shape[0]
-    real_base = ints[0] + 2
-    c0, c1 = ints[real_base + 1 + _CONSTANTS], ints[real_base + 2 + _CONSTANTS]
-    n_ext = n + c1 - c0
-    m = ((ints[2 + _RIGID] - ints[1 + _RIGID]) // 4 + (ints[2 + _DISTANCE] - ints[1 + _DISTANCE]) // 5
-         + (ints[2 + _ANGLE] - ints[1 + _ANGLE]) // 9 + (ints[2 + _PARALLEL] - ints[1 + _PARALLEL]) // 8
-         + (ints[2 + _DRIVER] - ints[1 + _DRIVER]) // 2)
-    a0 = n + m                               # offsets of A, γ, Φ_t and the scratch in buffer
-    g0 = a0 + m * n
-    t0 = g0 + m
-    s0 = t0 + m
-    x0 = buffer.shape[0] - 2 * n_ext         # x, then v, at the end of the scratch
+    real_base, c0, n_ext, m, a0, g0, t0, s0, x0 = layout(ints, n, buffer.shape[0])
     v0 = x0 + n_ext
     for k in range(n):
         buffer[x0 + k] = q[k]

@@ -15,9 +15,9 @@ import math
 
 from cmbs.jit import njit_borrowing
 from cmbs.model.drivers import evaluate_time_functions
-from cmbs.model.natural import (_ACTUATOR, _ACTUATOR_GAIN, _ANGLE, _CONSTANTS, _DISTANCE, _DRIVER, _LENGTH2,
-                                _PARALLEL, _POINT_FORCE, _Q_CONSTANT, _RIGID, _SPRING, _SPRING_PARAMETERS, _TF_OPS,
-                                _TF_REALS, _TF_TABLE, _TORQUE)
+from cmbs.model.natural import (_ACTUATOR, _ACTUATOR_GAIN, _ANGLE, _DISTANCE, _DRIVER, _LENGTH2, _PARALLEL,
+                                _POINT_FORCE, _Q_CONSTANT, _RIGID, _SPRING, _SPRING_PARAMETERS, _TF_OPS, _TF_REALS,
+                                _TF_TABLE, _TORQUE, layout)
 from cmbs.model.packing import int_section, real_section
 
 #: States per block (eight float64 fill an AVX-512 register).
@@ -32,6 +32,25 @@ def _add(terms, a0, row, column, n, w, value):
 
 
 @njit_borrowing(cache=True, error_model="numpy", inline="always")
+def _pair_indices(ints, r):
+    """The point coordinates (x_i, z_i, x_j, z_j, x_k, z_k, x_l, z_l) of an angle or parallel row
+    at ``ints[r:r + 8]``: the vectors u = j - i and w = l - k."""
+    return ints[r], ints[r + 1], ints[r + 2], ints[r + 3], ints[r + 4], ints[r + 5], ints[r + 6], ints[r + 7]
+
+
+@njit_borrowing(cache=True, error_model="numpy", inline="always")
+def _pair(x, v, w, indices):
+    """u, w of :func:`_pair_indices` in lane ``w`` and their rates, as
+    :func:`cmbs.model.natural._vector_pair` computes them."""
+    xi, zi, xj, zj, xk, zk, xl, zl = indices
+    ux, uz = x[xj, w] - x[xi, w], x[zj, w] - x[zi, w]
+    wx, wz = x[xl, w] - x[xk, w], x[zl, w] - x[zk, w]
+    dux, duz = v[xj, w] - v[xi, w], v[zj, w] - v[zi, w]
+    dwx, dwz = v[xl, w] - v[xk, w], v[zl, w] - v[zk, w]
+    return ux, uz, wx, wz, dux, duz, dwx, dwz
+
+
+@njit_borrowing(cache=True, error_model="numpy", inline="always")
 def evaluate_lanes(q, qd, t, U, ints, reals, buffer, x, v, terms):
     """Q, Φ, A, γ, Φ_t at the LANES states (q[w], q̇[w]) with inputs U[w] into the lane-major
     ``terms`` (n + 3m + mn, LANES), rows in the order of a :class:`~cmbs.model.model.Terms`
@@ -39,17 +58,7 @@ def evaluate_lanes(q, qd, t, U, ints, reals, buffer, x, v, terms):
     their stack, as for the one-state kernel; ``x``, ``v`` (n_ext, LANES) receive the extended
     coordinates (q, constants) and velocities (q̇, 0)."""
     n = q.shape[1]
-    real_base = ints[0] + 2
-    c0, c1 = ints[real_base + 1 + _CONSTANTS], ints[real_base + 2 + _CONSTANTS]
-    n_ext = n + c1 - c0
-    m = ((ints[2 + _RIGID] - ints[1 + _RIGID]) // 4 + (ints[2 + _DISTANCE] - ints[1 + _DISTANCE]) // 5
-         + (ints[2 + _ANGLE] - ints[1 + _ANGLE]) // 9 + (ints[2 + _PARALLEL] - ints[1 + _PARALLEL]) // 8
-         + (ints[2 + _DRIVER] - ints[1 + _DRIVER]) // 2)
-    a0 = n + m
-    g0 = a0 + m * n
-    t0 = g0 + m
-    s0 = t0 + m
-    x0 = buffer.shape[0] - 2 * n_ext
+    real_base, c0, n_ext, m, a0, g0, t0, s0, x0 = layout(ints, n, buffer.shape[0])
     for k in range(n):
         for w in range(LANES):
             x[k, w] = q[w, k]
@@ -100,14 +109,11 @@ def evaluate_lanes(q, qd, t, U, ints, reals, buffer, x, v, terms):
     i0 = ints[1 + _ANGLE]
     for k in range((ints[2 + _ANGLE] - i0) // 9):
         r = i0 + 9 * k
-        pi, pk, pj, pl = ints[r], ints[r + 1], ints[r + 2], ints[r + 3]
-        qi, qk, qj, ql = ints[r + 4], ints[r + 5], ints[r + 6], ints[r + 7]
+        indices = _pair_indices(ints, r)
+        pi, pk, pj, pl, qi, qk, qj, ql = indices
         angle = ints[r + 8]
         for w in range(LANES):
-            ux, uz = x[pj, w] - x[pi, w], x[pl, w] - x[pk, w]
-            wx, wz = x[qj, w] - x[qi, w], x[ql, w] - x[qk, w]
-            dux, duz = v[pj, w] - v[pi, w], v[pl, w] - v[pk, w]
-            dwx, dwz = v[qj, w] - v[qi, w], v[ql, w] - v[qk, w]
+            ux, uz, wx, wz, dux, duz, dwx, dwz = _pair(x, v, w, indices)
             f, df = x[angle, w], v[angle, w]
             c, s = math.cos(f), math.sin(f)
             cross = ux * wz - uz * wx
@@ -135,14 +141,10 @@ def evaluate_lanes(q, qd, t, U, ints, reals, buffer, x, v, terms):
 
     i0 = ints[1 + _PARALLEL]
     for k in range((ints[2 + _PARALLEL] - i0) // 8):
-        r = i0 + 8 * k
-        pi, pk, pj, pl = ints[r], ints[r + 1], ints[r + 2], ints[r + 3]
-        qi, qk, qj, ql = ints[r + 4], ints[r + 5], ints[r + 6], ints[r + 7]
+        indices = _pair_indices(ints, i0 + 8 * k)
+        pi, pk, pj, pl, qi, qk, qj, ql = indices
         for w in range(LANES):
-            ux, uz = x[pj, w] - x[pi, w], x[pl, w] - x[pk, w]
-            wx, wz = x[qj, w] - x[qi, w], x[ql, w] - x[qk, w]
-            dux, duz = v[pj, w] - v[pi, w], v[pl, w] - v[pk, w]
-            dwx, dwz = v[qj, w] - v[qi, w], v[ql, w] - v[qk, w]
+            ux, uz, wx, wz, dux, duz, dwx, dwz = _pair(x, v, w, indices)
             terms[n + row, w] = ux * wz - uz * wx
             _add(terms, a0, row, pi, n, w, -wz)
             _add(terms, a0, row, pk, n, w, wx)
@@ -205,9 +207,3 @@ def evaluate_lanes(q, qd, t, U, ints, reals, buffer, x, v, terms):
         for w in range(LANES):
             terms[ints[i0 + k], w] += reals[r0 + k] * U[w, k]
 
-
-@njit_borrowing(cache=True)
-def extended_size(ints, n):
-    """n_ext: the model's n coordinates and its constant point coordinates (the rows of x, v)."""
-    real_base = ints[0] + 2
-    return n + ints[real_base + 2 + _CONSTANTS] - ints[real_base + 1 + _CONSTANTS]
