@@ -41,6 +41,7 @@ def commands(out: Path, quick: bool) -> dict[str, list[str]]:
         "control": ["bench_control.py", *fast],
         "servo": ["bench_servo.py", *fast, "--json", str(out / "servo.json")],
         "gait": ["bench_gait.py", *(["--repeat", "2"] if quick else [])],
+        "memory": ["bench_memory.py", *fast, "--json", str(out / "memory.json")],
     }
 
 

@@ -30,9 +30,10 @@ import numpy as np
 
 from cmbs.fast import (BAUMGARTE, CONSTANT, KIND_NATURAL, LAGRANGE, OK, PROJECTION, PROJECTION_REGULAR, _gram_bounds,
                        _private_copy, _rk4_arrays, _rk4_steps, _structured)
-from cmbs.jit import njit, njit_borrowing, prange
+from cmbs.jit import interpreted, njit, njit_borrowing, prange
 from cmbs.model.natural import layout
 from cmbs.model.natural_lanes import LANES, evaluate_lanes
+
 #: Lane states.
 RUNNING, LEAVING, LEFT = 0, 1, 2
 
@@ -89,49 +90,71 @@ def _lists(nested: list, shape: int | tuple, longest: int) -> np.ndarray:
     return table
 
 
-@njit(cache=True, parallel=True)
-def rk4_lanes(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, buffer_size, mass, row_scale, m, law,
-              schur, plan, Qs, QDs, PHIs, statuses, recorded):
+def rk4_lanes(method: int, parameters: np.ndarray, Q0: np.ndarray, QD0: np.ndarray, U0: np.ndarray, h: float,
+              steps: int, every: int, ints: np.ndarray, reals: np.ndarray, buffer_size: int, mass: np.ndarray,
+              row_scale: np.ndarray, m: int, law: tuple, schur: tuple, plan: tuple, Qs: np.ndarray, QDs: np.ndarray,
+              PHIs: np.ndarray, statuses: np.ndarray, recorded: np.ndarray) -> None:
     """:func:`cmbs.fast.rk4_batch` (same arguments without the kernel kind, plus the
-    :func:`lane_plan`; same outputs and results) in blocks of LANES variants, parallel over the
-    blocks (numba threads).  A last block with fewer variants fills its other lanes with copies
-    of its first variant, whose outputs are not kept."""
+    :func:`lane_plan`; same outputs, bit for bit) in blocks of LANES variants, parallel over the
+    blocks (numba threads, :func:`_run_blocks`); then each variant that left its lanes goes on in
+    :func:`cmbs.fast._rk4_steps` from the step it left at, one after the other (a sweep in which
+    none leaves never loads that loop)."""
     N, n = Q0.shape
+    exits = (np.full(N, RUNNING, dtype=np.int64), np.zeros(N, dtype=np.int64), np.zeros(N, dtype=np.int64),
+             np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, 3)), np.zeros((N, m, n)))
+    _run_blocks(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, buffer_size, row_scale, m, schur, plan,
+                Qs, QDs, PHIs, *exits)
+    lanes, left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0 = exits
     records_total = steps // every + 1
+    statuses[lanes != LEFT] = OK
+    recorded[lanes != LEFT] = records_total
+    for v in np.flatnonzero(lanes == LEFT):
+        single, records, work = interpreted(_rk4_arrays)(resume_q[v], resume_qd[v], U0[v], m, records_total,
+                                                         buffer_size, law[8].shape[0])
+        own = interpreted(_private_copy)(schur)
+        own[27][:] = resume_reference[v]
+        own[28][:, :] = resume_A0[v]
+        done, status, _, _, _ = _rk4_steps(KIND_NATURAL, method, parameters, h, steps, every, ints, reals, mass,
+                                           row_scale, CONSTANT, law, own, *single, work, records, left_at[v], 0,
+                                           records_before[v])
+        first = records_before[v]
+        Qs[v, first:done] = records[1][first:done]
+        QDs[v, first:done] = records[2][first:done]
+        PHIs[v, first:done] = records[6][first:done]
+        statuses[v] = status
+        recorded[v] = done
+
+
+@njit(cache=True, parallel=True)
+def _run_blocks(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, buffer_size, row_scale, m, schur, plan,
+                Qs, QDs, PHIs, lanes, left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0):
+    """The lanes of :func:`rk4_lanes`, parallel over blocks of LANES variants: the records of
+    every variant while it runs in its lanes, and per variant its lane state (RUNNING to the end,
+    or LEFT) and, for a variant that left, its step, the records written before it and the state
+    and certificate reference its one-variant run resumes from (separate arrays: numba's parallel
+    loop writes into copies of arrays passed in a tuple).  A last block with fewer variants fills
+    its other lanes with copies of its first variant, whose outputs are not kept."""
+    N, n = Q0.shape
     for block in prange((N + LANES - 1) // LANES):
         base = block * LANES
         count = min(LANES, N - base)
-        state, work, exits = _lane_arrays(n, m, schur[9].shape[0], schur[10].shape[0], U0.shape[1], buffer_size,
-                                          layout(ints, n, buffer_size)[2])
+        state, work, block_exits = _lane_arrays(n, m, schur[9].shape[0], schur[10].shape[0], U0.shape[1],
+                                                buffer_size, layout(ints, n, buffer_size)[2])
         q, qd, U = state
         for w in range(LANES):
             v = base + (w if w < count else 0)
             q[w] = Q0[v]
             qd[w] = QD0[v]
             U[w] = U0[v]
-        _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, _private_copy(schur), plan,
-                    state, work, exits, base, count, Qs, QDs, PHIs)
-        lanes, left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0 = exits
-        for w in range(count):
-            v = base + w
-            if lanes[w] != LEFT:
-                statuses[v] = OK
-                recorded[v] = records_total
-                continue
-            single, records, scalar = _rk4_arrays(resume_q[w], resume_qd[w], U0[v], m, records_total, buffer_size,
-                                                  law[8].shape[0])
-            own = _private_copy(schur)
-            own[27][:] = resume_reference[w]
-            own[28][:, :] = resume_A0[w]
-            done, status, _, _, _ = _rk4_steps(KIND_NATURAL, method, parameters, h, steps, every, ints, reals, mass,
-                                               row_scale, CONSTANT, law, own, single[0], single[1], single[2],
-                                               single[3], single[4], scalar, records, left_at[w], 0, records_before[w])
-            first = records_before[w]
-            Qs[v, first:done] = records[1][first:done]
-            QDs[v, first:done] = records[2][first:done]
-            PHIs[v, first:done] = records[6][first:done]
-            statuses[v] = status
-            recorded[v] = done
+        _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, _private_copy(schur), plan, state,
+                    work, block_exits, base, count, Qs, QDs, PHIs)
+        lanes[base:base + count] = block_exits[0][:count]
+        left_at[base:base + count] = block_exits[1][:count]
+        records_before[base:base + count] = block_exits[2][:count]
+        resume_q[base:base + count] = block_exits[3][:count]
+        resume_qd[base:base + count] = block_exits[4][:count]
+        resume_reference[base:base + count] = block_exits[5][:count]
+        resume_A0[base:base + count] = block_exits[6][:count]
 
 
 @njit(cache=True)
