@@ -20,8 +20,11 @@ np.savez(sys.argv[1], **__import__("test_jit_fallback").results())
 
 def results() -> dict:
     """Runs through every kind of kernel: natural and joint models, the compiled RK4 loop
-    (Lagrange, projection), the matrix-R loop, the Python path (rk45), the human's terms."""
+    (Lagrange, projection), the matrix-R loop, the Python path (rk45), the human's terms, and
+    the batched sweep in lanes."""
     four_bar = cmbs.load("four-bar").without_drivers()
+    speeds = [cmbs.velocities(four_bar, four_bar.q0, qd=np.eye(four_bar.n)[-1] * s, fixed=["alpha"])
+              for s in (-1.0, 0.5, 2.0)]
     human = cmbs.load("human")
     terms = human.evaluate(human.q0, human.qd0 + 0.1, 0.3, np.linspace(-1.0, 1.0, human.n_u))
     return {
@@ -31,6 +34,7 @@ def results() -> dict:
                                   formulation="matrix-r").q,
         "joint_rk45": cmbs.simulate(cmbs.load("slider-crank-joint", gravity=9.81), t_end=0.05).q,
         "human_Q": terms.Q, "human_A": terms.A, "human_gamma": terms.gamma, "human_M": terms.M,
+        "sweep_lanes": cmbs.sweep(four_bar, [cmbs.Variant(qd0=qd) for qd in speeds], t_end=0.02, dt=1e-3).q,
     }
 
 
