@@ -43,10 +43,9 @@ def lane_plan(kind: int, method: int, schur: tuple, m: int, n: int) -> tuple | N
     run the batch.
 
     Lanes take natural-coordinate models (kind) under Lagrange, Baumgarte or the standard
-    projection (the compiled field's methods) whose massive block
-    M_pp is positive definite (the Schur path's flag 1), that are not solved by band LU, with
-    1 <= m <= n constraints and A's structural pattern known (``schur`` of
-    :func:`cmbs.fast.schur_workspace` built with it).
+    projection (the compiled field's methods) whose massive block M_pp is positive definite (the
+    Schur path's flag 1), that are not solved by band LU, with 1 <= m <= n constraints and A's
+    structural pattern known (``schur`` of :func:`cmbs.fast.schur_workspace` built with it).
 
     The plan lists, each as [count, items...] along its last axis: the massive non-zeros of each
     row of A, as positions in M_pp's coordinates in increasing order (where
