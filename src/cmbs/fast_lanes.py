@@ -130,14 +130,15 @@ def _run_blocks(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, b
     """The lanes of :func:`rk4_lanes`, parallel over blocks of LANES variants: the records of
     every variant while it runs in its lanes, and per variant its lane state (RUNNING to the end,
     or LEFT) and, for a variant that left, its step, the records written before it and the state
-    and certificate reference its one-variant run resumes from (separate arrays: numba's parallel
-    loop writes into copies of arrays passed in a tuple).  A last block with fewer variants fills
-    its other lanes with copies of its first variant, whose outputs are not kept."""
+    and certificate reference its one-variant run resumes from, written by the lanes (separate
+    arguments: numba's parallel loop writes into copies of arrays passed to it in a tuple).  A
+    last block with fewer variants fills its other lanes with copies of its first variant, whose
+    outputs are not kept."""
     N, n = Q0.shape
     for block in prange((N + LANES - 1) // LANES):
         base = block * LANES
         count = min(LANES, N - base)
-        state, work, block_exits = _lane_arrays(n, m, schur[9].shape[0], schur[10].shape[0], U0.shape[1],
+        state, work, block_lanes = _lane_arrays(n, m, schur[9].shape[0], schur[10].shape[0], U0.shape[1],
                                                 buffer_size, layout(ints, n, buffer_size)[2])
         q, qd, U = state
         for w in range(LANES):
@@ -145,28 +146,21 @@ def _run_blocks(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, b
             q[w] = Q0[v]
             qd[w] = QD0[v]
             U[w] = U0[v]
+        exits = (left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0)
         _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, _private_copy(schur), plan, state,
-                    work, block_exits, base, count, Qs, QDs, PHIs)
-        lanes[base:base + count] = block_exits[0][:count]
-        left_at[base:base + count] = block_exits[1][:count]
-        records_before[base:base + count] = block_exits[2][:count]
-        resume_q[base:base + count] = block_exits[3][:count]
-        resume_qd[base:base + count] = block_exits[4][:count]
-        resume_reference[base:base + count] = block_exits[5][:count]
-        resume_A0[base:base + count] = block_exits[6][:count]
+                    work, block_lanes, exits, base, count, Qs, QDs, PHIs)
+        lanes[base:base + count] = block_lanes[:count]
 
 
 @njit(cache=True)
 def _lane_arrays(n, m, n_p, n_a, n_u, buffer_size, n_ext):
-    """The arrays of a block, in three groups.  State, per lane (rows): q, q̇ and the inputs.
-    Work: a one-state terms buffer (its scratch holds the time functions), the extended
+    """The arrays of a block: two groups and the lane states.  State, per lane (rows): q, q̇ and
+    the inputs.  Work: a one-state terms buffer (its scratch holds the time functions), the extended
     coordinates and velocities (n_ext, LANES), per lane the stage state and the slopes of the four
     stages, lane-major (lanes last) the terms (Q, Φ, A, γ, Φ_t in a terms buffer's order), the
     Schur workspace (X, y, the reduced matrix and right-hand side), c of Aq̈ = c, λ, q̈, the
     certificate's reference (valid, √λ_low, √λ_high) and A₀ with their values at the step's
-    start, the lanes' accumulators (5, LANES) and one lane's A.  Exits: the lane states and, for
-    a lane that left, its step, the records written before it and the state and reference its
-    one-variant run resumes from."""
+    start, the lanes' accumulators (5, LANES) and one lane's A."""
     size = m + n_a
     W = LANES
     state = (np.zeros((W, n)), np.zeros((W, n)), np.zeros((W, n_u)))
@@ -175,22 +169,20 @@ def _lane_arrays(n, m, n_p, n_a, n_u, buffer_size, n_ext):
             np.zeros((n_p, W)), np.zeros((size, size, W)), np.zeros((size, W)), np.zeros((m, W)), np.zeros((m, W)),
             np.zeros((n, W)), np.zeros((3, W)), np.zeros((m, n, W)), np.zeros((3, W)), np.zeros((m, n, W)),
             np.zeros((5, W)), np.zeros((m, n)))
-    exits = (np.zeros(W, dtype=np.int64), np.zeros(W, dtype=np.int64), np.zeros(W, dtype=np.int64),
-             np.zeros((W, n)), np.zeros((W, n)), np.zeros((W, 3)), np.zeros((W, m, n)))
-    return state, work, exits
+    return state, work, np.zeros(W, dtype=np.int64)
 
 
 @njit_borrowing(cache=True, error_model="numpy")
-def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, schur, plan, state, work, exits, base,
-                count, Qs, QDs, PHIs):
+def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, schur, plan, state, work, lanes, exits,
+                base, count, Qs, QDs, PHIs):
     """The RK4 loop of :func:`cmbs.fast._rk4_loop` (constant inputs, the whole run from t = 0)
     for the block's lanes; writes the records of lanes ``0..count-1`` (variants ``base + w``)
-    while they run, and for each lane that leaves, its step, records and resume state.
-    Borrowing: the block's arrays come from :func:`_lane_arrays`."""
+    while they run, the lane states in ``lanes``, and for each of those variants that leaves, its
+    step, records and resume state in the per-variant ``exits`` (:func:`_leave`).  Borrowing: the
+    block's arrays come from :func:`_lane_arrays`."""
     q, qd, U = state
     (buffer, x, v, sq, sv, kq, kv, terms, X, y, reduced, z, c, lam, qdd, reference, A0, start_reference, start_A0,
      scratch, single_A) = work
-    lanes = exits[0]
     n = q.shape[1]
     m = lam.shape[0]
     a0 = n + m
@@ -237,7 +229,7 @@ def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, sch
             for w in range(LANES):
                 for i in range(n):
                     kv[stage, w, i] = qdd[i, w]
-            if _leave(exits, step, q, qd, start_reference, start_A0, before, count):
+            if _leave(lanes, exits, step, q, qd, start_reference, start_A0, before, base, count):
                 return
             if stage == 0:
                 if step % every == 0:
@@ -504,25 +496,28 @@ def _finite_lanes(values, lanes, bad):
 
 
 @njit_borrowing(cache=True, error_model="numpy")
-def _leave(exits, step, q, qd, start_reference, start_A0, records_before_step, count):
-    """Lanes LEAVING at a stage of ``step`` keep what their one-variant run resumes from (in
-    ``exits``): the step, the records written before it, the state and certificate reference at
-    the step's start; they are then LEFT (computed on, never read).  True when none of the
-    block's ``count`` variants runs any more."""
-    lanes, left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0 = exits
+def _leave(lanes, exits, step, q, qd, start_reference, start_A0, records_before_step, base, count):
+    """Lanes LEAVING at a stage of ``step`` become LEFT (computed on, never read); for those of
+    the block's ``count`` variants, what their one-variant run resumes from goes into the
+    per-variant ``exits`` at row ``base + w``: the step, the records written before it, the state
+    and certificate reference at the step's start.  True when none of the ``count`` variants
+    runs any more."""
+    left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0 = exits
     running = False
     for w in range(LANES):
         if lanes[w] == LEAVING:
             lanes[w] = LEFT
-            left_at[w] = step
-            records_before[w] = records_before_step
-            for i in range(q.shape[1]):
-                resume_q[w, i] = q[w, i]
-                resume_qd[w, i] = qd[w, i]
-            for k in range(3):
-                resume_reference[w, k] = start_reference[k, w]
-            for i in range(start_A0.shape[0]):
-                for j in range(start_A0.shape[1]):
-                    resume_A0[w, i, j] = start_A0[i, j, w]
+            if w < count:
+                v = base + w
+                left_at[v] = step
+                records_before[v] = records_before_step
+                for i in range(q.shape[1]):
+                    resume_q[v, i] = q[w, i]
+                    resume_qd[v, i] = qd[w, i]
+                for k in range(3):
+                    resume_reference[v, k] = start_reference[k, w]
+                for i in range(start_A0.shape[0]):
+                    for j in range(start_A0.shape[1]):
+                        resume_A0[v, i, j] = start_A0[i, j, w]
         running = running or (w < count and lanes[w] == RUNNING)
     return not running
