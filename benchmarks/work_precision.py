@@ -16,9 +16,9 @@ independent coordinate: smooth through the slider-crank's singular position, on 
 checked against Pinocchio with scipy's DOP853 at 1e-12 (the difference is printed; a level
 below ten times it is not resolved).  Not RK45 at 1e-12: on the slider-crank such tight index-1
 runs step so close to the singular position that they change branch (θ2 + 2θ1 = 0.43 rad at
-1 s instead of 0; docs/formulations.md).  Wall: the whole call (cmbs.simulate; the other tools' loop), one run
-after a warm-up run of the same configuration (cmbs, MuJoCo; it loads the compiled code that
-configuration takes).
+1 s instead of 0; docs/formulations.md).  Wall: the whole call (cmbs.simulate; the other
+tools' loop), the median of up to 5 runs (fewer past 0.5 s) after a warm-up run of the same
+configuration (cmbs, MuJoCo; it loads the compiled code that configuration takes).
 
 Configurations: cmbs RK4 with h = 10, 6.25, 5, 3.125, 2, 1, 0.5, 0.2, 0.1 ms on the compiled loops (baumgarte,
 projection, matrix-r); RK45 with rtol = 1e-4 ... 1e-10 (lagrange, matrix-r) and DOP853 (lagrange,
@@ -40,6 +40,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
+import statistics  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
@@ -93,10 +94,21 @@ def deviation(angles: np.ndarray, reference: np.ndarray) -> float | None:
     return float(max(abs(wrap(a - r)) for a, r in zip(angles, reference)))
 
 
+#: Each configuration's wall time is the median of up to REPEATS timed runs, fewer once BUDGET_S
+#: seconds are spent (runs of a few ms vary by tens of per cent on shared cores; one run decides
+#: nothing there).
+REPEATS = 5
+BUDGET_S = 0.5
+
+
 def timed(call):
-    started = time.perf_counter()
-    value = call()
-    return value, time.perf_counter() - started
+    """(the call's value, median wall seconds of up to REPEATS runs within BUDGET_S)."""
+    walls = []
+    while len(walls) < REPEATS and sum(walls) < BUDGET_S:
+        started = time.perf_counter()
+        value = call()
+        walls.append(time.perf_counter() - started)
+    return value, statistics.median(walls)
 
 
 def cmbs_configurations(quick: bool) -> list[tuple[str, str, dict, str]]:

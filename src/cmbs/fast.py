@@ -493,7 +493,7 @@ def _gram_bounds(A, row_scale, gram, factor, rows_of, start, Z):
 BOUNDS_REUSE_SIZE = 1024
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z):
     """(λ_low, λ_high, reused): bounds on the extreme eigenvalues of G = (SA)(SA)ᵀ as
     :func:`_gram_bounds` gives them, from a reference A₀ bounded earlier when A is close to it.
@@ -530,7 +530,7 @@ def _bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z):
     return low, high, False
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def _bounds_meeting(A, row_scale, ratio, floor, reference, A0, gram, factor, rows_of, start, Z):
     """(λ_low, λ_high) of :func:`_bounds`, computed afresh (G then in ``gram``) when reused ones
     fail the caller's test λ_low >= ratio²·max(λ_high, 1) and λ_low > floor²: a test lost only
@@ -542,7 +542,7 @@ def _bounds_meeting(A, row_scale, ratio, floor, reference, A0, gram, factor, row
     return low, high
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def _certify(A, row_scale, tolerance, reference, A0, gram, factor, rows_of, start, Z):
     """(singular, certified, decided) for the constraint Jacobian A: ``singular`` when σ_min/σ_max
     of the row-scaled SA is below ``tolerance`` (as KKTSolver's SVD test, with σ_max replaced by
