@@ -208,7 +208,7 @@ def test_projection_takes_the_svd_at_a_singular_position_and_the_schur_path_else
         qd = cmbs.velocities(model, q, qd=np.ones(model.n))
         terms = model.evaluate(q, qd, 0.0)
         qdd, lam = np.empty(model.n), np.empty(model.m)
-        taken = _projection_by_schur(terms.M, terms.Q, terms.A, terms.gamma, row_scale,
+        taken = _projection_by_schur(True, terms.M, terms.Q, terms.A, terms.gamma, row_scale,
                                      compiled.formulation.threshold, schur, qdd, lam)
         assert taken == schur_expected
         expected = compiled.solver.accelerations(terms, q, qd, 0.0)
@@ -444,6 +444,45 @@ def test_loop_goes_on_with_the_svd_from_the_stage_that_needs_it(every):
                            ints, reals, buffer.size, mass, row_scale, model.m, mode, law, schur)
     assert resumed[9] == count and resumed[10] == compiled.OK
     for got, expected in zip(resumed[:9], full_records):
+        np.testing.assert_array_equal(got, expected)
+
+
+SMALL_NATURAL_CASES = [("four-bar", "lagrange"), ("four-bar", "baumgarte"), ("four-bar", "projection"),
+                       ("slider-crank", "lagrange"), ("slider-crank", "projection"), ("kitchen-sink", "baumgarte")]
+
+
+@pytest.mark.parametrize("name, formulation", SMALL_NATURAL_CASES)
+def test_small_natural_loop_takes_the_general_loops_steps_bit_for_bit(name, formulation):
+    """The loop compiled for natural models with constant inputs and no band solve
+    (:func:`cmbs.fast._rk4_steps_small_natural`) does the general borrowing loop's operations:
+    the same records, status, stop time and stopping stage, bit for bit, on driven models, up to
+    the slider-crank's singular position (Lagrange: SINGULAR; projection: FALLBACK to the SVD)."""
+    model = kitchen_sink(python_driver=False) if name == "kitchen-sink" else cmbs.load(name)
+    chosen = cmbs.formulation(formulation)
+    steps, h = 2000, 1e-3
+    plan = compiled.compiled_plan(model, chosen, "rk4", None, False, steps * h, h)
+    assert plan is not None
+    kind, method, parameters, mode, law = plan
+    solver = chosen.bind(model)
+    parameters = compiled.bound_parameters(method, parameters, solver)
+    _, ints, reals, buffer, mass, schur = compiled.workspace(model)
+    assert kind == compiled.KIND_NATURAL and mode == compiled.CONSTANT and schur[16] != 1
+    law = compiled.law_arrays(law, model)
+    u0 = np.full(model.n_u, 0.3 if name == "kitchen-sink" else 0.0)     # the kitchen sink's actuator pushes
+
+    def run(loop):
+        state, records, work = compiled._rk4_arrays(np.array(model.q0), np.array(model.qd0), u0, model.m, steps + 1,
+                                                    buffer.size, law[8].shape[0])
+        ending = loop(kind, method, parameters, h, steps, 1, ints, reals, mass, np.ascontiguousarray(solver.row_scale),
+                      mode, law, compiled._private_copy(schur), *state, work, records, 0, 0, 0)
+        return ending, records
+
+    (general_ending, general), (small_ending, small) = run(compiled._rk4_steps_borrowed), run(
+        compiled._rk4_steps_small_natural)
+    assert small_ending == general_ending
+    expected_status = {"slider-crank": compiled.SINGULAR if formulation == "lagrange" else compiled.FALLBACK}
+    assert general_ending[1] == expected_status.get(name, compiled.OK)
+    for got, expected in zip(small, general):
         np.testing.assert_array_equal(got, expected)
 
 

@@ -306,7 +306,7 @@ def law_arrays(law: ComputedTorque | None, model: Model) -> tuple:
             law.solver.partition.dependent.astype(np.int64))
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def _evaluate(kind, q, qd, t, u, ints, reals, buffer):
     if kind == KIND_NATURAL:
         _natural_kernel(q, qd, t, u, ints, reals, buffer)
@@ -823,7 +823,7 @@ PROJECTION_REGULAR = 1e-4
 
 
 @njit_borrowing(cache=True, inline="always")
-def _projection_by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
+def _projection_by_schur(band, M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     """Aghili's standard projection solution at a regular configuration, by the augmented system.
 
     When A has full row rank and no singular value of the row-scaled DA falls below the SVD
@@ -833,7 +833,9 @@ def _projection_by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     Lagrange solution, unique here, with the same multipliers (λ = -(Aᵀ)⁺f_c and f_c = -Aᵀλ).
     Taken only when the Gram-matrix bounds of :func:`_bounds` certify σ_min(DA) >=
     PROJECTION_REGULAR·max(σ_max, 1) and σ_min > ``threshold``; returns False otherwise (near
-    singular positions, redundant constraints), and the caller takes the SVD path."""
+    singular positions, redundant constraints), and the caller takes the SVD path.  Solved by
+    band LU when ``band`` and the workspace chose it (schur[16] == 1), else by the Schur
+    complement."""
     m = A.shape[0]
     if m == 0 or m > A.shape[1]:
         return False
@@ -841,7 +843,7 @@ def _projection_by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
                                 schur[13], schur[14], schur[15])
     if low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold:
         return False
-    if schur[16] == 1:
+    if band and schur[16] == 1:
         return _band_kkt(Q, A, gamma, schur, qdd, lam)
     return _schur_solve(M, Q, A, gamma, schur, qdd, lam)
 
@@ -896,6 +898,26 @@ def _field_borrowed(kind, method, parameters, q, qd, t, u, ints, reals, buffer, 
     """:func:`field` up to the paths that create arrays: returns FALLBACK there, with the terms
     evaluated in ``buffer`` (and, for Lagrange and Baumgarte, the Gram matrix G = (SA)(SA)ᵀ of
     the fresh bounds in schur[7])."""
+    return _field_stage(kind, True, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, qdd, lam,
+                        K, rhs, check_rank, schur)
+
+
+@njit_borrowing(cache=True)
+def _field_small_natural(method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, qdd, lam, K, rhs,
+                         check_rank, schur):
+    """:func:`_field_borrowed` for a natural-coordinate model that is not solved by band LU
+    (schur[16] != 1): the same operations, compiled without the joint kernel and the band
+    solve, so the loop that calls it (:func:`_rk4_steps_small_natural`) is about a third
+    smaller to load."""
+    return _field_stage(KIND_NATURAL, False, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale,
+                        qdd, lam, K, rhs, check_rank, schur)
+
+
+@njit_borrowing(cache=True, inline="always")
+def _field_stage(kind, band, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale, qdd, lam, K, rhs,
+                 check_rank, schur):
+    """The body of :func:`_field_borrowed`; ``band`` False leaves out the band solve (the caller
+    knows schur[16] != 1)."""
     n = q.shape[0]
     m = lam.shape[0]
     _evaluate(kind, q, qd, t, u, ints, reals, buffer)
@@ -904,7 +926,7 @@ def _field_borrowed(kind, method, parameters, q, qd, t, u, ints, reals, buffer, 
         if not math.isfinite(buffer[k]):    # a state that has blown up: no factorisation sees it
             return NON_FINITE
     if method == PROJECTION:
-        if not _projection_by_schur(M, Q, A, gamma, row_scale, parameters[2], schur, qdd, lam):
+        if not _projection_by_schur(band, M, Q, A, gamma, row_scale, parameters[2], schur, qdd, lam):
             return FALLBACK
     else:
         singular, certified, decided = _certify(A, row_scale, parameters[2], schur[27], schur[28], schur[7],
@@ -913,8 +935,8 @@ def _field_borrowed(kind, method, parameters, q, qd, t, u, ints, reals, buffer, 
             return FALLBACK
         if check_rank and singular:
             return SINGULAR
-        if not _constrained_solve(method, parameters, qd, Q, phi, A, gamma, phi_t, M, K, rhs, certified, schur, qdd,
-                                  lam):
+        if not _constrained_solve(band, method, parameters, qd, Q, phi, A, gamma, phi_t, M, K, rhs, certified, schur,
+                                  qdd, lam):
             return SINGULAR
     return _finite(qdd)
 
@@ -934,7 +956,8 @@ def _field_fallback(kind, method, parameters, qd, buffer, mass, row_scale, qdd, 
         return _finite(qdd)
     if check_rank and _gram_singular(schur[7], parameters[2]):
         return SINGULAR
-    if not _constrained_solve(method, parameters, qd, Q, phi, A, gamma, phi_t, M, K, rhs, False, schur, qdd, lam):
+    if not _constrained_solve(True, method, parameters, qd, Q, phi, A, gamma, phi_t, M, K, rhs, False, schur, qdd,
+                              lam):
         return SINGULAR
     return _finite(qdd)
 
@@ -949,10 +972,11 @@ def _finite(qdd):
 
 
 @njit_borrowing(cache=True, inline="always")
-def _constrained_solve(method, parameters, qd, Q, phi, A, gamma, phi_t, M, K, rhs, certified, schur, qdd, lam):
+def _constrained_solve(band, method, parameters, qd, Q, phi, A, gamma, phi_t, M, K, rhs, certified, schur, qdd, lam):
     """q̈, λ of Lagrange's or Baumgarte's [M Aᵀ; A 0][q̈; λ] = [Q; c], c = γ (Lagrange) or
-    γ - 2ξωΦ̇ - ω²Φ with Φ̇ = Aq̇ + Φ_t (Baumgarte): band LU for large natural models, the Schur
-    complement when A is ``certified`` regular, else the full system.  False when singular."""
+    γ - 2ξωΦ̇ - ω²Φ with Φ̇ = Aq̇ + Φ_t (Baumgarte): band LU for large natural models (when
+    ``band``), the Schur complement when A is ``certified`` regular, else the full system.
+    False when singular."""
     n = Q.shape[0]
     m = gamma.shape[0]
     for r in range(m):
@@ -963,7 +987,7 @@ def _constrained_solve(method, parameters, qd, Q, phi, A, gamma, phi_t, M, K, rh
                 rate += A[r, j] * qd[j]
             value -= 2.0 * parameters[0] * parameters[1] * rate + parameters[1] * parameters[1] * phi[r]
         rhs[n + r] = value
-    if schur[16] == 1:                      # large natural model: band LU of the KKT matrix
+    if band and schur[16] == 1:             # large natural model: band LU of the KKT matrix
         return _band_kkt(Q, A, rhs[n:n + m], schur, qdd, lam)
     if certified and _schur_solve(M, Q, A, rhs[n:n + m], schur, qdd, lam):
         return True
@@ -1253,16 +1277,19 @@ def rk4(kind: int, method: int, parameters: np.ndarray, q0: np.ndarray, qd0: np.
     evaluated with it.
 
     The loop runs first without the paths that create arrays (:func:`_rk4_steps_borrowed`, whose
-    compiled code is about half the size, so a process loads it in half the time); at the first
-    stage that needs the SVD or the eigenvalue rank test it goes on from that stage in
-    :func:`_rk4_steps`, which has them: the same stages, the same results.
+    compiled code is about half the size, so a process loads it in half the time; for a natural
+    model with constant inputs and no band solve, :func:`_rk4_steps_small_natural`, smaller
+    still); at the first stage that needs the SVD or the eigenvalue rank test it goes on from
+    that stage in :func:`_rk4_steps`, which has them: the same stages, the same results.
     """
     state, records, work = interpreted(_rk4_arrays)(q0, qd0, u0, m, steps // every + 1, buffer_size,
                                                     law[8].shape[0])
     q, qd, u, sq, sv = state
     arguments = (kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law,
                  interpreted(_private_copy)(schur), q, qd, u, sq, sv, work, records)
-    recorded, status, st, step, stage = _rk4_steps_borrowed(*arguments, 0, 0, 0)
+    small_natural = kind == KIND_NATURAL and mode == CONSTANT and schur[16] != 1
+    first = _rk4_steps_small_natural if small_natural else _rk4_steps_borrowed
+    recorded, status, st, step, stage = first(*arguments, 0, 0, 0)
     if status == FALLBACK:
         recorded, status, st, _, _ = _rk4_steps(*arguments, step, stage, recorded)
     if status != OK:
@@ -1275,7 +1302,16 @@ def _rk4_steps_borrowed(kind, method, parameters, h, steps, every, ints, reals, 
                         qd, u, sq, sv, work, records, start_step, start_stage, recorded):
     """:func:`_rk4_loop` with :func:`_field_borrowed`: stops with FALLBACK at the first stage that
     needs :func:`_field_fallback`."""
-    return _rk4_loop(False, kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law,
+    return _rk4_loop(BORROWED, kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law,
+                     schur, q, qd, u, sq, sv, work, records, start_step, start_stage, recorded)
+
+
+@njit_borrowing(cache=True)
+def _rk4_steps_small_natural(kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law, schur,
+                             q, qd, u, sq, sv, work, records, start_step, start_stage, recorded):
+    """:func:`_rk4_steps_borrowed` for a natural model with constant inputs that is not solved by
+    band LU (:func:`_field_small_natural`; ``kind`` and ``mode`` are not read)."""
+    return _rk4_loop(SMALL_NATURAL, kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law,
                      schur, q, qd, u, sq, sv, work, records, start_step, start_stage, recorded)
 
 
@@ -1283,18 +1319,24 @@ def _rk4_steps_borrowed(kind, method, parameters, h, steps, every, ints, reals, 
 def _rk4_steps(kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law, schur, q, qd, u,
                sq, sv, work, records, start_step, start_stage, recorded):
     """:func:`_rk4_loop` with the whole :func:`field`."""
-    return _rk4_loop(True, kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law, schur,
+    return _rk4_loop(WHOLE, kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law, schur,
                      q, qd, u, sq, sv, work, records, start_step, start_stage, recorded)
 
 
+#: The field a compiled RK4 loop calls (:func:`_rk4_loop`).
+WHOLE, BORROWED, SMALL_NATURAL = 0, 1, 2
+
+
 @njit_borrowing(cache=True, inline="always")
-def _rk4_loop(with_fallback, kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law,
+def _rk4_loop(variant, kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law,
               schur, q, qd, u, sq, sv, work, records, start_step, start_stage, recorded):
     """The loop of :func:`rk4` on the arrays :func:`_rk4_arrays` allocated (state q, q̇, u
     updated in place; stage state sq, sv; ``work``), from stage ``start_stage`` of step
     ``start_step`` with ``recorded`` records written (the earlier stages of that step left their
-    slopes and λ in ``work``).  The stages call :func:`field` if ``with_fallback``, else
-    :func:`_field_borrowed`; the callers pass a constant, so numba compiles only that call.
+    slopes and λ in ``work``).  The stages call :func:`field` (``variant`` WHOLE),
+    :func:`_field_borrowed` (BORROWED) or :func:`_field_small_natural` (SMALL_NATURAL, which
+    also leaves out the input law); the callers pass a constant, so the compiled loop keeps only
+    that call.
     Returns (records written, status, time, step and stage of the failed stage).  Borrowing: no
     reference counting in the loop."""
     n = q.shape[0]
@@ -1314,11 +1356,15 @@ def _rk4_loop(with_fallback, kind, method, parameters, h, steps, every, ints, re
                 st = t + a
             for i in range(n):
                 kq[stage, i] = sv[i]
-            if mode == LAW or (mode == HELD and (step == 0 if stage == 0 else stage == 3)):
+            if variant != SMALL_NATURAL and (mode == LAW or (mode == HELD and (step == 0 if stage == 0 else
+                                                                             stage == 3))):
                 computed_torque(law, sq, sv, st, law_K, law_rhs, law_pivots, u)
-            if with_fallback:
+            if variant == WHOLE:
                 status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale,
                                kv[stage], lam if stage == 0 else stage_lam, K, rhs, True, schur)
+            elif variant == SMALL_NATURAL:
+                status = _field_small_natural(method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale,
+                                              kv[stage], lam if stage == 0 else stage_lam, K, rhs, True, schur)
             else:
                 status = _field_borrowed(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass,
                                          row_scale, kv[stage], lam if stage == 0 else stage_lam, K, rhs, True, schur)
