@@ -1336,9 +1336,8 @@ def _rk4_loop(variant, kind, method, parameters, h, steps, every, ints, reals, m
     slopes and λ in ``work``).  The stages call :func:`field` (``variant`` WHOLE),
     :func:`_field_borrowed` (BORROWED) or :func:`_field_small_natural` (SMALL_NATURAL, which
     also leaves out the input law); the callers pass a constant, so the compiled loop keeps only
-    that call.
-    Returns (records written, status, time, step and stage of the failed stage).  Borrowing: no
-    reference counting in the loop."""
+    that call.  Returns (records written, status, time, step and stage of the failed stage).
+    Borrowing: no reference counting in the loop."""
     n = q.shape[0]
     buffer, kq, kv, lam, stage_lam, K, rhs, law_K, law_rhs, law_pivots = work
     T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE = records
@@ -1356,8 +1355,8 @@ def _rk4_loop(variant, kind, method, parameters, h, steps, every, ints, reals, m
                 st = t + a
             for i in range(n):
                 kq[stage, i] = sv[i]
-            if variant != SMALL_NATURAL and (mode == LAW or (mode == HELD and (step == 0 if stage == 0 else
-                                                                             stage == 3))):
+            sampled = mode == LAW or (mode == HELD and (step == 0 if stage == 0 else stage == 3))
+            if variant != SMALL_NATURAL and sampled:
                 computed_torque(law, sq, sv, st, law_K, law_rhs, law_pivots, u)
             if variant == WHOLE:
                 status = field(kind, method, parameters, sq, sv, st, u, ints, reals, buffer, mass, row_scale,
