@@ -171,23 +171,30 @@ def run_mujoco(tree, quick: bool, reference: float) -> list[dict]:
     return rows
 
 
-def pinocchio_solution(tree, method: str, tolerance: float) -> tuple[np.ndarray, float]:
+def pinocchio_solution(built: tuple, method: str, tolerance: float) -> np.ndarray:
+    """θ1 at the quarters by scipy's ``method`` on the Pinocchio model ``built`` by
+    :func:`pinocchio_build` (its right-hand side, start state and index of θ1)."""
     from scipy.integrate import solve_ivp
 
+    rhs, y0, root = built
+    solution = solve_ivp(lambda t, y: rhs(y), (0.0, SPAN), y0, method=method, rtol=tolerance, atol=tolerance,
+                         t_eval=QUARTERS)
+    return solution.y[root]
+
+
+def pinocchio_model(tree) -> tuple:
+    """(right-hand side, start state, index of θ1) of :func:`pinocchio_build` for ``tree``."""
     _, _, rhs, y0, index, *_ = pinocchio_build(tree)
-    root = index(tree.links[0].name)
-    solution, wall = timed(lambda: solve_ivp(lambda t, y: rhs(y), (0.0, SPAN), y0, method=method, rtol=tolerance,
-                                             atol=tolerance, t_eval=QUARTERS))
-    return solution.y[root], wall
+    return rhs, y0, index(tree.links[0].name)
 
 
 def run_pinocchio(tree, quick: bool, reference: float) -> list[dict]:
-    _, _, rhs, y0, index, *_ = pinocchio_build(tree)
-    root = index(tree.links[0].name)
+    built = pinocchio_model(tree)
+    rhs, y0, root = built
     rows = []
     for method in ("RK45", "DOP853"):
         for tolerance in (TOLERANCES[::2] if quick else TOLERANCES):
-            angles, wall = pinocchio_solution(tree, method, tolerance)
+            angles, wall = timed(lambda: pinocchio_solution(built, method, tolerance))
             rows.append({"tool": "Pinocchio", "family": f"Pinocchio {method} (scipy)", "setting": f"rtol={tolerance:g}",
                          "wall_s": wall, "error": deviation(angles, reference)})
     for h in (1e-2, 2e-3, 1e-3):
@@ -234,7 +241,7 @@ def main() -> None:
         if "Pinocchio" in tools:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                other, _ = pinocchio_solution(tree, "DOP853", 1e-12)
+                other = pinocchio_solution(pinocchio_model(tree), "DOP853", 1e-12)
             check = deviation(other, reference)
         print(f"\n== {label}: reference θ1(1 s) = {reference[-1]:.12f} rad (cmbs matrix-r RK4, h = {REFERENCE_STEP:g})"
               + (f"; Pinocchio DOP853 1e-12 differs by {check:.1e} rad" if check is not None else ""))

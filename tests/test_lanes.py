@@ -2,6 +2,7 @@
 numbers (cmbs.fast.rk4_batch, itself cmbs.fast.rk4 per variant), including variants that leave
 their lanes at a singular position or when the motion diverges."""
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -38,12 +39,9 @@ def _both(model, QD0, chosen, steps, every, h=1e-3, U0=None):
         records = steps // every + 1
         out = (np.full((count, records, model.n), np.nan), np.full((count, records, model.n), np.nan),
                np.full((count, records), np.nan), np.full(count, -9, dtype=np.int64), np.zeros(count, dtype=np.int64))
-        if lanes:
-            fast_lanes.rk4_lanes(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, buffer.size, mass,
-                                 row_scale, model.m, law, schur, plan, *out)
-        else:
-            fast.rk4_batch(kind, method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, buffer.size, mass,
-                           row_scale, model.m, law, schur, *out)
+        run = functools.partial(fast_lanes.rk4_lanes, plan=plan) if lanes else fast.rk4_batch
+        run(kind, method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, buffer.size, mass, row_scale, model.m,
+            law, schur, *out)
         results.append(out)
     return results
 

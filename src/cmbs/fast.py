@@ -907,8 +907,8 @@ def _field_small_natural(method, parameters, q, qd, t, u, ints, reals, buffer, m
                          check_rank, schur):
     """:func:`_field_borrowed` for a natural-coordinate model that is not solved by band LU
     (schur[16] != 1): the same operations, compiled without the joint kernel and the band
-    solve, so the loop that calls it (:func:`_rk4_steps_small_natural`) is about a third
-    smaller to load."""
+    solve, so the loop that calls it (:func:`_rk4_steps_small_natural`) is about 30 %
+    smaller to load (419 KB of bitcode instead of 580 KB)."""
     return _field_stage(KIND_NATURAL, False, method, parameters, q, qd, t, u, ints, reals, buffer, mass, row_scale,
                         qdd, lam, K, rhs, check_rank, schur)
 

@@ -89,12 +89,12 @@ def _lists(nested: list, shape: int | tuple, longest: int) -> np.ndarray:
     return table
 
 
-def rk4_lanes(method: int, parameters: np.ndarray, Q0: np.ndarray, QD0: np.ndarray, U0: np.ndarray, h: float,
-              steps: int, every: int, ints: np.ndarray, reals: np.ndarray, buffer_size: int, mass: np.ndarray,
-              row_scale: np.ndarray, m: int, law: tuple, schur: tuple, plan: tuple, Qs: np.ndarray, QDs: np.ndarray,
-              PHIs: np.ndarray, statuses: np.ndarray, recorded: np.ndarray) -> None:
-    """:func:`cmbs.fast.rk4_batch` (same arguments without the kernel kind, plus the
-    :func:`lane_plan`; same outputs, bit for bit) in blocks of LANES variants, parallel over the
+def rk4_lanes(kind: int, method: int, parameters: np.ndarray, Q0: np.ndarray, QD0: np.ndarray, U0: np.ndarray,
+              h: float, steps: int, every: int, ints: np.ndarray, reals: np.ndarray, buffer_size: int,
+              mass: np.ndarray, row_scale: np.ndarray, m: int, law: tuple, schur: tuple, Qs: np.ndarray,
+              QDs: np.ndarray, PHIs: np.ndarray, statuses: np.ndarray, recorded: np.ndarray, plan: tuple) -> None:
+    """:func:`cmbs.fast.rk4_batch` (same arguments, then the :func:`lane_plan` made for ``kind``;
+    same outputs, bit for bit) in blocks of LANES variants, parallel over the
     blocks (numba threads, :func:`_run_blocks`); then each variant that left its lanes goes on in
     :func:`cmbs.fast._rk4_steps` from the step it left at, one after the other (a sweep in which
     none leaves never loads that loop)."""
@@ -113,7 +113,7 @@ def rk4_lanes(method: int, parameters: np.ndarray, Q0: np.ndarray, QD0: np.ndarr
         own = interpreted(_private_copy)(schur)
         own[27][:] = resume_reference[v]
         own[28][:, :] = resume_A0[v]
-        done, status, _, _, _ = _rk4_steps(KIND_NATURAL, method, parameters, h, steps, every, ints, reals, mass,
+        done, status, _, _, _ = _rk4_steps(kind, method, parameters, h, steps, every, ints, reals, mass,
                                            row_scale, CONSTANT, law, own, *single, work, records, left_at[v], 0,
                                            records_before[v])
         first = records_before[v]

@@ -26,6 +26,7 @@ Every path gives the same numbers for the same variant (tested: batched vs per-v
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import sys
@@ -388,16 +389,12 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
     row_scale, law = np.ascontiguousarray(solver.row_scale), fast.law_arrays(None, model)
     block = count if bar.disable else max(-(-count // PROGRESS_BLOCKS), 4 * _threads())
     lanes = fast_lanes.lane_plan(kind, method, schur, model.m, model.n)
+    run = fast.rk4_batch if lanes is None else functools.partial(fast_lanes.rk4_lanes, plan=lanes)
     for a in range(0, count, block):        # each variant is independent: blocks change nothing
         b = min(a + block, count)
-        if lanes is None:
-            fast.rk4_batch(kind, method, parameters, Q0[a:b], QD0[a:b], U0[a:b], settings.dt, steps, settings.every,
-                           ints, reals, buffer.size, mass, row_scale, model.m, law, schur, Qs[a:b], QDs[a:b],
-                           PHIs[a:b], statuses[a:b], recorded[a:b])
-        else:
-            fast_lanes.rk4_lanes(method, parameters, Q0[a:b], QD0[a:b], U0[a:b], settings.dt, steps, settings.every,
-                                 ints, reals, buffer.size, mass, row_scale, model.m, law, schur, lanes, Qs[a:b],
-                                 QDs[a:b], PHIs[a:b], statuses[a:b], recorded[a:b])
+        run(kind, method, parameters, Q0[a:b], QD0[a:b], U0[a:b], settings.dt, steps, settings.every, ints, reals,
+            buffer.size, mass, row_scale, model.m, law, schur, Qs[a:b], QDs[a:b], PHIs[a:b], statuses[a:b],
+            recorded[a:b])
         bar.update(b - a)
     reasons = {fast.SINGULAR: "singular system (rank of A)", fast.NON_FINITE: "the motion diverged"}
     outputs = []
