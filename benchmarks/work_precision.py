@@ -11,12 +11,14 @@ gravity 9.81; its crank passes 90° at 0.83 s, where the constraint Jacobian los
 
 Error: max |θ1(t) - θ1_ref(t)| over t = 0.25, 0.5, 0.75, 1 s, θ1 the first link's absolute
 angle (the crank; link 1 of the chain), a quantity every tool has (several times: at one time
-an error can vanish by chance).  Reference: cmbs matrix R with RK4 at h = 25 µs (the ODE in the
-independent coordinate: smooth through the slider-crank's singular position, on its branch),
-checked against Pinocchio with scipy's DOP853 at 1e-12 (the difference is printed; a level
-below ten times it is not resolved).  Not RK45 at 1e-12: on the slider-crank such tight index-1
-runs step so close to the singular position that they change branch (θ2 + 2θ1 = 0.43 rad at
-1 s instead of 0; docs/formulations.md).  Wall: the whole call (cmbs.simulate; the other
+an error can vanish by chance).  Reference: for the slider-crank, its motion on the branch
+θ2 = -2θ1 as one smooth ODE in θ1 (``cmbs.library.mechanisms.slider_crank_branch``, DOP853 at
+1e-13), which no singular position disturbs; for the others, cmbs matrix R with RK4 at h = 25 µs.
+Each is checked against Pinocchio with scipy's DOP853 at 1e-12 (the difference is printed; a
+level below ten times it is not resolved).  Not a small-step run on the slider-crank: every
+formulation evaluated at a stage within δ of the singular position amplifies rounding about
+1/δ³ times, and small steps put stages there (matrix R at h = 25 µs ends 6e-10 rad off, at
+10 µs 1e-5; docs/formulations.md).  Wall: the whole call (cmbs.simulate; the other
 tools' loop), the median of up to 5 runs (fewer past 0.5 s) after a warm-up run of the same
 configuration (cmbs, MuJoCo; it loads the compiled code that configuration takes).
 
@@ -48,6 +50,7 @@ import warnings  # noqa: E402
 import numpy as np  # noqa: E402
 
 import cmbs  # noqa: E402
+from cmbs.library.mechanisms import slider_crank_branch  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_dynamics import (GRAVITY, anchors_four_bar, chain_tree, four_bar_tree, installed,  # noqa: E402
@@ -55,15 +58,30 @@ from bench_dynamics import (GRAVITY, anchors_four_bar, chain_tree, four_bar_tree
 
 SPAN = 1.0
 QUARTERS = np.array([0.25, 0.5, 0.75, 1.0])   # error = max |Δθ1| over these times (one time can be lucky)
-REFERENCE_STEP = 2.5e-5     # matrix R, RK4 (compiled): keeps the slider-crank's branch; error ~1e-13
+REFERENCE_STEP = 2.5e-5     # matrix R, RK4 (compiled), for the mechanisms without singular positions
 LEVELS = [10.0 ** -k for k in range(3, 10)]
 STEPS = [1e-2, 1 / 160, 5e-3, 1 / 320, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4]   # each a divisor of a quarter of SPAN
 TOLERANCES = [1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10]
 
+
+
+def small_step_reference(model: cmbs.Model, tree) -> tuple[np.ndarray, str]:
+    """θ1 at the QUARTERS from cmbs matrix R with RK4 at REFERENCE_STEP, and its description."""
+    run = cmbs.simulate(model, t_end=SPAN, formulation="matrix-r", integrator="rk4", dt=REFERENCE_STEP)
+    return quarter_angles(model, tree, run), f"cmbs matrix-r RK4, h = {REFERENCE_STEP:g}"
+
+
+def branch_reference(model: cmbs.Model, tree) -> tuple[np.ndarray, str]:
+    """θ1 at the QUARTERS from the slider-crank's ODE on its branch θ2 = -2θ1, and its description."""
+    theta, _ = slider_crank_branch(QUARTERS, **model.parameters)
+    return theta, "branch ODE θ2 = -2θ1, DOP853 1e-13"
+
+
 MECHANISMS = {
-    "four-bar": (anchors_four_bar, four_bar_tree),
-    "slider-crank": (lambda: cmbs.load("slider-crank", gravity=GRAVITY), slider_crank_tree),
-    "chain14": (lambda: cmbs.load("chain", links=14, closed=True), lambda model: chain_tree(model, 14)),
+    "four-bar": (anchors_four_bar, four_bar_tree, small_step_reference),
+    "slider-crank": (lambda: cmbs.load("slider-crank", gravity=GRAVITY), slider_crank_tree, branch_reference),
+    "chain14": (lambda: cmbs.load("chain", links=14, closed=True), lambda model: chain_tree(model, 14),
+                small_step_reference),
 }
 
 
@@ -232,18 +250,17 @@ def main() -> None:
     print(f"cmbs {cmbs.__version__}; other tools: {', '.join(tools) or 'none installed'}; span {SPAN} s")
     report = {}
     for label in args.mechanism or list(MECHANISMS):
-        build, tree_of = MECHANISMS[label]
+        build, tree_of, reference_of = MECHANISMS[label]
         model = build()
         tree = tree_of(model)
-        reference_run = cmbs.simulate(model, t_end=SPAN, formulation="matrix-r", integrator="rk4", dt=REFERENCE_STEP)
-        reference = quarter_angles(model, tree, reference_run)
+        reference, described = reference_of(model, tree)
         check = None
         if "Pinocchio" in tools:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 other = pinocchio_solution(pinocchio_model(tree), "DOP853", 1e-12)
             check = deviation(other, reference)
-        print(f"\n== {label}: reference θ1(1 s) = {reference[-1]:.12f} rad (cmbs matrix-r RK4, h = {REFERENCE_STEP:g})"
+        print(f"\n== {label}: reference θ1(1 s) = {reference[-1]:.12f} rad ({described})"
               + (f"; Pinocchio DOP853 1e-12 differs by {check:.1e} rad" if check is not None else ""))
         rows = run_cmbs(model, tree, args.quick, reference)
         if "MuJoCo" in tools:

@@ -11,6 +11,7 @@ from scipy.integrate import solve_ivp
 import cmbs
 from cmbs.dynamics import FORMULATIONS, formulation
 from cmbs.errors import CmbsError, SingularSystemError
+from cmbs.library.mechanisms import slider_crank_branch
 from cmbs.model.natural import NaturalModelBuilder
 from cmbs.simulate import simulate
 
@@ -179,6 +180,23 @@ def test_position_level_methods_keep_the_assembly_branch(slider_crank_runs):
     run = slider_crank_runs["generalized-alpha"]
     assert run.info["status"] == "success" and branch_deviation(run) < 1e-8
     assert np.abs(run["energy"] - run["energy"][0]).max() / run["energy"][0] < 1e-4  # numerical damping ρ∞ = 0.9
+
+
+@pytest.mark.parametrize("name", ["matrix-r", "projection"])
+def test_slider_crank_follows_its_branch_ode_through_the_singular_position(name):
+    """With gravity the crank reaches 90° at 0.83 s.  On the branch θ2 = -2θ1 the mechanism is
+    one smooth ODE in θ1 (cmbs.library.mechanisms.slider_crank_branch, regular at 90°): RK4 at
+    1 ms stays within 1e-10 rad of it (measured 5e-12 for matrix R, 1.5e-12 for projection), and
+    the branch ODE's energy m(θ1) θ̇1²/2 + g sin θ1 equals the model's at every time."""
+    gravity = 9.81
+    model = cmbs.load("slider-crank", gravity=gravity)
+    run = simulate(model, t_end=1.0, formulation=name, integrator="rk4", dt=1e-3)
+    rows = np.searchsorted(run.t, np.array([0.25, 0.5, 0.75, 0.82, 0.84, 1.0]) - 1e-9)
+    theta, omega = slider_crank_branch(run.t[rows], gravity=gravity)
+    assert run["theta1"][rows[3]] < np.pi / 2 < run["theta1"][rows[4]]
+    np.testing.assert_allclose(run["theta1"][rows], theta, rtol=0, atol=1e-10)
+    branch_energy = (2.0 / 3.0 + 2.0 * np.sin(theta) ** 2) * omega ** 2 / 2 + gravity * np.sin(theta)
+    np.testing.assert_allclose(run["energy"][rows], branch_energy, rtol=1e-9)
 
 
 def test_matrix_r_keeps_its_number_of_dependent_coordinates_at_a_singular_position():

@@ -9,7 +9,9 @@ A_d ḋ = -A_z ż - Φ_t), with the independent accelerations of Rᵀ M R z̈ = 
     R = [-A_d⁻¹ A_z ; I],   S = [A_d⁻¹ γ_r ; 0]   (rows in the partition's order),
     q̈ = R z̈ + S,           λ_r = -A_d⁻ᵀ (M q̈ - Q)_d,   λ = 0 on the rows not in the partition.
 
-After every step the state is recovered and cond(A_d) checked.  Choosing a new partition is
+Every stage also keeps the largest cond₁(A_d) it met and its time (``worst``), for the warning
+of :func:`cmbs.dynamics.matrix_r.rounding_note`.  After every step the state is recovered and
+cond(A_d) checked.  Choosing a new partition is
 Python's (:meth:`MatrixRSolver.update_partition`: pivoted QR and LU, rare): when cond(A_d) has
 grown by ``condition_growth`` (automatic partition) or passed 1e12 (any partition), the loop
 returns REPARTITION with the step reached, Python chooses again (or raises for a user partition)
@@ -50,6 +52,29 @@ def _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
         for j in range(rows.shape[0]):
             Ad[a, j] = A[rows[a], dependent[j]]
     return _lu_in_place(Ad, pivots)
+
+
+@njit(cache=True)
+def _condition_one(buffer, n, m, rows, dependent, Ad, pivots, side):
+    """cond₁(A_d) = ‖A_d‖₁ ‖A_d⁻¹‖₁ (as ``numpy.linalg.cond(A_d, 1)``) from the A in ``buffer``
+    and the LU factors of A_d in ``Ad``, ``pivots``; ``side`` is overwritten."""
+    r = rows.shape[0]
+    A = buffer[n + m:n + m + m * n].reshape((m, n))
+    norm = 0.0
+    inverse_norm = 0.0
+    for j in range(r):
+        column = 0.0
+        for a in range(r):
+            column += abs(A[rows[a], dependent[j]])
+        norm = max(norm, column)
+        side[:r] = 0.0
+        side[j] = 1.0
+        _lu_solve(Ad, pivots, side)
+        column = 0.0
+        for a in range(r):
+            column += abs(side[a])
+        inverse_norm = max(inverse_norm, column)
+    return norm * inverse_norm if r else 1.0
 
 
 @njit(cache=True)
@@ -97,8 +122,9 @@ def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent,
 
 @njit(cache=True)
 def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent, independent, tolerance,
-           iterations, qdd, lam, work):
-    """Recover (q, q̇) in place, then q̈ and λ by matrix R at the recovered state."""
+           iterations, qdd, lam, work, worst):
+    """Recover (q, q̇) in place, then q̈ and λ by matrix R at the recovered state; raise
+    ``worst`` = [cond₁(A_d), t] when this stage's condition is the largest so far."""
     Ad, pivots, side, R, reduced, zrhs, S = work
     status = _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent, independent, tolerance,
                       iterations, Ad, pivots, side)
@@ -112,6 +138,9 @@ def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dep
     r, k = rows.shape[0], independent.shape[0]
     if not _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
         return SINGULAR
+    condition = _condition_one(buffer, n, m, rows, dependent, Ad, pivots, side)
+    if condition > worst[0]:
+        worst[0], worst[1] = condition, t
     R[:, :] = 0.0
     for b in range(k):                       # R's column b: e_z(b) - A_d⁻¹ A_z e_b on the dependent rows
         R[independent[b], b] = 1.0
@@ -182,10 +211,12 @@ def _condition(buffer, n, m, rows, dependent):
 
 @njit(cache=True)
 def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, rows, dependent, independent,
-        tolerance, iterations, reference_condition, growth, automatic, T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE):
+        tolerance, iterations, reference_condition, growth, automatic, worst, T, Qs, QDs, QDDs, LAMs, PHI, PHID,
+        FORCE):
     """RK4 steps ``first`` .. ``steps`` (t = step·h) from the state (q0, q̇0) at step ``first``,
     recording every step into the given arrays (row = step; the row of ``first`` > 0 is already
-    there).  Returns (status, step reached, rows recorded, q, q̇ at the step reached): OK at
+    there), and the largest stage cond₁(A_d) and its time into ``worst``.  Returns (status, step
+    reached, rows recorded, q, q̇ at the step reached): OK at
     the end; REPARTITION when cond(A_d) at the step reached calls for a new partition; a
     failure code where a stage of that step failed."""
     n = q0.shape[0]
@@ -201,7 +232,7 @@ def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, ro
     for step in range(first, steps + 1):
         t = step * h
         status = _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent, independent,
-                        tolerance, iterations, k1v, lam, work)
+                        tolerance, iterations, k1v, lam, work, worst)
         if status != OK:
             return status, step, recorded, q, qd
         if step > first or first == 0:
@@ -220,19 +251,19 @@ def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, ro
         k1q = qd.copy()                      # the recovered velocities are dq/dt
         sq, sv = q + 0.5 * h * k1q, qd + 0.5 * h * k1v
         status = _stage(kind, sq, sv, t + 0.5 * h, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent,
-                        independent, tolerance, iterations, k2v, stage_lam, work)
+                        independent, tolerance, iterations, k2v, stage_lam, work, worst)
         if status != OK:
             return status, step, recorded, q, qd
         k2q = sv.copy()
         sq, sv = q + 0.5 * h * k2q, qd + 0.5 * h * k2v
         status = _stage(kind, sq, sv, t + 0.5 * h, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent,
-                        independent, tolerance, iterations, k3v, stage_lam, work)
+                        independent, tolerance, iterations, k3v, stage_lam, work, worst)
         if status != OK:
             return status, step, recorded, q, qd
         k3q = sv.copy()
         sq, sv = q + h * k3q, qd + h * k3v
         status = _stage(kind, sq, sv, t + h, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent,
-                        independent, tolerance, iterations, k4v, stage_lam, work)
+                        independent, tolerance, iterations, k4v, stage_lam, work, worst)
         if status != OK:
             return status, step, recorded, q, qd
         k4q = sv
@@ -246,7 +277,8 @@ def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0:
     """Run :func:`rk4` over ``steps`` steps of ``dt`` from (q0, q̇0), handing every re-partition
     to ``solver`` (which chooses the new partition or raises).  Returns the records
     (t, q, q̇, q̈, λ, |Φ|max, |Φ̇|max, f_c), the number recorded, the failure message ("" on
-    success) and the number of re-partitions."""
+    success) and the number of re-partitions; the largest stage cond₁(A_d) goes to
+    ``solver.note_condition``."""
     kind, ints, reals, buffer, mass = kernel(model)
     n, m = model.n, model.m
     records = (np.zeros(steps + 1), np.zeros((steps + 1, n)), np.zeros((steps + 1, n)), np.zeros((steps + 1, n)),
@@ -254,6 +286,7 @@ def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0:
     parameters = solver.p
     q, qd, first = np.array(q0, dtype=float), np.array(qd0, dtype=float), 0
     repartitions = 0
+    worst = np.zeros(2)
     failures = {NOT_CONVERGED: f"matrix-r position recovery did not converge in {parameters.max_iterations} "
                                "iterations", SINGULAR: "singular block A_d or reduced mass matrix Rᵀ M R",
                 NON_FINITE: "non-finite state or accelerations: the motion diverged"}
@@ -263,7 +296,8 @@ def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0:
             kind, q, qd, np.ascontiguousarray(u, dtype=float), dt, first, steps, ints, reals, buffer.size, mass, m,
             part.rows.astype(np.int64), part.dependent.astype(np.int64), part.independent.astype(np.int64),
             parameters.position_tolerance, parameters.max_iterations, float(solver.reference_condition),
-            parameters.condition_growth, solver.user is None, *records)
+            parameters.condition_growth, solver.user is None, worst, *records)
+        solver.note_condition(worst[0], worst[1])
         t = reached * dt
         if status == OK:
             return records, recorded, "", repartitions

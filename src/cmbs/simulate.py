@@ -22,6 +22,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from cmbs.dynamics import Formulation, formulation as make_formulation
+from cmbs.dynamics.matrix_r import MatrixRSolver, rounding_note
 from cmbs.dynamics.projection import pseudo_inverse
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.integrate.explicit import Integration, integrate as integrate_explicit
@@ -134,8 +135,10 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
     Trajectory
         With extras ``lam``, ``constraint_force``, ``u``, ``energy``, ``constraint_error`` and
         ``velocity_constraint_error``; ``info`` holds the options, status, message, counters
-        and wall time.  A failed run returns the part computed before the failure with
-        ``info["status"] == "failed"``.
+        and wall time (matrix R adds ``max_condition``, the largest cond₁(A_d) at an evaluated
+        stage, at ``max_condition_t``; ``note`` warns when it passed
+        :data:`cmbs.dynamics.matrix_r.ROUNDING_CONDITION`).  A failed run returns the part
+        computed before the failure with ``info["status"] == "failed"``.
     """
     if not t_end > 0:
         raise CmbsError(f"t_end must be > 0, got {t_end}")
@@ -212,7 +215,19 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
     trajectory.info["wall_time"] = time.perf_counter() - started
     if integrator == "rk4":
         trajectory.info["note"] = _python_loop_note(model, chosen, u, project, compiled)
+    _note_rounding(trajectory.info, solver)
     return trajectory
+
+
+def _note_rounding(info: dict, solver) -> None:
+    """For matrix R: the largest cond₁(A_d) met at an evaluated stage (``max_condition``, at
+    ``max_condition_t``) and, when rounding there may have spoilt the motion, a warning in the note."""
+    if not isinstance(solver, MatrixRSolver):
+        return
+    info["max_condition"], info["max_condition_t"] = solver.worst_condition, solver.worst_time
+    warning = rounding_note(solver.worst_condition, solver.worst_time)
+    if warning:
+        info["note"] = f"{info['note']}; {warning}" if info.get("note") else warning
 
 
 def _python_loop_note(model: Model, chosen: Formulation, u: object, project: bool, compiled: bool | None) -> str:
@@ -486,6 +501,7 @@ def _run_compiled_matrix_r(model: Model, solver, chosen: Formulation, inputs: In
     info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall}, status, message,
                  {"steps": done, "evaluations": 4 * done, "repartitions": repartitions})
     trajectory = _trajectory(model, T, Q, QD, QDD, LAM, np.tile(u, (recorded, 1)), PHI, PHID, info, FORCE)
+    _note_rounding(info, solver)
     info["wall_time"] = time.perf_counter() - started
     return trajectory
 

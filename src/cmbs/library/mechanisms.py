@@ -49,6 +49,37 @@ def slider_crank(gravity: float = 0.0, crank_angle: float = 45.0, crank_speed: f
                                               "crank_speed": crank_speed})
 
 
+def slider_crank_branch(times: np.ndarray, gravity: float = 0.0, crank_angle: float = 45.0,
+                        crank_speed: float = 2.0, rtol: float = 1e-13) -> tuple[np.ndarray, np.ndarray]:
+    """Crank angle θ1 and speed θ̇1 at ``times`` of :func:`slider_crank` (same parameters), from
+    its motion on the assembly branch θ2 = -2θ1 written as one smooth ODE: a reference that no
+    singular position disturbs.
+
+    On that branch the rod's absolute angle is -θ1, so the crank's centre of mass is
+    (cos θ1, sin θ1)/2, the rod's (3 cos θ1, sin θ1)/2, both bodies turn at ±θ̇1 and the massless
+    slider adds nothing (Lagrange's equations of the reduced system)::
+
+        T = m(θ1) θ̇1² / 2,   m(θ1) = 2/3 + 2 sin²θ1,   V = g sin θ1
+        m(θ1) θ̈1 + sin(2θ1) θ̇1² + g cos θ1 = 0
+
+    m never vanishes, so the ODE is regular at θ1 = ±90°, where the constraint Jacobian of the
+    mechanism loses rank.  Integrated by DOP853 (scipy) at ``rtol`` and atol = rtol / 10.
+    """
+    from scipy.integrate import solve_ivp
+
+    def field(_t: float, state: np.ndarray) -> list[float]:
+        theta, omega = state
+        return [omega, -(math.sin(2.0 * theta) * omega ** 2 + gravity * math.cos(theta))
+                / (2.0 / 3.0 + 2.0 * math.sin(theta) ** 2)]
+
+    times = np.asarray(times, dtype=float)
+    solution = solve_ivp(field, (0.0, float(times[-1])), [math.radians(crank_angle), crank_speed], method="DOP853",
+                         t_eval=times, rtol=rtol, atol=rtol / 10.0)
+    if not solution.success:
+        raise RuntimeError(f"slider-crank branch reference: {solution.message}")
+    return solution.y[0], solution.y[1]
+
+
 def passive_manipulator(gravity: float = 0.0) -> Model:
     """3-link planar manipulator with a passive third joint (Quasem, Uhlar & Betsch 2009, after
     De Luca & Oriolo 2002), in natural coordinates.
