@@ -40,7 +40,8 @@ def main() -> None:
     def continuous() -> ComputedTorque:
         return ComputedTorque(plant, Reference(motion, ["alpha"]), kp=100.0, kd=20.0)
 
-    cases = {"CTC at every stage": (continuous, None), "CTC at 1 kHz (held)": (lambda: ZeroOrderHold(continuous(), h), None),
+    cases = {"CTC at every stage": (continuous, None),
+             "CTC at 1 kHz (held)": (lambda: ZeroOrderHold(continuous(), h), None),
              "CTC at every stage, Python path": (continuous, False)}
     print(f"four-bar, computed-torque tracking, {t_end:g} s, RK4 h = {h:g} s, lagrange; target {TARGET:g} s per 10 s")
     runs = {}

@@ -75,6 +75,7 @@ from cmbs.fast import CompiledDynamics  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_model import environment, fmt, time_call  # noqa: E402  (same timing method and helpers)
+from reporting import write_report  # noqa: E402
 
 FORMULATIONS = ("lagrange", "baumgarte", "penalty", "matrix-r", "projection", "udwadia-kalaba")
 COMPILED_FORMULATIONS = ("lagrange", "baumgarte", "projection")   # cmbs.fast.CompiledDynamics
@@ -1316,10 +1317,7 @@ def main(argv: list[str] | None = None) -> int:
     report["elapsed_s"] = time.perf_counter() - started
     print(f"\nload average at start / end: {env['load_average_start'][0]:.2f} / {os.getloadavg()[0]:.2f} on "
           f"{env['cpu_count']} cores; elapsed {report['elapsed_s']:.0f} s")
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(report, f, indent=1, default=str)
-        print(f"wrote {args.json}")
+    write_report(args.json, report, default=str)
     return 0
 
 

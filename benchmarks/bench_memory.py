@@ -61,6 +61,7 @@ import cmbs  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import bench_dynamics as bd  # noqa: E402
 from bench_model import environment  # noqa: E402
+from reporting import write_report  # noqa: E402
 
 MECHANISMS = ("four-bar", "four-bar-library", "slider-crank", "chain14-closed", "human")
 FORMULATION = {"slider-crank": "matrix-r"}   # cmbs; "baumgarte" for the others (see the docstring)
@@ -196,10 +197,7 @@ def main() -> int:
     report["elapsed_s"] = time.perf_counter() - started
     print(f"\nadded = child's VmHWM - baseline's; cmbs/tool = cmbs's added / the tool's added (same mechanism); "
           f"elapsed {report['elapsed_s']:.0f} s")
-    if args.json:
-        with open(args.json, "w") as stream:
-            json.dump(report, stream, indent=1, default=float)
-        print(f"figures -> {args.json}")
+    write_report(args.json, report)
     return 0
 
 

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import json
 import math
 import os
 import platform
@@ -43,6 +42,7 @@ from typing import Callable
 import numpy as np
 
 import cmbs
+from reporting import write_report
 
 # ------------------------------------------------------------------------------------ targets
 TARGETS_US = {"four-bar": 3.0, "human": 10.0}  # project issue: all five terms together
@@ -586,10 +586,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"  load average at start / end: {env['load_average_start'][0]:.2f} / {os.getloadavg()[0]:.2f} on "
           f"{env['cpu_count']} cores (other processes on the machine slow every figure; compare runs at low load)")
 
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(report, f, indent=1, default=float)
-        print(f"\nwrote {args.json}")
+    write_report(args.json, report)
     return 0
 
 

@@ -17,8 +17,8 @@ One evaluation: the model's terms and the solve for q̈ (and λ).  cmbs: ``Compi
 Also, through ``cmbs.simulate`` (compiled loops) over 10 s (1 s for N = 200; --quick: 1 s and
 0.1 s), Baumgarte (ξ = 1, ω = 10): RK4 at h = 1 ms and RK45 at rtol = atol = 1e-8, wall, max |Φ|
 and the relative energy error at the end; and the peak resident memory of a fresh process that
-runs the RK4 case (its second launch, with numba's cache warm).  The exponent is the least-squares slope of log(µs) on log(N) from 14
-to 200.
+runs the RK4 case (its second launch, with numba's cache warm).  The exponent is the
+least-squares slope of log(µs) on log(N) from 14 to 200.
 """
 
 from __future__ import annotations
@@ -28,7 +28,6 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import math  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
@@ -41,6 +40,7 @@ from cmbs.fast import CompiledDynamics  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_dynamics import GRAVITY, installed, mujoco_measure, pinocchio_measure, rod, tree_from  # noqa: E402
+from reporting import write_report  # noqa: E402
 from bench_model import time_call  # noqa: E402
 
 SIZES = (3, 14, 50, 200)
@@ -113,7 +113,8 @@ def main() -> None:
                 runs[label] = {"wall_s": time.perf_counter() - started, "status": run.info["status"],
                                "evaluations": run.info["evaluations"], "compiled": bool(run.info.get("compiled")),
                                "max_constraint_error": float(run["constraint_error"].max()),
-                               "relative_energy_error_end": float(abs(energy[-1] - energy[0]) / max(abs(energy[0]), 1.0))}
+                               "relative_energy_error_end": float(abs(energy[-1] - energy[0])
+                                                                  / max(abs(energy[0]), 1.0))}
             rk4 = runs["RK4 h=1ms"]
             loop_us = 1e6 * rk4["wall_s"] / rk4["evaluations"]
             row = {"links": links, "n": model.n, "m": model.m, "cmbs_us": ours["median"], "cmbs": ours,
@@ -154,10 +155,7 @@ def main() -> None:
                            for name in tools if tools[name] and all("median" in row.get(name, {}) for row in rows))
         print(f"  growth from 14 to 200 links: cmbs N^{slope:.2f} (target <= N^{TARGET_EXPONENT}: "
               f"{'PASS' if slope <= TARGET_EXPONENT else 'MISS'})" + (f"; {others}" if others else ""))
-    if args.json:
-        with open(args.json, "w") as stream:
-            json.dump(report, stream, indent=1, default=float)
-        print(f"\nfigures -> {args.json}")
+    write_report(args.json, report)
     if args.plot:
         import matplotlib
 

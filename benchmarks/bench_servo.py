@@ -25,7 +25,6 @@ for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import cProfile  # noqa: E402
-import json  # noqa: E402
 import pstats  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
@@ -38,6 +37,7 @@ from cmbs.inverse.servo import LinePath, segment_point, servo_inverse_dynamics  
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_model import environment, fmt  # noqa: E402  (same environment record and format)
+from reporting import write_report  # noqa: E402
 
 TARGET_S = 1.0
 CASES = (("RED", "passive-manipulator"), ("GEN", "passive-manipulator-joint"))
@@ -111,10 +111,7 @@ def main(argv: list[str] | None = None) -> int:
               f"target: {case['verdict']})")
     print(f"  load average at start / end: {env['load_average_start'][0]:.2f} / {os.getloadavg()[0]:.2f} on "
           f"{env['cpu_count']} cores")
-    if args.json:
-        with open(args.json, "w") as stream:
-            json.dump(report, stream, indent=1, default=float)
-        print(f"\nwrote {args.json}")
+    write_report(args.json, report)
     return 0
 
 

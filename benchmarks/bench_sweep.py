@@ -56,7 +56,8 @@ def main() -> None:
     wall = time.perf_counter() - started
     scaled = wall * TARGET_VARIANTS / batched_count
     print(f"batched: {batched_count} variants x 1 s in {wall:.2f} s ({1e3 * wall / batched_count:.2f} ms per variant, "
-          f"{set(result.status)}); 10 000 variants: {scaled:.1f} s{' (scaled)' if batched_count != TARGET_VARIANTS else ''}"
+          f"{set(result.status)}); 10 000 variants: {scaled:.1f} s"
+          f"{' (scaled)' if batched_count != TARGET_VARIANTS else ''}"
           f", target {TARGET_S:g} s, ratio {scaled / TARGET_S:.2f} -> {'PASS' if scaled <= TARGET_S else 'MISS'}")
     pooled = variants(model, pooled_count)
     cmbs.sweep(model, pooled[:2], batched=False, **every)                          # warm the pool's imports

@@ -40,7 +40,6 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
-import json  # noqa: E402
 import math  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
@@ -55,6 +54,7 @@ from cmbs.library.mechanisms import slider_crank_branch  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_dynamics import (GRAVITY, anchors_four_bar, chain_tree, four_bar_tree, installed,  # noqa: E402
                             mujoco_build, pinocchio_build, slider_crank_tree)
+from reporting import write_report  # noqa: E402
 
 SPAN = 1.0
 QUARTERS = np.array([0.25, 0.5, 0.75, 1.0])   # error = max |Δθ1| over these times (one time can be lucky)
@@ -289,10 +289,7 @@ def main() -> None:
             print(f"    {level:.0e}: " + "; ".join(cells) + f"  {verdict}")
         report[label] = {"reference": reference.tolist(), "reference_check": check, "runs": rows, "levels": verdicts}
         plot(label, rows, os.path.join(args.out_dir, f"work-precision-{label}.png"), check)
-    if args.json:
-        with open(args.json, "w") as stream:
-            json.dump(report, stream, indent=1, default=float)
-        print(f"\nruns -> {args.json}")
+    write_report(args.json, report)
 
 
 def plot(label: str, rows: list[dict], path: str, floor: float | None) -> None:
