@@ -9,14 +9,16 @@ A_d ḋ = -A_z ż - Φ_t), with the independent accelerations of Rᵀ M R z̈ = 
     R = [-A_d⁻¹ A_z ; I],   S = [A_d⁻¹ γ_r ; 0]   (rows in the partition's order),
     q̈ = R z̈ + S,           λ_r = -A_d⁻ᵀ (M q̈ - Q)_d,   λ = 0 on the rows not in the partition.
 
-Every stage also keeps the largest cond₁(A_d) it met and its time (``worst``), for the warning
-of :func:`cmbs.dynamics.matrix_r.rounding_note`.  After every step the state is recovered and
-cond(A_d) checked.  Choosing a new partition is
-Python's (:meth:`MatrixRSolver.update_partition`: pivoted QR and LU, rare): when cond(A_d) has
-grown by ``condition_growth`` (automatic partition) or passed 1e12 (any partition), the loop
-returns REPARTITION with the step reached, Python chooses again (or raises for a user partition)
-and the loop resumes from there.  Holonomic models with constant inputs only (a nonholonomic row
-makes some positions non-recoverable; see :meth:`MatrixRSolver.stage_state`).
+A state whose cond₁(A_d) exceeds :attr:`MatrixRSolver.recovery_limit` (near a singular position)
+keeps its integrated velocities (positions recovered), as on the Python path.  Every stage also
+keeps the largest cond₁(A_d) it met and its time (``worst``), for the warning of
+:func:`cmbs.dynamics.matrix_r.rounding_note`.  After every step the state is recovered and
+cond(A_d) checked.  Choosing a new partition is Python's (:meth:`MatrixRSolver.update_partition`:
+pivoted QR and LU, rare): when cond(A_d) has grown by ``condition_growth`` (automatic partition)
+or passed 1e12 (any partition), the loop returns REPARTITION with the step reached, Python
+chooses again (or raises for a user partition) and the loop resumes from there.  Holonomic
+models with constant inputs only (a nonholonomic row makes some positions non-recoverable; see
+:meth:`MatrixRSolver.stage_state`).
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from cmbs.fast import NON_FINITE, OK, SINGULAR, _evaluate, _lu_in_place, _lu_sol
 from cmbs.model.model import Model
 
 #: status codes besides fast.OK, SINGULAR and NON_FINITE
-REPARTITION, NOT_CONVERGED = 3, 4
+REPARTITION, NOT_CONVERGED, VELOCITIES_KEPT = 3, 4, 5
 #: cond(A_d) above which every partition is handed back to Python (which raises for a user's)
 SINGULAR_CONDITION = 1e12
 
@@ -67,7 +69,8 @@ def _condition_one(buffer, n, m, rows, dependent, Ad, pivots, side):
         for a in range(r):
             column += abs(A[rows[a], dependent[j]])
         norm = max(norm, column)
-        side[:r] = 0.0
+        for a in range(r):
+            side[a] = 0.0
         side[j] = 1.0
         _lu_solve(Ad, pivots, side)
         column = 0.0
@@ -79,13 +82,18 @@ def _condition_one(buffer, n, m, rows, dependent, Ad, pivots, side):
 
 @njit(cache=True)
 def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent, independent, tolerance,
-             iterations, Ad, pivots, side):
+             iterations, limit, Ad, pivots, side, worst):
     """Dependent coordinates (Newton, in place in ``q``) and velocities (in place in ``qd``);
-    leaves A at the recovered q in ``buffer``.  Returns OK, NOT_CONVERGED or NON_FINITE."""
+    leaves A at the recovered q in ``buffer`` and A_d's LU factors there in ``Ad``, ``pivots``.
+    Returns OK, NOT_CONVERGED or NON_FINITE, or VELOCITIES_KEPT (positions recovered, q̇
+    unchanged) where cond₁(A_d) at the given q exceeds ``limit``
+    (:attr:`MatrixRSolver.recovery_limit`); raises ``worst`` = [cond₁(A_d), t] when that
+    condition is the largest so far."""
     r = rows.shape[0]
     zeros = np.zeros(n)
     converged = False
-    for _ in range(iterations):
+    velocities_kept = False
+    for iteration in range(iterations):
         _evaluate(kind, q, zeros, t, u_zero, ints, reals, buffer)
         largest = 0.0
         for a in range(r):
@@ -93,27 +101,32 @@ def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent,
             if not value < np.inf:
                 return NON_FINITE
             largest = max(largest, value)
+        if not _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
+            return NON_FINITE
+        if iteration == 0:
+            condition = _condition_one(buffer, n, m, rows, dependent, Ad, pivots, side)
+            if condition > worst[0]:
+                worst[0], worst[1] = condition, t
+            velocities_kept = condition > limit
         if largest < tolerance:
             converged = True
             break
         for a in range(r):
             side[a] = buffer[n + rows[a]]
-        if not _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
-            return NON_FINITE
         _lu_solve(Ad, pivots, side)
         for j in range(r):
             q[dependent[j]] -= side[j]
     if not converged:
         return NOT_CONVERGED
+    if velocities_kept:
+        return VELOCITIES_KEPT
     A = buffer[n + m:n + m + m * n].reshape((m, n))
     phi_t = buffer[n + 2 * m + m * n:n + 3 * m + m * n]
-    for a in range(r):
+    for a in range(r):                       # A_d's factors at the recovered q are in Ad, pivots
         total = -phi_t[rows[a]]
         for j in range(independent.shape[0]):
             total -= A[rows[a], independent[j]] * qd[independent[j]]
         side[a] = total
-    if not _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
-        return NON_FINITE
     _lu_solve(Ad, pivots, side)
     for j in range(r):
         qd[dependent[j]] = side[j]
@@ -122,13 +135,13 @@ def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent,
 
 @njit(cache=True)
 def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent, independent, tolerance,
-           iterations, qdd, lam, work, worst):
-    """Recover (q, q̇) in place, then q̈ and λ by matrix R at the recovered state; raise
-    ``worst`` = [cond₁(A_d), t] when this stage's condition is the largest so far."""
+           iterations, limit, qdd, lam, work, worst):
+    """Recover (q, q̇) in place (q only where :func:`_recover` keeps the velocities), then q̈ and λ
+    by matrix R at that state (``worst`` as in :func:`_recover`)."""
     Ad, pivots, side, R, reduced, zrhs, S = work
     status = _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent, independent, tolerance,
-                      iterations, Ad, pivots, side)
-    if status != OK:
+                      iterations, limit, Ad, pivots, side, worst)
+    if status != OK and status != VELOCITIES_KEPT:
         return status
     _evaluate(kind, q, qd, t, u, ints, reals, buffer)
     Q = buffer[:n]
@@ -136,12 +149,7 @@ def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dep
     gamma = buffer[n + m + m * n:n + 2 * m + m * n]
     M = mass if kind == 0 else buffer[n + 3 * m + m * n:n + 3 * m + m * n + n * n].reshape((n, n))
     r, k = rows.shape[0], independent.shape[0]
-    if not _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
-        return SINGULAR
-    condition = _condition_one(buffer, n, m, rows, dependent, Ad, pivots, side)
-    if condition > worst[0]:
-        worst[0], worst[1] = condition, t
-    R[:, :] = 0.0
+    R[:, :] = 0.0                            # A_d's factors at this q are in Ad, pivots (_recover)
     for b in range(k):                       # R's column b: e_z(b) - A_d⁻¹ A_z e_b on the dependent rows
         R[independent[b], b] = 1.0
         for a in range(r):
@@ -211,7 +219,7 @@ def _condition(buffer, n, m, rows, dependent):
 
 @njit(cache=True)
 def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, rows, dependent, independent,
-        tolerance, iterations, reference_condition, growth, automatic, worst, T, Qs, QDs, QDDs, LAMs, PHI, PHID,
+        tolerance, iterations, limit, reference_condition, growth, automatic, worst, T, Qs, QDs, QDDs, LAMs, PHI, PHID,
         FORCE):
     """RK4 steps ``first`` .. ``steps`` (t = step·h) from the state (q0, q̇0) at step ``first``,
     recording every step into the given arrays (row = step; the row of ``first`` > 0 is already
@@ -232,7 +240,7 @@ def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, ro
     for step in range(first, steps + 1):
         t = step * h
         status = _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent, independent,
-                        tolerance, iterations, k1v, lam, work, worst)
+                        tolerance, iterations, limit, k1v, lam, work, worst)
         if status != OK:
             return status, step, recorded, q, qd
         if step > first or first == 0:
@@ -251,19 +259,19 @@ def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, ro
         k1q = qd.copy()                      # the recovered velocities are dq/dt
         sq, sv = q + 0.5 * h * k1q, qd + 0.5 * h * k1v
         status = _stage(kind, sq, sv, t + 0.5 * h, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent,
-                        independent, tolerance, iterations, k2v, stage_lam, work, worst)
+                        independent, tolerance, iterations, limit, k2v, stage_lam, work, worst)
         if status != OK:
             return status, step, recorded, q, qd
         k2q = sv.copy()
         sq, sv = q + 0.5 * h * k2q, qd + 0.5 * h * k2v
         status = _stage(kind, sq, sv, t + 0.5 * h, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent,
-                        independent, tolerance, iterations, k3v, stage_lam, work, worst)
+                        independent, tolerance, iterations, limit, k3v, stage_lam, work, worst)
         if status != OK:
             return status, step, recorded, q, qd
         k3q = sv.copy()
         sq, sv = q + h * k3q, qd + h * k3v
         status = _stage(kind, sq, sv, t + h, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent,
-                        independent, tolerance, iterations, k4v, stage_lam, work, worst)
+                        independent, tolerance, iterations, limit, k4v, stage_lam, work, worst)
         if status != OK:
             return status, step, recorded, q, qd
         k4q = sv
@@ -295,7 +303,8 @@ def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0:
         status, reached, recorded, q, qd = rk4(
             kind, q, qd, np.ascontiguousarray(u, dtype=float), dt, first, steps, ints, reals, buffer.size, mass, m,
             part.rows.astype(np.int64), part.dependent.astype(np.int64), part.independent.astype(np.int64),
-            parameters.position_tolerance, parameters.max_iterations, float(solver.reference_condition),
+            parameters.position_tolerance, parameters.max_iterations, solver.recovery_limit,
+            float(solver.reference_condition),
             parameters.condition_growth, solver.user is None, worst, *records)
         solver.note_condition(worst[0], worst[1])
         t = reached * dt

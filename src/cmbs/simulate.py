@@ -135,8 +135,8 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
     Trajectory
         With extras ``lam``, ``constraint_force``, ``u``, ``energy``, ``constraint_error`` and
         ``velocity_constraint_error``; ``info`` holds the options, status, message, counters
-        and wall time (matrix R adds ``max_condition``, the largest cond₁(A_d) at an evaluated
-        stage, at ``max_condition_t``; ``note`` warns when it passed
+        and wall time (matrix R adds ``max_condition``, the largest cond₁(A_d) met by its
+        recovery of a stage or step state, at ``max_condition_t``; ``note`` warns when it passed
         :data:`cmbs.dynamics.matrix_r.ROUNDING_CONDITION`).  A failed run returns the part
         computed before the failure with ``info["status"] == "failed"``.
     """
@@ -220,7 +220,7 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
 
 
 def _note_rounding(info: dict, solver) -> None:
-    """For matrix R: the largest cond₁(A_d) met at an evaluated stage (``max_condition``, at
+    """For matrix R: the largest cond₁(A_d) met by its recovery (``max_condition``, at
     ``max_condition_t``) and, when rounding there may have spoilt the motion, a warning in the note."""
     if not isinstance(solver, MatrixRSolver):
         return

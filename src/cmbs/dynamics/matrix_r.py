@@ -39,10 +39,14 @@ linalg = lazy_module("scipy.linalg")
 #: cond₁(A_d) at an evaluated stage above which :func:`rounding_note` warns.  At a state δ from a
 #: singular position, cond(A_d) ~ 1/δ; the positions a recovery reaches are then uncertain by
 #: about ε/δ along A_d's near-null direction (ε the rounding of Φ), the velocities recovered from
-#: them by ε/δ² and the accelerations by ε/δ³.  Measured on the slider-crank (gravity 9.81,
-#: RK4 for 1 s through its crossing at 0.83 s, against its branch ODE): the runs at h = 10 to
-#: 1 ms met at most 2.8e4 and ended within their truncation error (5.2e-12 rad at 1 ms); those
-#: at 0.5 ms to 10 µs met 1.5e5 to 6.3e6 and ended 5e-10 to 1e-5 rad away (1.9e-6 at 0.5 ms).
+#: them by ε/δ² and the accelerations by ε/δ³.  Recovering every velocity, the slider-crank
+#: (gravity 9.81, RK4 for 1 s through its crossing at 0.83 s, against its branch ODE) ended
+#: 5e-10 to 1e-5 rad off at h = 0.5 ms to 10 µs (worst stages 1.5e5 to 6.3e6), within its
+#: truncation error at 10 to 1 ms (at most 2.8e4).  Keeping the integrated velocities where
+#: cond₁(A_d) has grown 100-fold (``velocity_recovery_growth``) brings all of those within 1e-10;
+#: the horizontal slider-crank over 10 s (seven crossings) still loses digits at small steps
+#: (relative energy error 1e-6 at 0.1 ms, 3.3e-6 at 20 µs, worst stages 1e6 to 4e6; below 1e-7
+#: at 2.5 to 0.25 ms except 2.4e-7 at 0.5 ms, worst stages below 7e4).
 ROUNDING_CONDITION = 1e5
 
 
@@ -61,6 +65,14 @@ class MatrixR:
         Relative singular-value tolerance for the rank of A.
     position_tolerance, max_iterations
         Newton recovery of the dependent coordinates.
+    velocity_recovery_growth
+        Where cond₁(A_d) exceeds this factor times cond₁(A_d) at the start, the dependent
+        velocities are not recovered, only the positions.  So close to a singular position, the
+        positions' rounding error along A_d's near-null direction (about ε cond(A_d)) would turn
+        into velocity errors about cond(A_d) times larger, and accelerations larger again (see
+        ROUNDING_CONDITION): more than the integrated velocities' small inconsistency.  Those
+        states keep the integrated velocities, as an index-1 method does; the first state
+        outside that zone recovers them.
     """
 
     name: ClassVar[str] = "matrix-r"
@@ -69,10 +81,12 @@ class MatrixR:
     rank_tolerance: float = 1e-9
     position_tolerance: float = 1e-12
     max_iterations: int = 20
+    velocity_recovery_growth: float = 100.0
 
     def __post_init__(self) -> None:
         check_parameters(self, condition_growth="above-one", rank_tolerance="positive",
-                         position_tolerance="positive", max_iterations="count")
+                         position_tolerance="positive", max_iterations="count",
+                         velocity_recovery_growth="above-one")
 
     def bind(self, model: Model) -> "MatrixRSolver":
         return MatrixRSolver(model, self)
@@ -128,8 +142,12 @@ class MatrixRSolver:
                 f"{model.n - len(self.partition.rows)} degrees of freedom")
         self.repartitions = 0
         self.reference_condition: float | None = None
-        self.worst_condition = 0.0     # largest cond₁(A_d) at an evaluated stage, and its time
+        self.worst_condition = 0.0     # largest cond₁(A_d) met by a recovery, and its time
         self.worst_time = 0.0
+        block = A0[np.ix_(self.partition.rows, self.partition.dependent)]
+        start_condition = float(np.linalg.cond(block, 1)) if block.size else 1.0
+        #: cond₁(A_d) above which the velocities are not recovered (``velocity_recovery_growth``)
+        self.recovery_limit = parameters.velocity_recovery_growth * start_condition
         self.update_partition(A0, 0.0)
 
     def _block(self, A: np.ndarray) -> np.ndarray:
@@ -182,7 +200,6 @@ class MatrixRSolver:
         A_d = terms.A[np.ix_(part.rows, part.dependent)]
         if part.dependent.size:
             S[part.dependent] = np.linalg.solve(A_d, terms.gamma[part.rows])
-            self.note_condition(float(np.linalg.cond(A_d, 1)), t)
         zdd = np.linalg.solve(R.T @ terms.M @ R, R.T @ (terms.Q - terms.M @ S))
         qdd = R @ zdd + S
         lam = np.zeros(self.model.m)
@@ -191,7 +208,7 @@ class MatrixRSolver:
         return Accelerations(qdd, lam, -terms.A.T @ lam)
 
     def note_condition(self, condition: float, t: float) -> None:
-        """Keep the largest cond₁(A_d) met at an evaluated stage and its time."""
+        """Keep the largest cond₁(A_d) met by a recovery (at the state it was given) and its time."""
         if condition > self.worst_condition:
             self.worst_condition, self.worst_time = condition, t
 
@@ -215,13 +232,19 @@ class MatrixRSolver:
 
     def recover(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Dependent coordinates by Newton on Φ = 0 and their velocities from A_d ḋ = -A_z ż - Φ_t,
-        with the independent coordinates and velocities held."""
+        with the independent coordinates and velocities held; the velocities are kept as given
+        where cond₁(A_d) at the given q exceeds ``recovery_limit`` (``velocity_recovery_growth``)."""
         model, part = self.model, self.partition
         q = q.copy()
         terms = model.new_terms()
         zeros = np.zeros(model.n)
-        for _ in range(self.p.max_iterations):
+        velocities_kept = False
+        for iteration in range(self.p.max_iterations):
             model.evaluate(q, zeros, t, out=terms)
+            if iteration == 0 and part.dependent.size:
+                condition = float(np.linalg.cond(terms.A[np.ix_(part.rows, part.dependent)], 1))
+                self.note_condition(condition, t)
+                velocities_kept = condition > self.recovery_limit
             residual = terms.phi[part.rows]
             if np.max(np.abs(residual), initial=0.0) < self.p.position_tolerance:
                 break
@@ -230,8 +253,10 @@ class MatrixRSolver:
             raise ConvergenceError(
                 f"model {model.name!r} at t={t:.6g}: matrix-r position recovery did not converge in "
                 f"{self.p.max_iterations} iterations (residual {np.max(np.abs(residual)):.3g})")
-        model.evaluate(q, zeros, t, out=terms)
         qd = qd.copy()
+        if velocities_kept:
+            return q, qd
+        model.evaluate(q, zeros, t, out=terms)
         A = terms.A[part.rows]
         if part.dependent.size:
             side = -A[:, part.independent] @ qd[part.independent] - terms.phi_t[part.rows]
@@ -241,9 +266,9 @@ class MatrixRSolver:
 
 def rounding_note(worst_condition: float, worst_time: float) -> str:
     """A warning when a matrix-R run evaluated a stage with cond₁(A_d) above ROUNDING_CONDITION
-    (close to a singular position, where rounding is amplified about cond³ times), else ""."""
+    (close to a singular position, where rounding costs digits), else ""."""
     if not worst_condition > ROUNDING_CONDITION:
         return ""
     return (f"matrix-r evaluated a stage at cond(A_d) = {worst_condition:.2g} (t = {worst_time:.6g}, near a singular "
-            "position), where rounding is amplified about cond^3 times: the motion after it may be off by far more "
-            "than the integrator's error; check it with another dt or formulation (docs/formulations.md)")
+            "position), where rounding costs digits: the motion after it may be off by more than the integrator's "
+            "error; check it with another dt or formulation (docs/formulations.md)")
