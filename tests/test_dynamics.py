@@ -199,6 +199,19 @@ def test_slider_crank_follows_its_branch_ode_through_the_singular_position(name)
     np.testing.assert_allclose(run["energy"][rows], branch_energy, rtol=1e-9)
 
 
+def test_trapezoidal_rule_keeps_second_order_through_the_singular_position():
+    """The implicit trapezoidal rule in matrix R's independent coordinates, 1 s through the
+    crossing at 0.83 s, against the branch ODE: the error falls about 16-fold from h = 1 ms to
+    0.25 ms (measured 2.8e-6 -> 1.3e-7 rad).  Its dependent velocities are always recovered: it
+    integrates z and ż only (keeping its previous ḋ near the crossing stalled it at 3.6e-6)."""
+    gravity = 9.81
+    model = cmbs.load("slider-crank", gravity=gravity)
+    reference = slider_crank_branch(np.array([1.0]), gravity=gravity)[0][0]
+    errors = [abs(simulate(model, t_end=1.0, integrator="trapezoidal", dt=dt)["theta1"][-1] - reference)
+              for dt in (1e-3, 2.5e-4)]
+    assert errors[1] < 2e-7 and 10.0 < errors[0] / errors[1] < 30.0
+
+
 def test_matrix_r_keeps_its_number_of_dependent_coordinates_at_a_singular_position():
     """At θ1 = 90° (C over O) the slider-crank's A loses rank; a re-partition there must still
     choose the 5 dependent coordinates found at the start, not release a constraint."""

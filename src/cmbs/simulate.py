@@ -345,7 +345,7 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
         independent = solver.partition.independent
         guess, qd, qdd = full["q"].copy(), full["qd"].copy(), full["qdd"].copy()
         guess[independent], qd[independent], qdd[independent] = z, zd, zdd
-        q, qd = solver.recover(guess, qd, t)
+        q, qd = solver.recover(guess, qd, t, integrated_velocities=False)
         return q, qd, acceleration_analysis(model, q, qd, t, qdd=qdd, fixed=independent)
 
     def residual(t, z, zd, zdd, lam):

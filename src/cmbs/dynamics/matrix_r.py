@@ -230,10 +230,13 @@ class MatrixRSolver:
         self.update_partition(self.model.jacobian(q, t), t)
         return q, qd
 
-    def recover(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+    def recover(self, q: np.ndarray, qd: np.ndarray, t: float,
+                integrated_velocities: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Dependent coordinates by Newton on Φ = 0 and their velocities from A_d ḋ = -A_z ż - Φ_t,
-        with the independent coordinates and velocities held; the velocities are kept as given
-        where cond₁(A_d) at the given q exceeds ``recovery_limit`` (``velocity_recovery_growth``)."""
+        with the independent coordinates and velocities held.  When ``qd`` holds integrated
+        velocities, they are kept as given where cond₁(A_d) at the given q exceeds
+        ``recovery_limit`` (``velocity_recovery_growth``); False (an integrator of z and ż alone,
+        whose ḋ is only a guess) recovers them everywhere."""
         model, part = self.model, self.partition
         q = q.copy()
         terms = model.new_terms()
@@ -244,7 +247,7 @@ class MatrixRSolver:
             if iteration == 0 and part.dependent.size:
                 condition = float(np.linalg.cond(terms.A[np.ix_(part.rows, part.dependent)], 1))
                 self.note_condition(condition, t)
-                velocities_kept = condition > self.recovery_limit
+                velocities_kept = integrated_velocities and condition > self.recovery_limit
             residual = terms.phi[part.rows]
             if np.max(np.abs(residual), initial=0.0) < self.p.position_tolerance:
                 break
