@@ -14,12 +14,14 @@ every accepted step.  The motion is that of the ODE in z, whose right-hand side 
 the assembly branch even where A_d is ill-conditioned (near a singular position); evaluating it
 at unrecovered stage states there would amplify their constraint error by cond(A_d).  Its
 evaluation in floating point is not smooth there: the recovery amplifies rounding about
-cond(A_d)³ times (see ROUNDING_CONDITION), and runs report the worst stage.  The partition is
-given by the user (names of the independent coordinates) or chosen automatically by LU
-factorisation with partial pivoting of Aᵀ (pivot columns of A are dependent), and chosen again
-when the dependent block's condition number grows by ``condition_growth``, so that the method
-follows the mechanism through configurations where its first choice of independent coordinates
-stops determining the others.
+cond(A_d)³ times (see ROUNDING_CONDITION), so close to a singular position the integrated
+velocities are kept (``velocity_recovery_growth``), and runs report the worst stage.
+
+The partition is given by the user (names of the independent coordinates) or chosen
+automatically by LU factorisation with partial pivoting of Aᵀ (pivot columns of A are
+dependent), and chosen again when the dependent block's condition number grows by
+``condition_growth``, so that the method follows the mechanism through configurations where its
+first choice of independent coordinates stops determining the others.
 """
 
 from __future__ import annotations
