@@ -64,7 +64,6 @@ STEPS = [1e-2, 1 / 160, 5e-3, 1 / 320, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4]   # each a 
 TOLERANCES = [1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10]
 
 
-
 def small_step_reference(model: cmbs.Model, tree) -> tuple[np.ndarray, str]:
     """θ1 at the QUARTERS from cmbs matrix R with RK4 at REFERENCE_STEP, and its description."""
     run = cmbs.simulate(model, t_end=SPAN, formulation="matrix-r", integrator="rk4", dt=REFERENCE_STEP)

@@ -199,6 +199,12 @@ def test_slider_crank_follows_its_branch_ode_through_the_singular_position(name)
     np.testing.assert_allclose(run["energy"][rows], branch_energy, rtol=1e-9)
 
 
+@pytest.mark.parametrize("times", [[], [0.5, 0.25], [-0.1, 0.5], [0.0, float("nan")]])
+def test_branch_reference_refuses_times_it_cannot_integrate_to(times):
+    with pytest.raises(CmbsError, match="times must be a non-empty, non-decreasing sequence"):
+        slider_crank_branch(times, gravity=9.81)
+
+
 def test_trapezoidal_rule_keeps_second_order_through_the_singular_position():
     """The implicit trapezoidal rule in matrix R's independent coordinates, 1 s through the
     crossing at 0.83 s, against the branch ODE: the error falls about 16-fold from h = 1 ms to

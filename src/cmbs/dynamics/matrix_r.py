@@ -146,13 +146,14 @@ class MatrixRSolver:
         self.reference_condition: float | None = None
         self.worst_condition = 0.0     # largest cond₁(A_d) met by a recovery, and its time
         self.worst_time = 0.0
-        block = A0[np.ix_(self.partition.rows, self.partition.dependent)]
+        block = self._block(A0)
         start_condition = float(np.linalg.cond(block, 1)) if block.size else 1.0
         #: cond₁(A_d) above which the velocities are not recovered (``velocity_recovery_growth``)
         self.recovery_limit = parameters.velocity_recovery_growth * start_condition
         self.update_partition(A0, 0.0)
 
     def _block(self, A: np.ndarray) -> np.ndarray:
+        """A_d: the partition's rows and dependent columns of A."""
         return A[np.ix_(self.partition.rows, self.partition.dependent)]
 
     def update_partition(self, A: np.ndarray, t: float) -> None:
@@ -182,7 +183,7 @@ class MatrixRSolver:
         return self.reference_condition
 
     def _condition(self, A: np.ndarray) -> float:
-        block = A[np.ix_(self.partition.rows, self.partition.dependent)]
+        block = self._block(A)
         return float(np.linalg.cond(block)) if block.size else 1.0
 
     def velocity_matrix(self, terms: Terms) -> np.ndarray:
@@ -199,7 +200,7 @@ class MatrixRSolver:
         part = self.partition
         R = self.velocity_matrix(terms)
         S = np.zeros(self.model.n)
-        A_d = terms.A[np.ix_(part.rows, part.dependent)]
+        A_d = self._block(terms.A)
         if part.dependent.size:
             S[part.dependent] = np.linalg.solve(A_d, terms.gamma[part.rows])
         zdd = np.linalg.solve(R.T @ terms.M @ R, R.T @ (terms.Q - terms.M @ S))
@@ -247,13 +248,13 @@ class MatrixRSolver:
         for iteration in range(self.p.max_iterations):
             model.evaluate(q, zeros, t, out=terms)
             if iteration == 0 and part.dependent.size:
-                condition = float(np.linalg.cond(terms.A[np.ix_(part.rows, part.dependent)], 1))
+                condition = float(np.linalg.cond(self._block(terms.A), 1))
                 self.note_condition(condition, t)
                 velocities_kept = integrated_velocities and condition > self.recovery_limit
             residual = terms.phi[part.rows]
             if np.max(np.abs(residual), initial=0.0) < self.p.position_tolerance:
                 break
-            q[part.dependent] -= np.linalg.solve(terms.A[np.ix_(part.rows, part.dependent)], residual)
+            q[part.dependent] -= np.linalg.solve(self._block(terms.A), residual)
         else:
             raise ConvergenceError(
                 f"model {model.name!r} at t={t:.6g}: matrix-r position recovery did not converge in "

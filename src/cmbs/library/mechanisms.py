@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from cmbs.errors import CmbsError
 from cmbs.model.model import Model
 from cmbs.model.natural import NaturalModelBuilder
 
@@ -73,10 +74,14 @@ def slider_crank_branch(times: np.ndarray, gravity: float = 0.0, crank_angle: fl
                 / (2.0 / 3.0 + 2.0 * math.sin(theta) ** 2)]
 
     times = np.asarray(times, dtype=float)
+    if times.ndim != 1 or not times.size or not np.all(np.isfinite(times)) or times[0] < 0 \
+            or np.any(np.diff(times) < 0):
+        raise CmbsError(f"slider-crank branch reference: times must be a non-empty, non-decreasing sequence of "
+                        f"finite times >= 0, got {np.array2string(times, threshold=6)}")
     solution = solve_ivp(field, (0.0, float(times[-1])), [math.radians(crank_angle), crank_speed], method="DOP853",
                          t_eval=times, rtol=rtol, atol=rtol / 10.0)
     if not solution.success:
-        raise RuntimeError(f"slider-crank branch reference: {solution.message}")
+        raise CmbsError(f"slider-crank branch reference: {solution.message}")
     return solution.y[0], solution.y[1]
 
 
