@@ -138,7 +138,7 @@ def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dep
            iterations, limit, qdd, lam, work, worst):
     """Recover (q, q̇) in place (q only where :func:`_recover` keeps the velocities), then q̈ and λ
     by matrix R at that state (``worst`` as in :func:`_recover`)."""
-    Ad, pivots, side, R, reduced, zrhs, S = work
+    Ad, pivots, side, R, reduced, zrhs, S, MR, force = work
     status = _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent, independent, tolerance,
                       iterations, limit, Ad, pivots, side, worst)
     if status != OK and status != VELOCITIES_KEPT:
@@ -163,21 +163,26 @@ def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dep
     _lu_solve(Ad, pivots, side)
     for j in range(r):
         S[dependent[j]] = side[j]
-    for b in range(k):                       # Rᵀ M R and Rᵀ (Q - M S)
+    for i in range(n):                       # M R (skipping M's zeros: a natural model's M is sparse) and Q - M S
+        force[i] = Q[i]
         for c in range(k):
+            MR[i, c] = 0.0
+        for j in range(n):
+            mass_ij = M[i, j]
+            if mass_ij != 0.0:
+                force[i] -= mass_ij * S[j]
+                for c in range(k):
+                    MR[i, c] += mass_ij * R[j, c]
+    for b in range(k):                       # Rᵀ (M R), symmetric, and Rᵀ (Q - M S)
+        for c in range(b, k):
             total = 0.0
             for i in range(n):
-                row = 0.0
-                for j in range(n):
-                    row += M[i, j] * R[j, c]
-                total += R[i, b] * row
+                total += R[i, b] * MR[i, c]
             reduced[b, c] = total
+            reduced[c, b] = total
         total = 0.0
         for i in range(n):
-            force = Q[i]
-            for j in range(n):
-                force -= M[i, j] * S[j]
-            total += R[i, b] * force
+            total += R[i, b] * force[i]
         zrhs[b] = total
     if not _solve_in_place(reduced, zrhs):
         return SINGULAR
@@ -232,7 +237,7 @@ def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, ro
     buffer = np.zeros(buffer_size)
     u_zero = np.zeros(u.shape[0])
     work = (np.empty((max(r, 1), max(r, 1))), np.empty(max(r, 1), dtype=np.int64), np.empty(max(r, 1)),
-            np.empty((n, k)), np.empty((k, k)), np.empty(k), np.empty(n))
+            np.empty((n, k)), np.empty((k, k)), np.empty(k), np.empty(n), np.empty((n, k)), np.empty(n))
     q, qd = q0.copy(), qd0.copy()
     k1v, k2v, k3v, k4v = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     lam, stage_lam = np.empty(m), np.empty(m)
