@@ -115,3 +115,27 @@ def test_compiled_matrix_r_refuses_nonholonomic_models():
         simulate(sleigh, t_end=0.1, integrator="rk4", dt=1e-3, formulation="matrix-r", compiled=True)
     run = simulate(sleigh, t_end=0.1, integrator="rk4", dt=1e-3, formulation="matrix-r")
     assert "compiled" not in run.info and run.info["status"] == "success"
+
+
+def test_condition_bound_brackets_the_two_norm_condition():
+    """The step-end test's filter: cond₂(A_d) ≤ sqrt(cond₁ cond_∞) ≤ r cond₂(A_d), on random and
+    nearly singular blocks (the bound comes from the LU factors of A_d, numpy's cond from its SVD)."""
+    from cmbs.fast_matrix_r import _condition_two_bound, _factor_dependent
+
+    generator = np.random.default_rng(7)
+    n, m = 7, 5
+    for scale in (1.0, 1e-4, 1e-9):
+        A = generator.normal(size=(m, n))
+        A[3] = A[1] + scale * generator.normal(size=n)         # rows 1 and 3 nearly dependent
+        rows, dependent = np.array([0, 1, 3, 4]), np.array([0, 2, 5, 6])
+        buffer = np.zeros(n + 3 * m + m * n)
+        buffer[n + m:n + m + m * n] = A.ravel()
+        r = rows.size
+        Ad, pivots, side = np.empty((r, r)), np.empty(r, dtype=np.int64), np.empty(r)
+        assert _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots)
+        bound = _condition_two_bound(buffer, n, m, rows, dependent, Ad, pivots, side)
+        exact = np.linalg.cond(A[np.ix_(rows, dependent)])
+        assert exact * (1 - 1e-9) <= bound <= r * exact * (1 + 1e-9)
+        block = A[np.ix_(rows, dependent)]
+        expected = np.sqrt(np.linalg.cond(block, 1) * np.linalg.cond(block, np.inf))
+        assert bound == pytest.approx(expected, rel=1e-6)

@@ -10,15 +10,16 @@ A_d ḋ = -A_z ż - Φ_t), with the independent accelerations of Rᵀ M R z̈ = 
     q̈ = R z̈ + S,           λ_r = -A_d⁻ᵀ (M q̈ - Q)_d,   λ = 0 on the rows not in the partition.
 
 A state whose cond₁(A_d) exceeds :attr:`MatrixRSolver.recovery_limit` (near a singular position)
-keeps its integrated velocities (positions recovered), as on the Python path.  Every stage also
+keeps its integrated velocities (positions recovered), as on the Python path. Every stage also
 keeps the largest cond₁(A_d) it met and its time (``worst``), for the warning of
-:func:`cmbs.dynamics.matrix_r.rounding_note`.  After every step the state is recovered and
-cond(A_d) checked.  Choosing a new partition is Python's (:meth:`MatrixRSolver.update_partition`:
-pivoted QR and LU, rare): when cond(A_d) has grown by ``condition_growth`` (automatic partition)
-or passed 1e12 (any partition), the loop returns REPARTITION with the step reached, Python
-chooses again (or raises for a user partition) and the loop resumes from there.  Holonomic
-models with constant inputs only (a nonholonomic row makes some positions non-recoverable; see
-:meth:`MatrixRSolver.stage_state`).
+:func:`cmbs.dynamics.matrix_r.rounding_note`. After every step the state is recovered and
+cond₂(A_d) checked (by its SVD only where the bound sqrt(cond₁ cond_∞), from the LU factors the
+recovery left, does not already rule a re-partition out). Choosing a new partition is Python's
+(:meth:`MatrixRSolver.update_partition`: pivoted QR and LU, rare): when cond(A_d) has grown by
+``condition_growth`` (automatic partition) or passed 1e12 (any partition), the loop returns
+REPARTITION with the step reached, Python chooses again (or raises for a user partition) and the
+loop resumes from there. Holonomic models with constant inputs only (a nonholonomic row makes some
+positions non-recoverable; see :meth:`MatrixRSolver.stage_state`).
 """
 
 from __future__ import annotations
@@ -78,6 +79,43 @@ def _condition_one(buffer, n, m, rows, dependent, Ad, pivots, side):
             column += abs(side[a])
         inverse_norm = max(inverse_norm, column)
     return norm * inverse_norm if r else 1.0
+
+
+@njit(cache=True)
+def _condition_two_bound(buffer, n, m, rows, dependent, Ad, pivots, side):
+    """An upper bound of cond₂(A_d): sqrt(cond₁ cond_∞) ≥ cond₂, since ‖B‖₂ ≤ sqrt(‖B‖₁ ‖B‖∞)
+    for every matrix B (Golub & Van Loan, Matrix Computations, 4th ed., §2.3.3), from the A in
+    ``buffer`` and the LU factors of A_d in ``Ad``, ``pivots`` (the columns of A_d⁻¹ give both
+    of its norms); ``side`` is overwritten.  r triangular solve pairs instead of an SVD."""
+    r = rows.shape[0]
+    if r == 0:
+        return 1.0
+    A = buffer[n + m:n + m + m * n].reshape((m, n))
+    row_sums = np.zeros(r)
+    norm_one = 0.0
+    norm_inf = 0.0
+    inverse_one = 0.0
+    for j in range(r):
+        column = 0.0
+        row = 0.0
+        for a in range(r):
+            column += abs(A[rows[a], dependent[j]])
+            row += abs(A[rows[j], dependent[a]])
+        norm_one = max(norm_one, column)
+        norm_inf = max(norm_inf, row)
+        for a in range(r):
+            side[a] = 0.0
+        side[j] = 1.0
+        _lu_solve(Ad, pivots, side)
+        column = 0.0
+        for a in range(r):
+            column += abs(side[a])
+            row_sums[a] += abs(side[a])
+        inverse_one = max(inverse_one, column)
+    inverse_inf = 0.0
+    for a in range(r):
+        inverse_inf = max(inverse_inf, row_sums[a])
+    return np.sqrt(norm_one * inverse_one * norm_inf * inverse_inf)
 
 
 @njit(cache=True)
@@ -256,8 +294,10 @@ def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, ro
             LAMs[step] = lam
             record_constraints(buffer, n, m, qd, lam, PHI, PHID, FORCE, step)
             recorded = step + 1
-            condition = _condition(buffer, n, m, rows, dependent)
-            if condition > SINGULAR_CONDITION or (automatic and condition > growth * reference_condition):
+            limit_two = min(growth * reference_condition, SINGULAR_CONDITION) if automatic else SINGULAR_CONDITION
+            # the SVD only where the bound from the recovery's LU factors cannot rule the test out
+            if _condition_two_bound(buffer, n, m, rows, dependent, work[0], work[1], work[2]) > limit_two \
+                    and _condition(buffer, n, m, rows, dependent) > limit_two:
                 return REPARTITION, step, recorded, q, qd
         if step == steps:
             break
