@@ -101,7 +101,9 @@ def test_redundant_constraints():
 
 
 @pytest.mark.parametrize("integrator, order, steps", [
-    ("rk4", 4, (0.04, 0.02)), ("trapezoidal", 2, (0.02, 0.01)), ("backward-euler", 1, (0.004, 0.002)),
+    # trapezoidal: h = 0.02 is at the edge of the asymptotic range (the re-partition instants of its
+    # matrix R move with h; 0.04 -> 0.02 measures 0.2-0.7 for every condition_growth from 1.1 to 3)
+    ("rk4", 4, (0.04, 0.02)), ("trapezoidal", 2, (0.01, 0.005)), ("backward-euler", 1, (0.004, 0.002)),
     ("generalized-alpha", 2, (0.02, 0.01)),
 ])
 def test_order_of_accuracy(integrator, order, steps):

@@ -62,7 +62,12 @@ class MatrixR:
         Names of the independent coordinates (default: chosen automatically).
     condition_growth
         Re-partition when cond(A_d) grows beyond this factor times its value when the partition
-        was chosen (automatic partition only).
+        was chosen (automatic partition only).  The error constant of the ODE in z grows with
+        cond(A_d) (its derivatives hold A_d⁻¹), so re-partitioning early pays: RK4 at 1 ms,
+        end error against Lagrange at 25 µs, factor 3 → 1.25: closed 8-link chain (2 s)
+        1.1e-2 → 2.1e-4, 14-link (1 s) 4.2e-2 → 7.6e-4, 50-link (1.6 s) 3.2e-4 → 2.8e-5,
+        undriven four-bar (5 s) 1.0e-8 → 3.0e-10, with 1-3 times the re-partitions; the
+        slider-crank through its singular positions is as accurate and 9 % slower.
     rank_tolerance
         Relative singular-value tolerance for the rank of A.
     position_tolerance, max_iterations
@@ -79,7 +84,7 @@ class MatrixR:
 
     name: ClassVar[str] = "matrix-r"
     independent: tuple[str, ...] | None = None
-    condition_growth: float = 3.0
+    condition_growth: float = 1.25
     rank_tolerance: float = 1e-9
     position_tolerance: float = 1e-12
     max_iterations: int = 20
