@@ -69,3 +69,46 @@ def test_console_script(tmp_path):
     result = subprocess.run([_console_script(), "describe", "no-such-model"], capture_output=True, text=True)
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (["simulate", "four-bar", "--undriven", "--t-end", "inf"], "--t-end must be a finite number > 0, got inf"),
+    (["simulate", "four-bar", "--undriven", "--t-end", "1", "--rtol", "nan"], "--rtol must be a finite number > 0"),
+    (["track", "four-bar", "--t-end", "1", "--kp", "-5"], "--kp must be a finite number >= 0, got -5.0"),
+    (["track", "four-bar", "--t-end", "1", "--sample-rate", "0"], "--sample-rate must be a finite number > 0"),
+    (["track", "four-bar", "--t-end", "1", "--initial-error", "nan"], "--initial-error must be a finite number"),
+    (["kinematics", "four-bar", "--t-end", "1e9", "--dt", "1e-9", "--out", "k.csv"], "more than 10,000,000"),
+    (["describe", "chain", "--param", "closed=maybe"], "parameter closed must be true or false, got 'maybe'"),
+    (["describe", "chain", "--param", "links=3.5"], "parameter links must be a whole number, got 3.5"),
+    (["simulate", "four-bar", "--undriven", "--t-end", "1", "--formulation", "baumgarte", "--option",
+      "least_squares=maybe"], "option least_squares must be true or false, got 'maybe'"),
+    (["simulate", "four-bar", "--t-end", "1", "--option", "omega"], "--option expects key=value, got 'omega'"),
+    (["sweep", "slider-crank", "--vary", "crank_speed=1,abc", "--t-end", "0.1"],
+     "parameter crank_speed must be a finite number, got 'abc'"),
+    (["sweep", "slider-crank", "--vary", "crank_speed=1,2", "--formulation", "lagrangee", "--t-end", "0.1"],
+     "--formulation: unknown 'lagrangee'"),
+    (["sweep", "four-bar", "--undriven", "--mass", "crank=1,-1", "--t-end", "0.1"], "mass factors must be > 0"),
+])
+def test_bad_values_one_line_exit_2(arguments, message, tmp_path, monkeypatch, capsys):
+    """Numbers that are not finite or out of range, and yes/no values that are not, are named in one
+    line with exit status 2 before any work (an infinite --t-end used to end in an OverflowError)."""
+    monkeypatch.chdir(tmp_path)
+    assert main(arguments) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("cmbs: error: ") and err.count("\n") == 1 and message in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_yes_no_words_are_flags(capsys):
+    """--param closed=no is False (the word used to count as true and close the chain)."""
+    for word, name in (("no", "chain4"), ("off", "chain4"), ("yes", "chain4-closed"), ("true", "chain4-closed")):
+        assert main(["describe", "chain", "--param", f"closed={word}", "--param", "links=4"]) == 0
+        first = capsys.readouterr().out.splitlines()[0].split()
+        assert first == ["model", name], (word, first)
+
+
+def test_kinematics_grid_is_that_of_simulate(tmp_path, capsys):
+    """--dt 0.3 over 1 s gives 0, 0.3, 0.6, 0.9 and 1 (it used to be stretched to 0.333)."""
+    out = tmp_path / "k.npz"
+    assert main(["kinematics", "four-bar", "--t-end", "1", "--dt", "0.3", "--out", str(out)]) == 0
+    assert np.allclose(np.load(out)["t"], [0.0, 0.3, 0.6, 0.9, 1.0], rtol=0, atol=1e-15)

@@ -61,3 +61,17 @@ def test_constants_and_time_only():
     assert parse_expression("pi")(5.0) == (math.pi, 0.0, 0.0)
     assert parse_expression("t")(2.5) == (2.5, 1.0, 0.0)
     assert np.isfinite(parse_expression("exp(-t)")(100.0)).all()
+
+
+@pytest.mark.parametrize("text", ["(" * 200 + "t" + ")" * 200, "-" * 1000 + "t", "t" + "^t" * 300,
+                                  "sin(" * 150 + "t" + ")" * 150])
+def test_deep_nesting_is_refused_before_the_recursion_limit(text):
+    """Brackets, signs, powers and function calls nested more than 100 deep: an ExpressionError
+    (it used to be Python's RecursionError, a traceback)."""
+    with pytest.raises(ExpressionError, match="more than 100 nested"):
+        parse_expression(text)
+
+
+def test_nesting_up_to_the_limit_parses():
+    program = parse_expression("(" * 99 + "t + 1" + ")" * 99)
+    assert program(0.5) == pytest.approx((1.5, 1.0, 0.0))

@@ -66,3 +66,24 @@ def test_library_parameter_errors():
         cmbs.load("chain", links=0)
     with pytest.raises(ModelError, match="no library model or file 'nonesuch'"):
         cmbs.load("nonesuch")
+
+
+@pytest.mark.parametrize("parameters, message", [
+    ({"closed": "no"}, "parameter closed must be true or false, got 'no'"),
+    ({"links": 3.0}, "parameter links must be a whole number, got 3.0"),
+    ({"links": True}, "parameter links must be a whole number, got True"),
+])
+def test_library_parameters_have_their_defaults_kind(parameters, message):
+    """A string where a flag is expected used to count as true (closed="no" closed the chain)."""
+    with pytest.raises(ModelError, match=message):
+        cmbs.load("chain", **parameters)
+
+
+def test_simulate_takes_a_library_name_and_refuses_an_infinite_span():
+    run = cmbs.simulate("pendulum", t_end=0.05, dt=0.01, integrator="rk4")
+    assert run.info["status"] == "success" and run.t[-1] == pytest.approx(0.05)
+    for bad in (float("inf"), float("nan"), "1", -1.0):
+        with pytest.raises(cmbs.CmbsError, match="t_end must be a finite number > 0"):
+            cmbs.simulate("pendulum", t_end=bad)
+    with pytest.raises(cmbs.CmbsError, match="more than 10,000,000"):
+        cmbs.simulate("pendulum", t_end=1e6, dt=1e-3)

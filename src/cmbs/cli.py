@@ -7,6 +7,7 @@ status 2; a run that fails on a valid input (e.g. assembly that does not converg
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from typing import Sequence
 
@@ -21,20 +22,45 @@ class _UsageError(CmbsError):
     """A bad command-line option."""
 
 
-def _parameter(text: str) -> tuple[str, object]:
-    """``key=value`` with value read as bool, int, float or string."""
+#: words read as a yes/no value in ``key=value`` options
+FLAGS = {"true": True, "yes": True, "on": True, "false": False, "no": False, "off": False}
+
+
+def _parameter(text: str, option: str = "--param") -> tuple[str, object]:
+    """``key=value`` with value read as bool (true/false, yes/no, on/off), int, float or string."""
     key, sep, raw = text.partition("=")
     if not sep or not key:
-        raise _UsageError(f"--param expects key=value, got {text!r}")
+        raise _UsageError(f"{option} expects key=value, got {text!r}")
     lowered = raw.strip().lower()
-    if lowered in ("true", "false"):
-        return key, lowered == "true"
+    if lowered in FLAGS:
+        return key, FLAGS[lowered]
     for kind in (int, float):
         try:
             return key, kind(raw)
         except ValueError:
             pass
     return key, raw
+
+
+#: numeric options checked after parsing (every command that has them): what each must be
+NUMBER_RULES = {
+    "t_end": "positive", "dt": "positive", "rtol": "positive", "atol": "positive", "sample_rate": "positive",
+    "kp": "non-negative", "kd": "non-negative", "ki": "non-negative", "kf": "non-negative",
+    "initial_error": "finite",
+}
+
+
+def _check_numbers(args: argparse.Namespace) -> None:
+    """Every numeric option of NUMBER_RULES given on the command line is finite (and > 0 or >= 0):
+    an infinite --t-end would otherwise fail deep inside as an overflow."""
+    wanted = {"positive": "a finite number > 0", "non-negative": "a finite number >= 0", "finite": "a finite number"}
+    for name, rule in NUMBER_RULES.items():
+        value = getattr(args, name, None)
+        if value is None:
+            continue
+        ok = math.isfinite(value) and {"positive": value > 0, "non-negative": value >= 0, "finite": True}[rule]
+        if not ok:
+            raise _UsageError(f"--{name.replace('_', '-')} must be {wanted[rule]}, got {value!r}")
 
 
 def _load(args: argparse.Namespace) -> cmbs.Model:
@@ -44,15 +70,13 @@ def _load(args: argparse.Namespace) -> cmbs.Model:
 
 def _formulation_options(args: argparse.Namespace) -> dict[str, object]:
     """``--option key=value`` pairs; tuples of names for matrix-r's ``independent``."""
-    options = dict(_parameter(text) for text in args.option)
+    options = dict(_parameter(text, "--option") for text in args.option)
     if isinstance(options.get("independent"), str):
         options["independent"] = tuple(options["independent"].split(","))
     return options
 
 
 def _simulation_settings(args: argparse.Namespace) -> dict[str, object]:
-    if args.t_end <= 0:
-        raise _UsageError(f"--t-end must be > 0, got {args.t_end}")
     return {"t_end": args.t_end, "integrator": args.integrator, "dt": args.dt, "rtol": args.rtol, "atol": args.atol,
             "project": args.project}
 
@@ -100,13 +124,11 @@ def _describe(args: argparse.Namespace) -> int:
 def _kinematics(args: argparse.Namespace) -> int:
     from cmbs.plotting import plot_trajectory, save_figure
 
-    if args.t_end <= 0 or args.dt <= 0:
-        raise _UsageError(f"--t-end and --dt must be > 0, got {args.t_end} and {args.dt}")
+    times = _grid(args)
     _check_output(args.out, (".npz", ".csv"), "--out")
     if args.plot:
         _check_output(args.plot, (".png", ".pdf", ".svg"), "--plot")
     model = _load(args)
-    times = np.linspace(0.0, args.t_end, int(round(args.t_end / args.dt)) + 1)
     motion = cmbs.kinematic_analysis(model, times)
     singular = cmbs.singular_configurations(model, motion)
     path = motion.save(args.out)
@@ -186,11 +208,10 @@ def _compare(args: argparse.Namespace) -> int:
 def _inverse(args: argparse.Namespace) -> int:
     from cmbs.inverse import inverse_dynamics
 
-    _check_time_grid_and_outputs(args)
+    times = _check_time_grid_and_outputs(args)
     model = _load(args)
     if args.motion:
         model = _prescribed(model, args)
-    times = np.linspace(0.0, args.t_end, int(round(args.t_end / args.dt)) + 1)
     result = inverse_dynamics(model, times, method=args.method, **_formulation_options(args))
     print(f"{model.name}: inverse dynamics ({args.method}) over {len(times)} instants")
     for name in result.driven_coordinates:
@@ -247,7 +268,7 @@ def _track(args: argparse.Namespace) -> int:
     from cmbs.control.study import Fault, format_table, robustness_study, track
     from cmbs.inverse.ida import driven_columns
 
-    _check_time_grid_and_outputs(args)
+    times = _check_time_grid_and_outputs(args)
     driven = _load(args)
     if args.reference:
         args.motion = args.reference
@@ -257,7 +278,6 @@ def _track(args: argparse.Namespace) -> int:
                           "or use a driven model")
     faults = [Fault.parse(text) for text in args.fault]
     start_error = [Fault.parse(f"initial:{args.initial_error!r}")] if args.initial_error else []
-    times = np.linspace(0.0, args.t_end, int(round(args.t_end / args.dt)) + 1)
     motion = cmbs.kinematic_analysis(driven, times)
     plant = driven.without_drivers()
     coordinates = [driven.coordinate_names[c] for c in driven_columns(driven)]
@@ -312,14 +332,25 @@ def _controller(args: argparse.Namespace, plant: cmbs.Model, reference):
     return UdwadiaKalabaTracking(plant, task, kp=args.kp, kd=args.kd)
 
 
-def _check_time_grid_and_outputs(args: argparse.Namespace) -> None:
-    """--t-end and --dt positive; --out and --plot paths valid (checked before any work)."""
-    if args.t_end <= 0 or args.dt <= 0:
-        raise _UsageError(f"--t-end and --dt must be > 0, got {args.t_end} and {args.dt}")
+def _grid(args: argparse.Namespace) -> np.ndarray:
+    """The output instants of --t-end and --dt, as ``cmbs.simulate`` records them (0, dt, 2 dt, ...,
+    and --t-end)."""
+    from cmbs.simulate import output_times
+
+    try:
+        return output_times(args.t_end, args.dt)
+    except CmbsError as error:
+        raise _UsageError(str(error).replace("t_end", "--t-end").replace("dt", "--dt")) from None
+
+
+def _check_time_grid_and_outputs(args: argparse.Namespace) -> np.ndarray:
+    """The output instants (:func:`_grid`); --out and --plot paths valid (checked before any work)."""
+    times = _grid(args)
     for path, suffixes, option in ((args.out, (".npz", ".csv"), "--out"),
                                    (args.plot, (".png", ".pdf", ".svg"), "--plot")):
         if path:
             _check_output(path, suffixes, option)
+    return times
 
 
 def _check_output(path: str, suffixes: tuple[str, ...], option: str) -> None:
@@ -329,7 +360,7 @@ def _check_output(path: str, suffixes: tuple[str, ...], option: str) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="cmbs", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="cmbs", description=cmbs.__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"cmbs {cmbs.__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -424,8 +455,8 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument("--integrator", default="rk45", choices=_integrator_names(), help="time integrator")
     track.add_argument("--sample-rate", type=float, metavar="HZ",
                        help="digital controller: sample and hold the law at this rate (e.g. 1000)")
-    track.add_argument("--rtol", type=float, default=1e-8)
-    track.add_argument("--atol", type=float, default=1e-10)
+    track.add_argument("--rtol", type=float, default=1e-8, help="relative tolerance (adaptive integrators)")
+    track.add_argument("--atol", type=float, default=1e-10, help="absolute tolerance (adaptive integrators)")
     track.add_argument("--out", help="result file (.npz or .csv)")
     track.add_argument("--plot", help="figure (.png, .pdf, .svg)")
     track.set_defaults(run=_track)
@@ -472,10 +503,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        _check_numbers(args)
         return args.run(args)
     except CmbsError as error:
         print(f"cmbs: error: {error}", file=sys.stderr)
         return error.exit_status
+    except KeyboardInterrupt:
+        print("cmbs: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:            # the reader of the output stopped (e.g. `| head`): not an error
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # no second error at exit
+        return 0
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import sys
 import time
+from pathlib import Path
 from typing import Callable, Mapping
 
 import numpy as np
@@ -94,12 +95,35 @@ class _Progress:
             sys.stderr.write("\n")
 
 
-def simulate(model: Model, *, t_end: float, formulation: str | Formulation | None = None, integrator: str = "rk45",
-             dt: float = 0.01, rtol: float = 1e-6, atol: float = 1e-9, q0: np.ndarray | None = None,
-             qd0: np.ndarray | None = None, u: Inputs | np.ndarray | None = None, project: bool = False,
-             projection_tolerance: float = 1e-10, formulation_options: Mapping[str, object] | None = None,
-             newton_tolerance: float = 1e-10, compiled: bool | None = None, progress: bool = False) -> Trajectory:
-    """Forward dynamics of ``model`` from t = 0 to ``t_end``.
+#: output samples above which a time grid is refused (each holds the state, its derivatives, λ, ...)
+MAX_SAMPLES = 10_000_000
+
+
+def output_times(t_end: float, dt: float) -> np.ndarray:
+    """The output instants 0, dt, 2 dt, ... and t_end (the last interval shorter when t_end is not
+    a multiple of dt).  CmbsError for a t_end or dt that is not a finite number > 0, or a grid of
+    more than MAX_SAMPLES instants."""
+    for name, value in (("t_end", t_end), ("dt", dt)):
+        if not (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+                and np.isfinite(value) and value > 0):
+            raise CmbsError(f"{name} must be a finite number > 0, got {value!r}")
+    if t_end / dt + 1 > MAX_SAMPLES:
+        raise CmbsError(f"t_end = {t_end:g} s with dt = {dt:g} s gives {t_end / dt + 1:.3g} output instants, more "
+                        f"than {MAX_SAMPLES:,}; choose a larger dt")
+    steps = int(round(t_end / dt))
+    if abs(steps * dt - t_end) < 1e-9 * t_end:
+        return np.linspace(0.0, steps * dt, steps + 1)
+    return np.append(np.arange(0.0, t_end, dt), t_end)
+
+
+def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Formulation | None = None,
+             integrator: str = "rk45", dt: float = 0.01, rtol: float = 1e-6, atol: float = 1e-9,
+             q0: np.ndarray | None = None, qd0: np.ndarray | None = None, u: Inputs | np.ndarray | None = None,
+             project: bool = False, projection_tolerance: float = 1e-10,
+             formulation_options: Mapping[str, object] | None = None, newton_tolerance: float = 1e-10,
+             compiled: bool | None = None, progress: bool = False) -> Trajectory:
+    """Forward dynamics of ``model`` (a model, or a library name or model file for
+    :func:`cmbs.load`) from t = 0 to ``t_end``, recorded at :func:`output_times` (t_end, dt).
 
     Parameters
     ----------
@@ -140,10 +164,11 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
         :data:`cmbs.dynamics.matrix_r.ROUNDING_CONDITION`).  A failed run returns the part
         computed before the failure with ``info["status"] == "failed"``.
     """
-    if not t_end > 0:
-        raise CmbsError(f"t_end must be > 0, got {t_end}")
-    if not dt > 0:
-        raise CmbsError(f"dt must be > 0, got {dt}")
+    times = output_times(t_end, dt)
+    if isinstance(model, (str, Path)):
+        from cmbs import load
+
+        model = load(model)
     for name, value in (("rtol", rtol), ("atol", atol)):
         if not (value > 0 and np.isfinite(value)):  # a zero or negative scale makes the error norm meaningless
             raise CmbsError(f"{name} must be a finite number > 0, got {value}")
@@ -172,8 +197,6 @@ def simulate(model: Model, *, t_end: float, formulation: str | Formulation | Non
         if value.shape != (n,):
             raise CmbsError(f"{label} must have shape ({n},) for model {model.name!r}, got {value.shape}")
     steps = int(round(t_end / dt))
-    times = np.linspace(0.0, steps * dt, steps + 1) if abs(steps * dt - t_end) < 1e-9 * t_end else \
-        np.append(np.arange(0.0, t_end, dt), t_end)
     from cmbs import fast, fast_matrix_r
 
     fast_plan = fast.compiled_plan(model, chosen, integrator, u, project, t_end, dt)

@@ -44,11 +44,13 @@ def _values(text: str, option: str) -> tuple[str, list]:
     key, sep, raw = text.partition("=")
     if not sep or not key or not raw:
         raise SweepUsageError(f"{option} expects NAME=V1,V2,..., got {text!r}")
+    from cmbs.cli import FLAGS
+
     values = []
     for item in raw.split(","):
         lowered = item.strip().lower()
-        if lowered in ("true", "false"):
-            values.append(lowered == "true")
+        if lowered in FLAGS:
+            values.append(FLAGS[lowered])
             continue
         try:
             values.append(int(item) if item.strip().lstrip("-").isdigit() else float(item))
@@ -69,10 +71,19 @@ def variants_from(args: argparse.Namespace, model) -> list:
     from cmbs.kinematics import velocities
     from cmbs.sweep import Variant
 
+    from cmbs.library import check_parameters, names
+
     fixed = dict(_fixed(text) for text in args.param)
     axes = [("parameter", *_values(text, "--vary")) for text in args.vary]
+    if axes and args.model in names():
+        for _, key, values in axes:              # each value of the grid, checked before any run
+            for value in values:
+                check_parameters(args.model, **{**fixed, key: value})
     axes += [("mass", key, _numbers(key, values, "--mass")) for key, values in
              (_values(text, "--mass") for text in args.mass)]
+    for kind, key, factors in axes:
+        if kind == "mass" and min(factors) <= 0:
+            raise SweepUsageError(f"--mass {key}: mass factors must be > 0, got {factors}")
     if args.speed:
         key, values = _values(args.speed, "--speed")
         if key not in model.coordinate_names:
@@ -119,9 +130,12 @@ def _sweep(args: argparse.Namespace) -> int:
     for path, suffixes, option in ((args.out, (".npz",), "--out"), (args.plot, (".png", ".pdf", ".svg"), "--plot")):
         if path:
             checked_output(path, suffixes, option)
-    if args.t_end <= 0 or args.dt <= 0 or args.every < 1 or (args.workers is not None and args.workers < 1):
-        raise SweepUsageError(f"--t-end and --dt must be > 0, --every and --workers >= 1 (got {args.t_end}, "
-                              f"{args.dt}, {args.every}, {args.workers})")
+    if args.every < 1 or (args.workers is not None and args.workers < 1):
+        raise SweepUsageError(f"--every and --workers must be >= 1 (got {args.every}, {args.workers})")
+    from cmbs.dynamics import FORMULATIONS
+
+    if args.formulation not in FORMULATIONS:
+        raise SweepUsageError(f"--formulation: unknown {args.formulation!r}; choose one of {', '.join(FORMULATIONS)}")
     if args.undriven and args.vary:
         raise SweepUsageError("--undriven cannot be combined with --vary (the varied model is rebuilt by name)")
     parameters = dict(_fixed(text) for text in args.param)

@@ -76,8 +76,9 @@ def constraint_velocity(terms: Terms, qd: np.ndarray) -> np.ndarray:
 
 
 def check_parameters(formulation: object, **rules: str) -> None:
-    """Validate a formulation's numeric options: each rule is ``"positive"``, ``"non-negative"``,
-    ``"count"`` (integer ≥ 0), ``"above-one"`` or ``"optional-positive"`` (None allowed).
+    """Validate a formulation's options: each rule is ``"positive"``, ``"non-negative"``,
+    ``"count"`` (integer ≥ 0), ``"above-one"``, ``"optional-positive"`` (None allowed) or
+    ``"flag"`` (True or False).
 
     Raises :class:`~cmbs.errors.CmbsError` naming the formulation, the option and the value.
     """
@@ -88,7 +89,9 @@ def check_parameters(formulation: object, **rules: str) -> None:
         value = getattr(formulation, option)
         if rule == "optional-positive" and value is None:
             continue
-        if rule == "count":
+        if rule == "flag":
+            ok, expected = isinstance(value, (bool, np.bool_)), "true or false"
+        elif rule == "count":
             ok = isinstance(value, int) and not isinstance(value, bool) and value >= 0
             expected = "an integer >= 0"
         else:

@@ -46,7 +46,7 @@ class Lagrange:
     singular_tolerance: float = 1e-4
 
     def __post_init__(self) -> None:
-        check_parameters(self, singular_tolerance="non-negative")
+        check_parameters(self, singular_tolerance="non-negative", least_squares="flag")
 
     def bind(self, model: Model) -> "KKTSolver":
         return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=0.0, omega=0.0)
@@ -66,7 +66,8 @@ class Baumgarte:
     singular_tolerance: float = 1e-4
 
     def __post_init__(self) -> None:
-        check_parameters(self, xi="non-negative", omega="non-negative", singular_tolerance="non-negative")
+        check_parameters(self, xi="non-negative", omega="non-negative", singular_tolerance="non-negative",
+                         least_squares="flag")
 
     def bind(self, model: Model) -> "KKTSolver":
         return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=self.xi, omega=self.omega)

@@ -58,10 +58,12 @@ _FILES = [
 ]
 _BUILDERS = [
     ("chain", "chain", "chain", "N-link pendulum chain (links=N, closed=true pins the tip), N or N-2 DOF"),
-    ("slider-crank", "mechanisms", "slider_crank", "Aghili's slider-crank, equal crank and rod, natural coordinates, 1 DOF"),
+    ("slider-crank", "mechanisms", "slider_crank",
+     "Aghili's slider-crank, equal crank and rod, natural coordinates, 1 DOF"),
     ("slider-crank-joint", "mechanisms", "slider_crank_joint",
      "Aghili's slider-crank in joint angles (theta1, theta2), 1 DOF"),
-    ("arm-on-slider", "mechanisms", "arm_on_slider", "Aghili's 3-link arm with its endpoint on a slider, joint angles, 2 DOF"),
+    ("arm-on-slider", "mechanisms", "arm_on_slider",
+     "Aghili's 3-link arm with its endpoint on a slider, joint angles, 2 DOF"),
     ("passive-manipulator", "mechanisms", "passive_manipulator",
      "3-link arm with passive third joint (Quasem et al.), natural coordinates, 3 DOF"),
     ("passive-manipulator-joint", "mechanisms", "passive_manipulator_joint",
@@ -92,11 +94,37 @@ def entry(name: str) -> LibraryEntry:
 def load_library_model(name: str, **parameters: object) -> Model:
     """Build library model ``name`` with keyword ``parameters`` (checked against its loader)."""
     library_entry = entry(name)
-    allowed = library_entry.parameters()
+    check_parameters(name, **parameters)
+    from cmbs.model.files import assembled
+
+    return assembled(library_entry.loader(**parameters), f"library model {name!r}")
+
+
+def check_parameters(name: str, **parameters: object) -> None:
+    """ModelError unless every keyword is a parameter of library model ``name`` with a value of its
+    default's kind (:func:`_check_parameter`)."""
+    allowed = entry(name).parameters()
     unknown = sorted(set(parameters) - set(allowed))
     if unknown:
         accepted = ", ".join(f"{k}={v!r}" for k, v in allowed.items()) or "none"
         raise ModelError(f"model {name!r} has no parameter(s) {', '.join(unknown)} (parameters: {accepted})")
-    from cmbs.model.files import assembled
+    for key, value in parameters.items():
+        _check_parameter(name, key, value, allowed[key])
 
-    return assembled(library_entry.loader(**parameters), f"library model {name!r}")
+
+def _check_parameter(model: str, key: str, value: object, default: object) -> None:
+    """A library parameter has its default's kind: true/false for a flag, a whole number for a
+    count, a finite number for a quantity (a string such as "no" would otherwise count as true)."""
+    import math
+
+    if isinstance(default, bool):
+        ok, kind = isinstance(value, bool), "true or false"
+    elif isinstance(default, int):
+        ok, kind = isinstance(value, int) and not isinstance(value, bool), "a whole number"
+    elif isinstance(default, float):
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        kind = "a finite number"
+    else:
+        return
+    if not ok:
+        raise ModelError(f"model {model!r}: parameter {key} must be {kind}, got {value!r}")

@@ -67,6 +67,10 @@ def _tokenize(text: str) -> list[str]:
     return tokens
 
 
+#: deepest nesting of brackets, function arguments, signs and exponents in an expression
+MAX_NESTING = 100
+
+
 class _Parser:
     """Recursive descent over the token list, emitting the stack program as it goes."""
 
@@ -76,9 +80,11 @@ class _Parser:
         self.position = 0
         self.ops: list[tuple[int, int]] = []
         self.constants: list[float] = []
+        self.nesting = 0
 
     def _fail(self, problem: str) -> ExpressionError:
-        return ExpressionError(f"{problem} in expression {self.text!r}")
+        shown = self.text if len(self.text) <= 80 else f"{self.text[:60]}...{self.text[-10:]}"
+        return ExpressionError(f"{problem} in expression {shown!r}")
 
     def _peek(self) -> str | None:
         return self.tokens[self.position] if self.position < len(self.tokens) else None
@@ -99,12 +105,21 @@ class _Parser:
         ops = np.array(self.ops, dtype=np.int64).reshape(-1, 2)
         return Program(self.text, ops, np.array(self.constants, dtype=float), _stack_depth(ops))
 
+    def _enter(self) -> None:
+        """One level deeper (brackets, function arguments, signs, exponents): refused beyond
+        MAX_NESTING, before Python's own recursion limit is reached."""
+        self.nesting += 1
+        if self.nesting > MAX_NESTING:
+            raise self._fail(f"more than {MAX_NESTING} nested brackets, signs or powers")
+
     def _expr(self) -> None:
+        self._enter()
         self._term()
         while self._peek() in ("+", "-"):
             operator = self._take()
             self._term()
             self.ops.append((_BINARY[operator], 0))
+        self.nesting -= 1
 
     def _term(self) -> None:
         self._unary()
@@ -116,7 +131,9 @@ class _Parser:
     def _unary(self) -> None:
         if self._peek() in ("+", "-"):
             negate = self._take() == "-"
+            self._enter()
             self._unary()
+            self.nesting -= 1
             if negate:
                 self.ops.append((OP_NEG, 0))
             return
@@ -126,7 +143,9 @@ class _Parser:
         self._atom()
         if self._peek() in ("^", "**"):
             self._take()
+            self._enter()
             self._unary()
+            self.nesting -= 1
             self.ops.append((OP_POW, 0))
 
     def _atom(self) -> None:
