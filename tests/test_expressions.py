@@ -75,3 +75,12 @@ def test_deep_nesting_is_refused_before_the_recursion_limit(text):
 def test_nesting_up_to_the_limit_parses():
     program = parse_expression("(" * 99 + "t + 1" + ")" * 99)
     assert program(0.5) == pytest.approx((1.5, 1.0, 0.0))
+
+
+def test_evaluation_follows_ieee_arithmetic_instead_of_raising():
+    """A run that reaches a pole or a negative square root meets inf/NaN, which it reports with the
+    function's name, rather than an exception from inside a compiled loop."""
+    value, first, second = parse_expression("1/(t-0.5)")(0.5)
+    assert value == math.inf and first == -math.inf and math.isnan(second)
+    assert all(math.isnan(v) for v in parse_expression("sqrt(t - 2)")(1.0))
+    assert parse_expression("exp(t)")(1000.0)[0] == math.inf

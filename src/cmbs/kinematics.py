@@ -120,10 +120,14 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
         q[free] += step
     phi = terms.phi[rows]
     worst = int(np.nanargmax(np.abs(phi))) if np.any(np.isfinite(phi)) else 0
+    where = f"largest residual {abs(phi[worst]):.3g} in constraint {model.constraint_names[rows[worst]]!r}"
+    problem = model.time_function_problem([t]) if not np.all(np.isfinite(phi)) else ""
+    if problem:
+        raise ConvergenceError(f"model {model.name!r}: assembly at t={t:g} met a non-finite residual ({where}): "
+                               f"{problem}")
     raise ConvergenceError(
         f"model {model.name!r}: assembly at t={t:g} did not converge in {max_iterations} Newton iterations "
-        f"(largest residual {abs(phi[worst]):.3g} in constraint {model.constraint_names[rows[worst]]!r}); "
-        "check the initial positions, the segment lengths and the drivers' values")
+        f"({where}); check the initial positions, the segment lengths and the drivers' values")
 
 
 def velocities(model: Model, q: np.ndarray, t: float = 0.0, *, qd: np.ndarray | None = None,
@@ -228,7 +232,8 @@ def singular_configurations(model: Model, trajectory: Trajectory, *, threshold: 
         if not (rho[k] <= left and rho[k] < right):
             continue
         lo, hi = times[max(k - 1, 0)], times[min(k + 1, len(times) - 1)]
-        segment = lambda t: max(int(np.searchsorted(times, t, side="right")) - 1, 0)
+        def segment(t: float) -> int:
+            return max(int(np.searchsorted(times, t, side="right")) - 1, 0)
 
         def objective(t: float) -> float:
             j = min(segment(t), len(times) - 2)

@@ -210,15 +210,27 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
                         f"--project and no Python time functions; model {model.name!r})")
     run_options = {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol, "project": project}
     if fast_plan is not None and compiled is not False and integrator != "rk4":
-        return _run_compiled_adaptive(model, solver, chosen, fast_plan, inputs, q_start, qd_start, times, started,
-                                      run_options)
-    if fast_plan is not None and compiled is not False:
-        return _run_compiled(model, solver, chosen, fast_plan, inputs, q_start, qd_start, t_end, dt, started,
-                             run_options)
-    if velocity_loop and compiled is not False:
-        return _run_compiled_matrix_r(model, solver, chosen, inputs, q_start, qd_start, steps, dt, started,
-                                      run_options)
-    bar = _Progress(t_end, progress)
+        trajectory = _run_compiled_adaptive(model, solver, chosen, fast_plan, inputs, q_start, qd_start, times,
+                                            started, run_options)
+    elif fast_plan is not None and compiled is not False:
+        trajectory = _run_compiled(model, solver, chosen, fast_plan, inputs, q_start, qd_start, t_end, dt, started,
+                                   run_options)
+    elif velocity_loop and compiled is not False:
+        trajectory = _run_compiled_matrix_r(model, solver, chosen, inputs, q_start, qd_start, steps, dt, started,
+                                            run_options)
+    else:
+        trajectory = _run_python(model, solver, chosen, inputs, q_start, qd_start, times, integrator, u, dt, rtol,
+                                 atol, project, projection_tolerance, newton_tolerance, compiled, progress, started)
+    _explain_failure(model, trajectory, times)
+    return trajectory
+
+
+def _run_python(model: Model, solver, chosen: Formulation, inputs: Inputs, q_start: np.ndarray, qd_start: np.ndarray,
+                times: np.ndarray, integrator: str, u: object, dt: float, rtol: float, atol: float, project: bool,
+                projection_tolerance: float, newton_tolerance: float, compiled: bool | None, progress: bool,
+                started: float) -> Trajectory:
+    """The run on the Python loops (every integrator and formulation)."""
+    bar = _Progress(float(times[-1]), progress)
     try:
         if integrator in EXPLICIT:
             result = _run_explicit(model, solver, inputs, q_start, qd_start, times, integrator, dt, rtol, atol,
@@ -240,6 +252,22 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         trajectory.info["note"] = _python_loop_note(model, chosen, u, project, compiled)
     _note_rounding(trajectory.info, solver)
     return trajectory
+
+
+def _explain_failure(model: Model, trajectory: Trajectory, times: np.ndarray) -> None:
+    """A failed run whose cause is a function of time that is not finite (e.g. ``1/(t - 0.5)`` at
+    0.5, ``sqrt(1 - t)`` past 1) names it in ``info["message"]``: the functions are evaluated at the
+    output instants from the last one recorded to the next, and on a fine grid between them (the
+    failing stage lies there)."""
+    if trajectory.info.get("status") != "failed":
+        return
+    last = float(trajectory.t[-1]) if len(trajectory.t) else 0.0
+    after = times[times > last + 1e-12 * max(1.0, abs(last))]
+    following = float(after[0]) if after.size else last
+    candidates = np.concatenate([[last, following], np.linspace(last, following, 1001)])
+    problem = model.time_function_problem(candidates)
+    if problem:
+        trajectory.info["message"] = f"{trajectory.info['message']} ({problem})"
 
 
 def _note_rounding(info: dict, solver) -> None:
@@ -375,6 +403,8 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
         q, qd, qdd = expand(t, z, zd, zdd)
         full["last"] = (q, qd, qdd)
         model.evaluate(q, qd, t, inputs(t, q, qd), out=terms)
+        if not (np.all(np.isfinite(terms.Q)) and np.all(np.isfinite(terms.M))):
+            raise CmbsError(f"model {model.name!r} at t={t:.6g}: non-finite forces or mass matrix")
         R = solver.velocity_matrix(terms)
         C, K = _force_derivatives(model, inputs, q, qd, t)
         return (R.T @ (terms.M @ qdd - terms.Q), np.zeros(0), R.T @ terms.M @ R, np.zeros((0, R.shape[1])),

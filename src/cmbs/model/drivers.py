@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -172,7 +173,8 @@ class TimeFunctionPack:
     ``table`` is (k, 4) ints: kind, start of its ops (expressions) or -1, number of op rows or
     pieces, start of its reals.  ``ops`` stacks every expression's (opcode, arg) rows; ``reals``
     holds expression constants and piecewise breaks+coefficients.  ``python`` lists the
-    (index, function) pairs evaluated in Python.
+    (index, function) pairs evaluated in Python; ``labels`` names each function for messages
+    (e.g. ``"force push (fz)"``).
     """
 
     table: np.ndarray
@@ -181,6 +183,7 @@ class TimeFunctionPack:
     depth: int
     python: tuple[tuple[int, TimeFunction], ...]
     functions: tuple[TimeFunction, ...]
+    labels: tuple[str, ...] = ()
 
     @property
     def count(self) -> int:
@@ -197,8 +200,26 @@ class TimeFunctionPack:
         python = tuple((k, function) for k, function in self.python if k in used)
         return dataclasses.replace(self, table=table, python=python)
 
+    def problem(self, times: Sequence[float]) -> str:
+        """The first function (by its label) whose value or time derivatives are not finite at one
+        of ``times``, as a sentence, else "": why a run met non-finite terms."""
+        for k, function in enumerate(self.functions):
+            if self.table[k, 0] == KIND_UNUSED:
+                continue
+            for t in times:
+                with np.errstate(all="ignore"):
+                    try:
+                        values = function(float(t))
+                    except (ArithmeticError, ValueError) as error:
+                        values = (str(error),)
+                if not all(isinstance(v, float) and math.isfinite(v) for v in values):
+                    label = self.labels[k] if k < len(self.labels) else f"function of time {k}"
+                    shown = ", ".join(f"{v:.6g}" if isinstance(v, float) else v for v in values)
+                    return f"{label} ({_describe(function)}) is not finite at t = {t:.6g}: {shown}"
+        return ""
+
     @classmethod
-    def build(cls, functions: Sequence[TimeFunction]) -> "TimeFunctionPack":
+    def build(cls, functions: Sequence[TimeFunction], labels: Sequence[str] = ()) -> "TimeFunctionPack":
         table = np.zeros((len(functions), 4), dtype=np.int64)
         ops: list[np.ndarray] = []
         reals: list[float] = []
@@ -227,7 +248,14 @@ class TimeFunctionPack:
                 python.append((k, function))
         all_ops = np.concatenate(ops) if ops else np.zeros((0, 2), dtype=np.int64)
         return cls(table, np.ascontiguousarray(all_ops, dtype=np.int64), np.array(reals, dtype=float),
-                   depth, tuple(python), tuple(functions))
+                   depth, tuple(python), tuple(functions), tuple(labels))
+
+
+def _describe(function: TimeFunction) -> str:
+    """A short description of a time function for messages: its expression, or its kind."""
+    if isinstance(function, Expression):
+        return repr(function.text)
+    return type(function).__name__.lower()
 
 
 @njit_borrowing(cache=True)

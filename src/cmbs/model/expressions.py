@@ -217,19 +217,24 @@ def _taylor_power(a0, a1, a2, b0, b1, b2):
                 d2 += b0 * (b0 - 1.0) * a0 ** (b0 - 2.0) * a1 * a1
         return p0, d1, d2
     # a^b = exp(b log a), a > 0
-    l0 = math.log(a0)
+    l0 = np.log(a0)
     l1 = a1 / a0
     l2 = a2 / a0 - l1 * l1
     e0 = b0 * l0
     e1 = b1 * l0 + b0 * l1
     e2 = b2 * l0 + 2.0 * b1 * l1 + b0 * l2
-    p0 = math.exp(e0)
+    p0 = np.exp(e0)
     return p0, p0 * e1, p0 * (e2 + e1 * e1)
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, error_model="numpy")
 def evaluate_program(ops, constants, t, stack):
     """Evaluate a stack program at time ``t``: returns the top slot ``(f, f', f'')`` as a tuple.
+
+    IEEE arithmetic (numba's ``error_model="numpy"``, numpy's functions when interpreted): a
+    division by zero or a square root of a negative number gives inf or NaN instead of raising in
+    the middle of a run; the caller that meets it names the function
+    (:meth:`cmbs.model.model.Model.time_function_problem`).
 
     Each binary/unary rule is the product/chain rule to second order, e.g. for ``c = a·b``:
     ``c' = a'b + ab'``, ``c'' = a''b + 2a'b' + ab''``.
@@ -269,20 +274,20 @@ def evaluate_program(ops, constants, t, stack):
             if opcode == OP_NEG:
                 c0, c1, c2 = -a0, -a1, -a2
             elif opcode == OP_SIN:
-                s, c = math.sin(a0), math.cos(a0)
+                s, c = np.sin(a0), np.cos(a0)
                 c0, c1, c2 = s, c * a1, c * a2 - s * a1 * a1
             elif opcode == OP_COS:
-                s, c = math.sin(a0), math.cos(a0)
+                s, c = np.sin(a0), np.cos(a0)
                 c0, c1, c2 = c, -s * a1, -s * a2 - c * a1 * a1
             elif opcode == OP_TAN:
-                tn = math.tan(a0)
+                tn = np.tan(a0)
                 sec2 = 1.0 + tn * tn
                 c0, c1, c2 = tn, sec2 * a1, sec2 * a2 + 2.0 * tn * sec2 * a1 * a1
             elif opcode == OP_EXP:
-                e = math.exp(a0)
+                e = np.exp(a0)
                 c0, c1, c2 = e, e * a1, e * (a2 + a1 * a1)
             else:
-                r = math.sqrt(a0)
+                r = np.sqrt(a0)
                 c0 = r
                 c1 = a1 / (2.0 * r)
                 c2 = a2 / (2.0 * r) - a1 * a1 / (4.0 * r * r * r)

@@ -313,16 +313,17 @@ class JointEquations:
     into the scratch rows the kernel reads).
     """
 
-    __slots__ = ("ip", "rp", "n", "m", "scratch_size", "python")
+    __slots__ = ("ip", "rp", "n", "m", "scratch_size", "python", "time_functions")
 
     def __init__(self, ip: np.ndarray, rp: np.ndarray, n: int, m: int, scratch_size: int,
-                 python: tuple[tuple[int, TimeFunction], ...]):
+                 python: tuple[tuple[int, TimeFunction], ...], time_functions: TimeFunctionPack):
         self.ip = ip
         self.rp = rp
         self.n = n
         self.m = m
         self.scratch_size = scratch_size
         self.python = python
+        self.time_functions = time_functions
 
     def new_terms(self) -> Terms:
         """A workspace sized for this model (scratch included)."""
@@ -789,6 +790,7 @@ class JointModelBuilder:
             driver_ints.append((coordinate_of(driver.coordinate, f"driver {driver.name!r}"), len(functions)))
             functions.append(driver.function)
             constraint_names.append(driver.name)
+        labels = [f"driver {name}" for name in constraint_names[nr:]]
         nd = len(driver_ints)
         seen: set[str] = set()
         for constraint in constraint_names:
@@ -798,7 +800,7 @@ class JointModelBuilder:
             seen.add(constraint)
         actuators = list(self._actuators.values())
         actuator_coordinates = [coordinate_of(act.coordinate, f"actuator {act.name!r}") for act in actuators]
-        pack = TimeFunctionPack.build(functions)
+        pack = TimeFunctionPack.build(functions, labels)
 
         # ---- pack ints
         ip_parts: list[np.ndarray] = [np.zeros(_HEADER, np.int64)]
@@ -836,7 +838,7 @@ class JointModelBuilder:
         ip.setflags(write=False)
         rp.setflags(write=False)
         scratch = 3 * pack.count + 3 * pack.depth + _WORK_PER_LINK * n
-        equations = JointEquations(ip, rp, n, nr + nd, scratch, pack.python)
+        equations = JointEquations(ip, rp, n, nr + nd, scratch, pack.python, pack)
 
         parameters = {
             "builder": "joints",

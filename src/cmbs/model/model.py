@@ -240,7 +240,8 @@ class Model:
         """The same mechanism with its driver constraints removed (e.g. to simulate a driven
         model's free motion, or to drive it by forces instead); q0, q̇0 are kept."""
         keep = np.flatnonzero(~self.drivers)
-        return self.replace(name=f"{self.name}-undriven", constraint_names=tuple(self.constraint_names[k] for k in keep),
+        return self.replace(name=f"{self.name}-undriven",
+                            constraint_names=tuple(self.constraint_names[k] for k in keep),
                             drivers=np.zeros(keep.size, dtype=bool), nonholonomic=self.nonholonomic[keep],
                             equations=self.equations.without_drivers() if hasattr(self.equations, "without_drivers")
                             and np.array_equal(keep, np.arange(keep.size)) else _RowSubset(self.equations, keep))
@@ -301,6 +302,15 @@ class Model:
     def energy(self, q: np.ndarray, qd: np.ndarray) -> float:
         """Total mechanical energy T + V."""
         return self.kinetic_energy(q, qd) + self.potential_energy(q)
+
+    def time_function_problem(self, times: Sequence[float]) -> str:
+        """The model's first function of time (driver, force, torque; by name, with its expression)
+        whose value or derivatives are not finite at one of ``times``, as a sentence, else ""."""
+        for equations in (self.equations, base_equations(self)[0]):
+            pack = getattr(equations, "time_functions", None)
+            if pack is not None:
+                return pack.problem(times)
+        return ""
 
     def energy_history(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
         """T + V at every row of q, q̇ (k, n): vectorised when the base equations can (constant

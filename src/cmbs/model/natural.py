@@ -205,7 +205,9 @@ class NaturalModelBuilder:
                                  entry=entry)
         if initial is not None:
             initial = _finite(initial, entry, "initial")
-        as_spec = lambda spec: tuple(spec) if isinstance(spec, list) else spec
+        def as_spec(spec):
+            return tuple(spec) if isinstance(spec, list) else spec
+
         u, v = (None, as_spec(segment)) if segment is not None else (as_spec(from_segment), as_spec(to_segment))
         self._angles[name] = (u, v, initial)
 
@@ -460,10 +462,11 @@ class _Assembler:
                 parallel_rows.append(line_points + self._xz(s.i, entry) + self._xz(s.j, entry))
                 constraint_names.append(f"slider {name} lock")
 
-        driver_rows, functions = [], []
+        driver_rows, functions, labels = [], [], []
         for name, (coordinate, function) in b._drivers.items():
             driver_rows.append([self._coordinate(coordinate, f"drivers.{name}"), len(functions)])
             functions.append(function)
+            labels.append(f"driver {name}")
             constraint_names.append(name)
 
         force_rows = []
@@ -471,6 +474,7 @@ class _Assembler:
             xz = self._xz(point, f"forces.{name}")
             force_rows.append(xz + [len(functions), len(functions) + 1])
             functions.extend([fx, fz])
+            labels.extend([f"force {name} (fx)", f"force {name} (fz)"])
 
         torque_rows = []
         for name, (angle, torque) in b._torques.items():
@@ -479,6 +483,7 @@ class _Assembler:
                 raise ModelError(f"unknown angle {angle!r} (angles: {', '.join(b._angles) or 'none'})", entry=entry)
             torque_rows.append([self.coordinate_of[angle], len(functions)])
             functions.append(torque)
+            labels.append(f"torque {name}")
 
         spring_rows, spring_parameters = [], []
         for name, (i, j, stiffness, damping, rest) in b._springs.items():
@@ -526,8 +531,10 @@ class _Assembler:
         self._check_mass(mass)
         mass.setflags(write=False)
 
-        tf = TimeFunctionPack.build(functions)
-        resolve = lambda rows, width: self._resolve(np.array(rows, dtype=np.int64).reshape(-1, width), n)
+        tf = TimeFunctionPack.build(functions, labels)
+        def resolve(rows, width):
+            return self._resolve(np.array(rows, dtype=np.int64).reshape(-1, width), n)
+
         ints, reals = pack(
             [resolve(rigid, 4), resolve(distance_rows, 5), resolve(angle_rows, 9), resolve(parallel_rows, 8),
              np.array(driver_rows, dtype=np.int64).reshape(-1, 2), _force_rows(force_rows, n, self),
