@@ -395,7 +395,8 @@ def build_parser() -> argparse.ArgumentParser:
                              help="step of fixed-step integrators, output interval of adaptive ones [s]")
         command.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance (adaptive)")
         command.add_argument("--atol", type=float, default=1e-9, help="absolute tolerance (adaptive)")
-        command.add_argument("--project", action="store_true", help="coordinate and velocity projection each step")
+        command.add_argument("--project", action="store_true",
+                             help="coordinate and velocity projection after each step and at each output instant")
         command.add_argument("--undriven", action="store_true", help="remove the model's driver constraints")
 
     simulate = model_command("simulate", "forward dynamics of a model")

@@ -320,10 +320,15 @@ def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.
         return np.concatenate([q, qd])
 
     tableau = explicit_method(integrator)
-    return integrate_explicit(field, np.concatenate([q0, qd0]), times, tableau=tableau, rtol=rtol, atol=atol,
-                              step=dt if tableau.b_error is None else None,
-                              after_step=after_step if project or solver.adjusts_state else None, progress=bar,
-                              stop_on=(CmbsError,))
+    result = integrate_explicit(field, np.concatenate([q0, qd0]), times, tableau=tableau, rtol=rtol, atol=atol,
+                                step=dt if tableau.b_error is None else None,
+                                after_step=after_step if project or solver.adjusts_state else None, progress=bar,
+                                stop_on=(CmbsError,))
+    if project:     # the output instants between steps are interpolated: projected as well
+        for row, t in zip(result.y, result.t):
+            q, qd = project_state(model, row[:n], row[n:], float(t), tolerance=projection_tolerance)
+            row[:n], row[n:] = q, qd
+    return result
 
 
 def _solve(solver, model: Model, terms, q: np.ndarray, qd: np.ndarray, t: float):
