@@ -112,3 +112,16 @@ def test_kinematics_grid_is_that_of_simulate(tmp_path, capsys):
     out = tmp_path / "k.npz"
     assert main(["kinematics", "four-bar", "--t-end", "1", "--dt", "0.3", "--out", str(out)]) == 0
     assert np.allclose(np.load(out)["t"], [0.0, 0.3, 0.6, 0.9, 1.0], rtol=0, atol=1e-15)
+
+
+def test_animate_mp4_without_ffmpeg_fails_before_the_run(tmp_path, monkeypatch, capsys):
+    """--animate x.mp4 without ffmpeg used to be found out after the .npz and .png were written."""
+    import matplotlib.animation
+
+    monkeypatch.setattr(matplotlib.animation.writers, "is_available", lambda name: False)
+    arguments = ["simulate", "pendulum", "--t-end", "0.1", "--out", str(tmp_path / "r.npz"), "--plot",
+                 str(tmp_path / "r.png"), "--animate", str(tmp_path / "r.mp4")]
+    assert main(arguments) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "needs ffmpeg" in err, err
+    assert list(tmp_path.iterdir()) == []

@@ -66,6 +66,16 @@ def frame_times(trajectory: Trajectory, *, fps: float = 30, speed: float = 1.0,
     return np.linspace(start, end, count), rate
 
 
+def checked_animation_path(path: str | Path, option: str = "animation") -> Path:
+    """``path`` as an animation file that can be written: a .gif, or a .mp4 when ffmpeg is found,
+    in an existing folder (CmbsError otherwise; the CLI checks it before the run)."""
+    path = checked_output(path, (".gif", ".mp4"), option)
+    if path.suffix.lower() == ".mp4" and not animation.writers.is_available("ffmpeg"):
+        raise CmbsError(f"{path}: writing .mp4 needs ffmpeg, which was not found; "
+                        "install ffmpeg or write a .gif instead (always available)")
+    return path
+
+
 def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fps: float = 30,
             speed: float = 1.0, trail: str | None = None, dpi: float = 100,
             reference: Trajectory | None = None) -> Path:
@@ -114,12 +124,9 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
         non-finite coordinates, a reference that does not overlap the trajectory in time, or a
         failed write.
     """
-    path = checked_output(path, (".gif", ".mp4"), "animation")
+    path = checked_animation_path(path)
     _check_positive(fps=fps, speed=speed, dpi=dpi)
     mp4 = path.suffix.lower() == ".mp4"
-    if mp4 and not animation.writers.is_available("ffmpeg"):
-        raise CmbsError(f"{path}: writing .mp4 needs ffmpeg, which was not found; "
-                        "install ffmpeg or write a .gif instead (always available)")
     q = _coordinates_of(model, trajectory, "trajectory")
     reference_q = _coordinates_of(model, reference, "reference") if reference is not None else None
     trail_index = None
@@ -274,7 +281,8 @@ def _fixed_limits(axis: plt.Axes, figure: plt.Figure, points: np.ndarray) -> Non
     size = float(max(high - low))
     margin = 0.08 * size if size > 0 else 0.5 * max(1.0, float(np.max(np.abs(low))))
     low, high = low - margin, high + margin
-    width, height = axis.get_position().width * figure.get_figwidth(), axis.get_position().height * figure.get_figheight()
+    box = axis.get_position()
+    width, height = box.width * figure.get_figwidth(), box.height * figure.get_figheight()
     center, span = (low + high) / 2, high - low
     if span[0] / span[1] < width / height:
         span[0] = span[1] * width / height

@@ -148,9 +148,13 @@ def _simulate(args: argparse.Namespace) -> int:
     from cmbs.simulate import simulate
 
     for path, suffixes, option in ((args.out, (".npz", ".csv"), "--out"), (args.plot, (".png", ".pdf", ".svg"),
-                                   "--plot"), (args.animate, (".gif", ".mp4"), "--animate")):
+                                   "--plot")):
         if path:
             _check_output(path, suffixes, option)
+    if args.animate:
+        from cmbs.animate import checked_animation_path
+
+        checked_animation_path(args.animate, "--animate")
     model = _load(args)
     formulation = None if args.formulation is None and args.integrator not in ("rk23", "rk45", "rk4") else \
         (args.formulation or "lagrange")

@@ -77,9 +77,13 @@ def _prepared_stride(args: argparse.Namespace):
     from cmbs.opensim_files import SUFFIXES
 
     for option, suffixes in (("out", (".npz", ".csv")), ("plot", (".png", ".pdf", ".svg")),
-                             ("animate", (".gif", ".mp4")), ("opensim", SUFFIXES)):
+                             ("opensim", SUFFIXES)):
         if getattr(args, option, None):
             _check_output(getattr(args, option), suffixes, f"--{option}")
+    if getattr(args, "animate", None):
+        from cmbs.animate import checked_animation_path
+
+        checked_animation_path(args.animate, "--animate")     # an .mp4 also needs ffmpeg
     return prepare_stride(args.stride, cutoff=args.cutoff)
 
 
