@@ -125,3 +125,21 @@ def test_animate_mp4_without_ffmpeg_fails_before_the_run(tmp_path, monkeypatch, 
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "needs ffmpeg" in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_first_compilation_is_announced_once():
+    """An interactive `cmbs` run says when it compiles (a fresh install's first run takes 1-2
+    minutes): one line at the first compilation, none after."""
+    numba = pytest.importorskip("numba")
+    from cmbs.jit import announce_compilation
+
+    lines = []
+    announce_compilation(lines.append)
+
+    @numba.njit
+    def twice(x):
+        return 2 * x
+
+    assert lines == []
+    assert twice(1) == 2 and twice(1.5) == 3.0          # two compilations
+    assert len(lines) == 1 and "compiling the kernels" in lines[0]

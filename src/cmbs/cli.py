@@ -507,6 +507,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``cmbs`` console script; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if sys.stderr.isatty():
+        from cmbs.jit import announce_compilation
+
+        announce_compilation(lambda line: print(line, file=sys.stderr, flush=True))
     try:
         _check_numbers(args)
         return args.run(args)

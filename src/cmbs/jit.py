@@ -86,3 +86,26 @@ prange = _numba.prange if _numba is not None else range
 def threads() -> int:
     """Threads a parallel kernel uses (numba's), 1 without numba."""
     return _numba.get_num_threads() if _numba is not None else 1
+
+
+def announce_compilation(write: Callable[[str], object]) -> None:
+    """Call ``write`` with one line the first time this process compiles a kernel (numba's
+    ``numba:compile`` event, which a kernel loaded from the disk cache does not raise): the first
+    run after an install compiles for one to two minutes and would otherwise look stuck."""
+    if _numba is None:
+        return
+    from numba.core import event
+
+    class Announcement(event.Listener):
+        done = False
+
+        def on_start(self, event: object) -> None:
+            if not self.done:
+                self.done = True
+                write("cmbs: compiling the kernels this run needs (first use after an install: 1-2 minutes; "
+                      "cached for later runs)")
+
+        def on_end(self, event: object) -> None:
+            pass
+
+    event.register("numba:compile", Announcement())
