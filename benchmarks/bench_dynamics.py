@@ -3,7 +3,8 @@
 
     python benchmarks/bench_dynamics.py [--quick] [--json FILE]
 
-Mechanisms (parameters and start states of shared/anchors/common.py; gravity 9.81 downwards):
+Mechanisms (the parameters and start states of the reference measurements of the other tools;
+gravity 9.81 downwards):
 
 * ``four-bar``: the anchors' crank-rocker, ground A (0, 0), D (1, 0), crank A-B 0.5 m, coupler
   B-C 1 m, rocker D-C 1 m, uniform 1 kg rods, crank at 30°, upper branch, at rest.  Built here
@@ -91,7 +92,7 @@ TARGET_PROJECTION_US = {"four-bar": 5.0, "human": 40.0}
 TARGET_SLIDER_CRANK_S = 0.24         # Exudyn's 10 s (anchors), to be beaten ...
 TARGET_SLIDER_CRANK_ENERGY = 1e-6    # ... with relative energy error <= this
 
-# Quoted from /work/shared/anchors/RESULTS.md (2026-11-21, 2 shared AMD EPYC cores), printed only
+# Quoted from reference measurements of the other tools (2026-11-21, 2 shared AMD EPYC cores), printed only
 # for a tool that is not installed here.  per-eval µs; 10 s walls in s.
 ANCHORS_QUOTED = {
     "four-bar": {
@@ -132,7 +133,7 @@ def anchors_four_bar() -> cmbs.Model:
     builder = cmbs.NaturalModelBuilder(
         "four-bar-anchors", gravity=(0.0, -GRAVITY),
         description="crank-rocker 0.5/1/1 m on a 1 m ground, 1 kg uniform rods, crank at 30 deg, at rest",
-        source="shared/anchors/common.py (fourbar)")
+        source="benchmark crank-rocker of the reference measurements (fourbar)")
     builder.add_point("A", 0.0, 0.0, fixed=True)
     builder.add_point("D", ground, 0.0, fixed=True)
     builder.add_point("B", *b)
@@ -1154,7 +1155,7 @@ def main(argv: list[str] | None = None) -> int:
         for name in TOOLS:
             if not tools[name]:
                 quoted = ANCHORS_QUOTED.get(case.label)
-                print(f"    {name}: not installed" + ("; QUOTED from shared/anchors/RESULTS.md, not measured here: "
+                print(f"    {name}: not installed" + ("; QUOTED from reference measurements, not measured here: "
                                                     + ", ".join(f"{k} {v:g}" for k, v in quoted[name].items())
                                                     if quoted else "; no quoted figure for this mechanism"))
                 continue

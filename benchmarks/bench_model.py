@@ -17,10 +17,10 @@ For the thesis four-bar (5 coordinates), the 14-DOF human model (38 coordinates)
 5. import + build of the human model in a fresh interpreter, first (cold numba cache) and warm.
 
 Per-call times: median [min-max] of 7 timeit batches of ~0.2 s each after warm-up (the method of
-shared/anchors/common.py ``time_call``; own helper below).  ``--quick``: 3 batches of ~0.05 s,
+the reference measurements of the other tools; own helper below).  ``--quick``: 3 batches of ~0.05 s,
 2 warm launches and no cold launch.  The targets (issue: ≤ 3 µs four-bar, ≤ 10 µs human, all
 five terms together) are checked against the median.  Figures of other tools are quoted from
-shared/anchors/RESULTS.md, not measured here.
+reference measurements made beside them, not measured here.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ from reporting import write_report
 # ------------------------------------------------------------------------------------ targets
 TARGETS_US = {"four-bar": 3.0, "human": 10.0}  # project issue: all five terms together
 
-# Quoted from /work/shared/anchors/RESULTS.md (2026-11-21, same machine class): per-evaluation
+# Quoted from reference measurements of the other tools (2026-11-21, same machine class): per-evaluation
 # FORWARD DYNAMICS (terms + KKT solve or ABA -> accelerations), µs, median.  Their four-bar is
 # the anchors' 1-DOF 0.5/1/1 m crank-rocker, not the thesis four-bar of cmbs; chain14_closed is
 # the same mechanism as cmbs's chain(links=14, closed=True).  Not measured in this run.
@@ -326,7 +326,7 @@ def human_mechanism() -> Mechanism:
 
 
 def chain_mechanism(links: int = 14) -> Mechanism:
-    """shared/anchors chain: rods 0.3 m 1 kg (I_G = m l²/12) from the origin in a half circle,
+    """The benchmark chain: rods 0.3 m 1 kg (I_G = m l²/12) from the origin in a half circle,
     link angle -(k + ½)π/N; the tip is a ground point at its start position."""
     length, mass = 0.3, 1.0
     points = {"P0": (0.0, 0.0, True)}
@@ -556,7 +556,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"    {name:<46} {fmt(stats):>22} µs")
         quoted = ANCHORS_QUOTED.get(label)
         if quoted:
-            print("  QUOTED from shared/anchors/RESULTS.md, not measured in this run (forward dynamics, i.e. terms"
+            print("  QUOTED from reference measurements, not measured in this run (forward dynamics, i.e. terms"
                   " + solve for accelerations;")
             print(f"  anchor model: {quoted['anchor model']}):")
             for name, value in quoted.items():

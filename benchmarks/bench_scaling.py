@@ -6,8 +6,8 @@ about N^1.2 from 14 to 200 links).
     python benchmarks/bench_scaling.py [--quick] [--json FILE] [--plot FILE.png]
 
 Mechanisms: ``cmbs.load("chain", links=N, closed=...)`` for N = 3, 14, 50, 200, open (hanging
-from P0) and tip-pinned (closed): uniform 0.3 m, 1 kg rods on a half circle (shared/anchors
-common.py), gravity 9.81.  The other tools get the same chain through the tree builders of
+from P0) and tip-pinned (closed): uniform 0.3 m, 1 kg rods on a half circle
+(the benchmark chain), gravity 9.81.  The other tools get the same chain through the tree builders of
 bench_dynamics.py (joint angles; the pin as a 3-D point contact).
 
 One evaluation: the model's terms and the solve for q̈ (and λ).  cmbs: ``CompiledDynamics

@@ -1,4 +1,4 @@
-"""N-link pendulum chain in natural coordinates (the benchmark chain of shared/anchors).
+"""N-link pendulum chain in natural coordinates (the chain of the benchmarks, benchmarks/bench_scaling.py).
 
 N uniform slender rods (length 0.3 m, mass 1 kg, I_G = m l²/12) pinned at the origin, starting
 at rest in a half circle with absolute link angles θ_k = -(k + ½)π/N; with ``closed`` the tip
@@ -28,7 +28,7 @@ def chain(links: int = 3, closed: bool = False) -> Model:
         f"chain{links}{'-closed' if closed else ''}",
         description=f"{links}-link pendulum chain{' with its tip pinned' if closed else ''}: "
                     f"rods {LINK_LENGTH} m, {LINK_MASS} kg, half-circle start",
-        source="benchmark mechanism of shared/anchors/common.py (uniform slender rods)")
+        source="benchmark mechanism of cmbs (uniform slender rods; benchmarks/bench_scaling.py)")
     x = z = 0.0
     builder.add_point("P0", x, z, fixed=True)
     for k in range(links):

@@ -23,7 +23,7 @@ def slider_crank(gravity: float = 0.0, crank_angle: float = 45.0, crank_speed: f
     The constraint Jacobian loses rank at θ1 = ±90° where C passes through O.  Aghili gives no
     numbers that survived extraction: l = 1 m, m = 1 kg are chosen; ``gravity`` (m/s², along -z)
     defaults to 0 (a horizontal mechanism).  Start: crank at ``crank_angle`` degrees turning at
-    ``crank_speed`` rad/s (the benchmark state of shared/anchors: 45°, 2 rad/s), rod on the branch
+    ``crank_speed`` rad/s (the benchmark state: 45°, 2 rad/s), rod on the branch
     θ2 = -2θ1; without gravity the crank then turns fully, crossing the singular positions.
     """
     theta = math.radians(crank_angle)
