@@ -304,7 +304,9 @@ def _track(args: argparse.Namespace) -> int:
     run = result.run
     print(f"{plant.name}: {args.controller} tracking of {', '.join(coordinates)}, {run.info['status']} "
           f"at t = {run.t[-1]:.6g} s")
-    print(f"  NRMSE {', '.join(f'{v:.4g}' for v in result.nrmse)}; settling time (1 %) {result.settling_time:.4g} s")
+    settling = result.settling_time
+    settled = "- (no initial error)" if np.isnan(settling) else "never" if np.isinf(settling) else f"{settling:.4g} s"
+    print(f"  NRMSE {', '.join(f'{v:.4g}' for v in result.nrmse)}; settling time (1 %) {settled}")
     print(f"  actuation RMS norm {result.rms_norm:.6g}, peak norm {result.peak_norm:.6g}")
     if args.out:
         print(f"  result -> {run.save(args.out)}")

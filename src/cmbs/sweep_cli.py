@@ -151,8 +151,10 @@ def _sweep(args: argparse.Namespace) -> int:
                    workers=args.workers, scheduler=args.scheduler,
                    progress=sys.stderr.isatty() if args.progress is None else args.progress)
     failed = int(np.count_nonzero(result.status != "success"))
-    print(f"{nominal.name}: {len(result)} variants, {result.info['mode']} ({result.info['workers']} "
-          f"{'scheduler' if result.info['mode'] == 'dask' else 'workers'}), {result.info['wall_time']:.3g} s wall, "
+    mode, used = result.info["mode"], result.info["workers"]
+    where = {"dask": f"scheduler {used}", "batched": f"{used} threads"}.get(
+        mode, "in this process" if used == 1 or len(result) == 1 else f"{used} worker processes")
+    print(f"{nominal.name}: {len(result)} variants, {mode} ({where}), {result.info['wall_time']:.3g} s wall, "
           f"{failed} failed")
     for v, variant in enumerate(result.variants):
         energy = result.energy[v, :result.recorded[v]]
