@@ -339,3 +339,9 @@ def test_kinematics_names_the_driver_that_blows_up(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "driver spin ('1/(t-0.5)') is not finite at t = 0.5" in err, err
     assert not (tmp_path / "k.csv").exists()
+
+
+def test_a_folder_given_as_model_file_is_named_as_such(tmp_path, capsys):
+    assert main(["describe", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a folder, not a model file" in err, err

@@ -318,6 +318,8 @@ def load_model_file(path: str | Path) -> Model:
     """
     path = Path(path)
     source = str(path)
+    if path.is_dir():
+        raise ModelError("is a folder, not a model file (give the path of a .toml file)", source=source)
     if not path.is_file():
         raise ModelError("no such model file", source=source)
     try:
