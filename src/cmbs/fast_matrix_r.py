@@ -58,49 +58,21 @@ def _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
 
 
 @njit(cache=True)
-def _condition_one(buffer, n, m, rows, dependent, Ad, pivots, side):
-    """cond₁(A_d) = ‖A_d‖₁ ‖A_d⁻¹‖₁ (as ``numpy.linalg.cond(A_d, 1)``) from the A in ``buffer``
-    and the LU factors of A_d in ``Ad``, ``pivots``; ``side`` is overwritten."""
+def _norms(buffer, n, m, rows, dependent, Ad, pivots, side, rows_too):
+    """(‖A_d‖₁, ‖A_d⁻¹‖₁, ‖A_d‖∞, ‖A_d⁻¹‖∞) from the A in ``buffer`` and the LU factors of A_d in
+    ``Ad``, ``pivots``: A_d⁻¹ column by column (r triangular solve pairs); the ∞-norms only when
+    ``rows_too`` (else 0).  ``side`` is overwritten."""
     r = rows.shape[0]
     A = buffer[n + m:n + m + m * n].reshape((m, n))
-    norm = 0.0
-    inverse_norm = 0.0
-    for j in range(r):
-        column = 0.0
-        for a in range(r):
-            column += abs(A[rows[a], dependent[j]])
-        norm = max(norm, column)
-        for a in range(r):
-            side[a] = 0.0
-        side[j] = 1.0
-        _lu_solve(Ad, pivots, side)
-        column = 0.0
-        for a in range(r):
-            column += abs(side[a])
-        inverse_norm = max(inverse_norm, column)
-    return norm * inverse_norm if r else 1.0
-
-
-@njit(cache=True)
-def _condition_two_bound(buffer, n, m, rows, dependent, Ad, pivots, side):
-    """An upper bound of cond₂(A_d): sqrt(cond₁ cond_∞) ≥ cond₂, since ‖B‖₂ ≤ sqrt(‖B‖₁ ‖B‖∞)
-    for every matrix B (Golub & Van Loan, Matrix Computations, 4th ed., §2.3.3), from the A in
-    ``buffer`` and the LU factors of A_d in ``Ad``, ``pivots`` (the columns of A_d⁻¹ give both
-    of its norms); ``side`` is overwritten.  r triangular solve pairs instead of an SVD."""
-    r = rows.shape[0]
-    if r == 0:
-        return 1.0
-    A = buffer[n + m:n + m + m * n].reshape((m, n))
-    row_sums = np.zeros(r)
-    norm_one = 0.0
-    norm_inf = 0.0
-    inverse_one = 0.0
+    row_sums = np.zeros(r if rows_too else 0)
+    norm_one = inverse_one = norm_inf = inverse_inf = 0.0
     for j in range(r):
         column = 0.0
         row = 0.0
         for a in range(r):
             column += abs(A[rows[a], dependent[j]])
-            row += abs(A[rows[j], dependent[a]])
+            if rows_too:
+                row += abs(A[rows[j], dependent[a]])
         norm_one = max(norm_one, column)
         norm_inf = max(norm_inf, row)
         for a in range(r):
@@ -110,11 +82,31 @@ def _condition_two_bound(buffer, n, m, rows, dependent, Ad, pivots, side):
         column = 0.0
         for a in range(r):
             column += abs(side[a])
-            row_sums[a] += abs(side[a])
+            if rows_too:
+                row_sums[a] += abs(side[a])
         inverse_one = max(inverse_one, column)
-    inverse_inf = 0.0
-    for a in range(r):
+    for a in range(row_sums.shape[0]):
         inverse_inf = max(inverse_inf, row_sums[a])
+    return norm_one, inverse_one, norm_inf, inverse_inf
+
+
+@njit(cache=True)
+def _condition_one(buffer, n, m, rows, dependent, Ad, pivots, side):
+    """cond₁(A_d) = ‖A_d‖₁ ‖A_d⁻¹‖₁ (as ``numpy.linalg.cond(A_d, 1)``), by :func:`_norms`."""
+    if rows.shape[0] == 0:
+        return 1.0
+    norm_one, inverse_one, _, _ = _norms(buffer, n, m, rows, dependent, Ad, pivots, side, False)
+    return norm_one * inverse_one
+
+
+@njit(cache=True)
+def _condition_two_bound(buffer, n, m, rows, dependent, Ad, pivots, side):
+    """An upper bound of cond₂(A_d): sqrt(cond₁ cond_∞) ≥ cond₂, since ‖B‖₂ ≤ sqrt(‖B‖₁ ‖B‖∞)
+    for every matrix B (Golub & Van Loan, Matrix Computations, 4th ed., §2.3.3), by
+    :func:`_norms`: r triangular solve pairs instead of an SVD."""
+    if rows.shape[0] == 0:
+        return 1.0
+    norm_one, inverse_one, norm_inf, inverse_inf = _norms(buffer, n, m, rows, dependent, Ad, pivots, side, True)
     return np.sqrt(norm_one * inverse_one * norm_inf * inverse_inf)
 
 
