@@ -87,3 +87,11 @@ def test_simulate_takes_a_library_name_and_refuses_an_infinite_span():
             cmbs.simulate("pendulum", t_end=bad)
     with pytest.raises(cmbs.CmbsError, match="more than 10,000,000"):
         cmbs.simulate("pendulum", t_end=1e6, dt=1e-3)
+
+
+def test_numpy_scalars_are_accepted_as_library_parameters():
+    """A grid built with numpy gives np.int64 and np.float64 values: they are numbers too."""
+    import numpy as np
+
+    assert cmbs.load("chain", links=np.int64(4), closed=np.bool_(True)).name == "chain4-closed"
+    assert cmbs.load("slider-crank", crank_speed=np.float64(1.5)).n > 0

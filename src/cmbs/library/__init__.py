@@ -94,37 +94,43 @@ def entry(name: str) -> LibraryEntry:
 def load_library_model(name: str, **parameters: object) -> Model:
     """Build library model ``name`` with keyword ``parameters`` (checked against its loader)."""
     library_entry = entry(name)
-    check_parameters(name, **parameters)
+    parameters = check_parameters(name, **parameters)
     from cmbs.model.files import assembled
 
     return assembled(library_entry.loader(**parameters), f"library model {name!r}")
 
 
-def check_parameters(name: str, **parameters: object) -> None:
-    """ModelError unless every keyword is a parameter of library model ``name`` with a value of its
+def check_parameters(name: str, **parameters: object) -> dict[str, object]:
+    """The keyword parameters of library model ``name`` as Python values (a numpy scalar becomes
+    a bool, int or float); ModelError unless each is a parameter of the model with a value of its
     default's kind (:func:`_check_parameter`)."""
     allowed = entry(name).parameters()
     unknown = sorted(set(parameters) - set(allowed))
     if unknown:
         accepted = ", ".join(f"{k}={v!r}" for k, v in allowed.items()) or "none"
         raise ModelError(f"model {name!r} has no parameter(s) {', '.join(unknown)} (parameters: {accepted})")
-    for key, value in parameters.items():
-        _check_parameter(name, key, value, allowed[key])
+    return {key: _check_parameter(name, key, value, allowed[key]) for key, value in parameters.items()}
 
 
-def _check_parameter(model: str, key: str, value: object, default: object) -> None:
-    """A library parameter has its default's kind: true/false for a flag, a whole number for a
-    count, a finite number for a quantity (a string such as "no" would otherwise count as true)."""
+def _check_parameter(model: str, key: str, value: object, default: object) -> object:
+    """``value`` as a Python value of its default's kind: true/false for a flag, a whole number for
+    a count, a finite number for a quantity (a string such as "no" would otherwise count as true);
+    other defaults take the value as it is."""
     import math
+    import numbers
 
+    import numpy as np
+
+    flag = isinstance(value, (bool, np.bool_))
     if isinstance(default, bool):
-        ok, kind = isinstance(value, bool), "true or false"
+        ok, kind, python = flag, "true or false", bool
     elif isinstance(default, int):
-        ok, kind = isinstance(value, int) and not isinstance(value, bool), "a whole number"
+        ok, kind, python = isinstance(value, numbers.Integral) and not flag, "a whole number", int
     elif isinstance(default, float):
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-        kind = "a finite number"
+        ok = isinstance(value, numbers.Real) and not flag and math.isfinite(value)
+        kind, python = "a finite number", float
     else:
-        return
+        return value
     if not ok:
         raise ModelError(f"model {model!r}: parameter {key} must be {kind}, got {value!r}")
+    return python(value)
