@@ -145,7 +145,8 @@ def _draw_energy_drift(axis: plt.Axes, t: np.ndarray, energy: np.ndarray) -> Non
     axis.set_xlabel("t [s]")
     axis.set_ylabel("E(t) - E(0) [J]")
     worst = np.nanmax(np.abs(drift)) if np.any(np.isfinite(drift)) else float("nan")
-    axis.set_title(f"energy drift, max |E - E(0)| = {worst:.3g} J", fontsize="medium")
+    # raised above the axis' power-of-ten label (e.g. "1e-6"), which matplotlib puts at its top left
+    axis.set_title(f"energy drift, max |E - E(0)| = {worst:.3g} J", fontsize="medium", pad=14)
     axis.grid(alpha=0.3)
 
 
