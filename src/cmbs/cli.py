@@ -344,9 +344,9 @@ def _grid(args: argparse.Namespace) -> np.ndarray:
     from cmbs.simulate import output_times
 
     try:
-        return output_times(args.t_end, args.dt)
+        return output_times(args.t_end, args.dt, ("--t-end", "--dt"))
     except CmbsError as error:
-        raise _UsageError(str(error).replace("t_end", "--t-end").replace("dt", "--dt")) from None
+        raise _UsageError(str(error)) from None
 
 
 def _check_time_grid_and_outputs(args: argparse.Namespace) -> np.ndarray:

@@ -99,17 +99,18 @@ class _Progress:
 MAX_SAMPLES = 10_000_000
 
 
-def output_times(t_end: float, dt: float) -> np.ndarray:
+def output_times(t_end: float, dt: float, names: tuple[str, str] = ("t_end", "dt")) -> np.ndarray:
     """The output instants 0, dt, 2 dt, ... and t_end (the last interval shorter when t_end is not
     a multiple of dt).  CmbsError for a t_end or dt that is not a finite number > 0, or a grid of
-    more than MAX_SAMPLES instants."""
-    for name, value in (("t_end", t_end), ("dt", dt)):
+    more than MAX_SAMPLES instants, naming them by ``names`` (the CLI's are its options)."""
+    for name, value in zip(names, (t_end, dt)):
         if not (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
                 and np.isfinite(value) and value > 0):
             raise CmbsError(f"{name} must be a finite number > 0, got {value!r}")
     if t_end / dt + 1 > MAX_SAMPLES:
-        raise CmbsError(f"t_end = {t_end:g} s with dt = {dt:g} s gives {t_end / dt + 1:.3g} output instants, more "
-                        f"than {MAX_SAMPLES:,}; choose a larger dt")
+        end, step = names
+        raise CmbsError(f"{end} = {t_end:g} s with {step} = {dt:g} s gives {t_end / dt + 1:.3g} output instants, "
+                        f"more than {MAX_SAMPLES:,}; choose a larger {step}")
     steps = int(round(t_end / dt))
     if abs(steps * dt - t_end) < 1e-9 * t_end:
         return np.linspace(0.0, steps * dt, steps + 1)
@@ -264,8 +265,7 @@ def _explain_failure(model: Model, trajectory: Trajectory, times: np.ndarray) ->
     last = float(trajectory.t[-1]) if len(trajectory.t) else 0.0
     after = times[times > last + 1e-12 * max(1.0, abs(last))]
     following = float(after[0]) if after.size else last
-    candidates = np.concatenate([[last, following], np.linspace(last, following, 1001)])
-    problem = model.time_function_problem(candidates)
+    problem = model.time_function_problem(np.linspace(last, following, 1001))   # both ends exact
     if problem:
         trajectory.info["message"] = f"{trajectory.info['message']} ({problem})"
 
@@ -324,7 +324,7 @@ def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.
                                 step=dt if tableau.b_error is None else None,
                                 after_step=after_step if project or solver.adjusts_state else None, progress=bar,
                                 stop_on=(CmbsError,))
-    if project:     # the output instants between steps are interpolated: projected as well
+    if project and tableau.b_error is not None:     # adaptive: outputs between steps are interpolated
         for row, t in zip(result.y, result.t):
             q, qd = project_state(model, row[:n], row[n:], float(t), tolerance=projection_tolerance)
             row[:n], row[n:] = q, qd

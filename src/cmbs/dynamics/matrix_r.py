@@ -151,10 +151,8 @@ class MatrixRSolver:
         self.reference_condition: float | None = None
         self.worst_condition = 0.0     # largest cond₁(A_d) met by a recovery, and its time
         self.worst_time = 0.0
-        block = self._block(A0)
-        start_condition = float(np.linalg.cond(block, 1)) if block.size else 1.0
         #: cond₁(A_d) above which the velocities are not recovered (``velocity_recovery_growth``)
-        self.recovery_limit = parameters.velocity_recovery_growth * start_condition
+        self.recovery_limit = parameters.velocity_recovery_growth * self._condition_one(A0)
         self.update_partition(A0, 0.0)
 
     def _block(self, A: np.ndarray) -> np.ndarray:
@@ -188,8 +186,14 @@ class MatrixRSolver:
         return self.reference_condition
 
     def _condition(self, A: np.ndarray) -> float:
+        """cond₂(A_d): the re-partition test."""
         block = self._block(A)
         return float(np.linalg.cond(block)) if block.size else 1.0
+
+    def _condition_one(self, A: np.ndarray) -> float:
+        """cond₁(A_d): the recovery's measure (the compiled loop's, from its LU factors)."""
+        block = self._block(A)
+        return float(np.linalg.cond(block, 1)) if block.size else 1.0
 
     def velocity_matrix(self, terms: Terms) -> np.ndarray:
         """R (n, n - r) with q̇ = R ż for the current partition."""
@@ -253,7 +257,7 @@ class MatrixRSolver:
         for iteration in range(self.p.max_iterations):
             model.evaluate(q, zeros, t, out=terms)
             if iteration == 0 and part.dependent.size:
-                condition = float(np.linalg.cond(self._block(terms.A), 1))
+                condition = self._condition_one(terms.A)
                 self.note_condition(condition, t)
                 velocities_kept = integrated_velocities and condition > self.recovery_limit
             residual = terms.phi[part.rows]
@@ -267,8 +271,7 @@ class MatrixRSolver:
         qd = qd.copy()
         if velocities_kept:
             return q, qd
-        model.evaluate(q, zeros, t, out=terms)
-        A = terms.A[part.rows]
+        A = terms.A[part.rows]               # the loop's last evaluation was at the recovered q
         if part.dependent.size:
             side = -A[:, part.independent] @ qd[part.independent] - terms.phi_t[part.rows]
             qd[part.dependent] = np.linalg.solve(A[:, part.dependent], side)

@@ -6,6 +6,7 @@ parameter values.  Builders take keyword parameters (``cmbs.load("chain", links=
 
 from __future__ import annotations
 
+import functools
 import inspect
 from dataclasses import dataclass
 from importlib import import_module, resources
@@ -40,7 +41,10 @@ def _file_loader(filename: str) -> Callable[[], Model]:
     return load
 
 
+@functools.cache
 def _entries() -> dict[str, LibraryEntry]:
+    """Every library entry by name, built once (its builders' modules imported, their signatures
+    read), not on every :func:`entry` or :func:`check_parameters`."""
     entries: list[LibraryEntry] = []
     for filename, summary in _FILES:
         entries.append(LibraryEntry(filename.removesuffix(".toml"), summary, _file_loader(filename)))

@@ -203,19 +203,19 @@ class TimeFunctionPack:
     def problem(self, times: Sequence[float]) -> str:
         """The first function (by its label) whose value or time derivatives are not finite at one
         of ``times``, as a sentence, else "": why a run met non-finite terms."""
-        for k, function in enumerate(self.functions):
-            if self.table[k, 0] == KIND_UNUSED:
-                continue
-            for t in times:
-                with np.errstate(all="ignore"):
+        with np.errstate(all="ignore"):
+            for k, function in enumerate(self.functions):
+                if self.table[k, 0] == KIND_UNUSED:
+                    continue
+                for t in times:
                     try:
                         values = function(float(t))
                     except (ArithmeticError, ValueError) as error:
                         values = (str(error),)
-                if not all(isinstance(v, float) and math.isfinite(v) for v in values):
-                    label = self.labels[k] if k < len(self.labels) else f"function of time {k}"
-                    shown = ", ".join(f"{v:.6g}" if isinstance(v, float) else v for v in values)
-                    return f"{label} ({_describe(function)}) is not finite at t = {t:.6g}: {shown}"
+                    if not all(isinstance(v, float) and math.isfinite(v) for v in values):
+                        label = self.labels[k] if k < len(self.labels) else f"function of time {k}"
+                        shown = ", ".join(f"{v:.6g}" if isinstance(v, float) else v for v in values)
+                        return f"{label} ({_describe(function)}) is not finite at t = {t:.6g}: {shown}"
         return ""
 
     @classmethod

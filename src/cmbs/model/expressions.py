@@ -17,9 +17,11 @@ Taylor (forward-mode) arithmetic: each stack slot holds ``(f, f', f'')``.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import re
 from dataclasses import dataclass
+from typing import Iterator
 
 from cmbs.jit import njit_borrowing
 import numpy as np
@@ -105,21 +107,23 @@ class _Parser:
         ops = np.array(self.ops, dtype=np.int64).reshape(-1, 2)
         return Program(self.text, ops, np.array(self.constants, dtype=float), _stack_depth(ops))
 
-    def _enter(self) -> None:
+    @contextlib.contextmanager
+    def _deeper(self) -> Iterator[None]:
         """One level deeper (brackets, function arguments, signs, exponents): refused beyond
         MAX_NESTING, before Python's own recursion limit is reached."""
         self.nesting += 1
         if self.nesting > MAX_NESTING:
             raise self._fail(f"more than {MAX_NESTING} nested brackets, signs or powers")
+        yield
+        self.nesting -= 1
 
     def _expr(self) -> None:
-        self._enter()
-        self._term()
-        while self._peek() in ("+", "-"):
-            operator = self._take()
+        with self._deeper():
             self._term()
-            self.ops.append((_BINARY[operator], 0))
-        self.nesting -= 1
+            while self._peek() in ("+", "-"):
+                operator = self._take()
+                self._term()
+                self.ops.append((_BINARY[operator], 0))
 
     def _term(self) -> None:
         self._unary()
@@ -131,9 +135,8 @@ class _Parser:
     def _unary(self) -> None:
         if self._peek() in ("+", "-"):
             negate = self._take() == "-"
-            self._enter()
-            self._unary()
-            self.nesting -= 1
+            with self._deeper():
+                self._unary()
             if negate:
                 self.ops.append((OP_NEG, 0))
             return
@@ -143,9 +146,8 @@ class _Parser:
         self._atom()
         if self._peek() in ("^", "**"):
             self._take()
-            self._enter()
-            self._unary()
-            self.nesting -= 1
+            with self._deeper():
+                self._unary()
             self.ops.append((OP_POW, 0))
 
     def _atom(self) -> None:

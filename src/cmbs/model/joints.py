@@ -316,14 +316,15 @@ class JointEquations:
     __slots__ = ("ip", "rp", "n", "m", "scratch_size", "python", "time_functions")
 
     def __init__(self, ip: np.ndarray, rp: np.ndarray, n: int, m: int, scratch_size: int,
-                 python: tuple[tuple[int, TimeFunction], ...], time_functions: TimeFunctionPack):
+                 time_functions: TimeFunctionPack):
         self.ip = ip
         self.rp = rp
         self.n = n
         self.m = m
         self.scratch_size = scratch_size
-        self.python = python
         self.time_functions = time_functions
+        #: the (index, function) pairs evaluated in Python before each kernel call
+        self.python: tuple[tuple[int, TimeFunction], ...] = time_functions.python
 
     def new_terms(self) -> Terms:
         """A workspace sized for this model (scratch included)."""
@@ -838,7 +839,7 @@ class JointModelBuilder:
         ip.setflags(write=False)
         rp.setflags(write=False)
         scratch = 3 * pack.count + 3 * pack.depth + _WORK_PER_LINK * n
-        equations = JointEquations(ip, rp, n, nr + nd, scratch, pack.python, pack)
+        equations = JointEquations(ip, rp, n, nr + nd, scratch, pack)
 
         parameters = {
             "builder": "joints",
