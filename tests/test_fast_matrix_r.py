@@ -106,7 +106,7 @@ def test_velocities_kept_near_the_singular_position_keep_the_digits(compiled):
     kept, kept_error = error(5e-4, "matrix-r")
     recovered, recovered_error = error(5e-4, MatrixR(velocity_recovery_growth=1e12))
     assert coarse.info["max_condition"] < ROUNDING_CONDITION < kept.info["max_condition"] / 10
-    assert "cond(A_d) = 1.1e+06 (t = 0.82775" in kept.info["note"]
+    assert "‖A_r‖‖A_d⁻¹‖ = 1.1e+06 (t = 0.82775" in kept.info["note"]
     assert coarse_error < 1e-10 and kept_error < 1e-9 and recovered_error > max(1e-8, 10 * kept_error)
 
 
@@ -118,9 +118,10 @@ def test_compiled_matrix_r_refuses_nonholonomic_models():
     assert "compiled" not in run.info and run.info["status"] == "success"
 
 
-def test_condition_bound_brackets_the_two_norm_condition():
-    """The step-end test's filter: cond₂(A_d) ≤ sqrt(cond₁ cond_∞) ≤ r cond₂(A_d), on random and
-    nearly singular blocks (the bound comes from the LU factors of A_d, numpy's cond from its SVD)."""
+def test_condition_bound_brackets_the_two_norm_partition_condition():
+    """The step-end test's filter: κ₂ ≤ sqrt(κ₁ κ_∞) ≤ (r n)^¼ √r κ₂ (κ_p = ‖A_r‖_p ‖A_d⁻¹‖_p;
+    ‖B‖₁ ≤ √rows ‖B‖₂ and ‖B‖∞ ≤ √columns ‖B‖₂), on random and nearly singular partitions (the
+    bound comes from the LU factors of A_d, the reference from numpy's norms and inverse)."""
     from cmbs.fast_matrix_r import _condition_two_bound, _factor_dependent
 
     generator = np.random.default_rng(7)
@@ -135,8 +136,10 @@ def test_condition_bound_brackets_the_two_norm_condition():
         Ad, pivots, side = np.empty((r, r)), np.empty(r, dtype=np.int64), np.empty(r)
         assert _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots)
         bound = _condition_two_bound(buffer, n, m, rows, dependent, Ad, pivots, side)
-        exact = np.linalg.cond(A[np.ix_(rows, dependent)])
-        assert exact * (1 - 1e-9) <= bound <= r * exact * (1 + 1e-9)
-        block = A[np.ix_(rows, dependent)]
-        expected = np.sqrt(np.linalg.cond(block, 1) * np.linalg.cond(block, np.inf))
+        A_r, inverse = A[rows], np.linalg.inv(A[np.ix_(rows, dependent)])
+        exact = np.linalg.svd(A_r, compute_uv=False)[0] / np.linalg.svd(A[np.ix_(rows, dependent)],
+                                                                         compute_uv=False)[-1]
+        assert exact * (1 - 1e-9) <= bound <= (r * n) ** 0.25 * np.sqrt(r) * exact * (1 + 1e-9)
+        expected = np.sqrt(np.linalg.norm(A_r, 1) * np.linalg.norm(inverse, 1) * np.linalg.norm(A_r, np.inf)
+                           * np.linalg.norm(inverse, np.inf))
         assert bound == pytest.approx(expected, rel=1e-6)

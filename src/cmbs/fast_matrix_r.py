@@ -9,13 +9,15 @@ A_d ḋ = -A_z ż - Φ_t), with the independent accelerations of Rᵀ M R z̈ = 
     R = [-A_d⁻¹ A_z ; I],   S = [A_d⁻¹ γ_r ; 0]   (rows in the partition's order),
     q̈ = R z̈ + S,           λ_r = -A_d⁻ᵀ (M q̈ - Q)_d,   λ = 0 on the rows not in the partition.
 
-A state whose cond₁(A_d) exceeds :attr:`MatrixRSolver.recovery_limit` (near a singular position)
-keeps its integrated velocities (positions recovered), as on the Python path. Every stage also
-keeps the largest cond₁(A_d) it met and its time (``worst``), for the warning of
+A state whose κ₁ = ‖A_r‖₁ ‖A_d⁻¹‖₁ (the partition's condition,
+:func:`cmbs.dynamics.matrix_r.partition_condition`) exceeds :attr:`MatrixRSolver.recovery_limit`
+(near a singular position) keeps its integrated velocities (positions recovered), as on the
+Python path. Every stage also
+keeps the largest κ₁ it met and its time (``worst``), for the warning of
 :func:`cmbs.dynamics.matrix_r.rounding_note`. After every step the state is recovered and
-cond₂(A_d) checked (by its SVD only where the bound sqrt(cond₁ cond_∞), from the LU factors the
+κ₂ checked (by SVDs only where the bound sqrt(κ₁ κ_∞), from the LU factors the
 recovery left, does not already rule a re-partition out). Choosing a new partition is Python's
-(:meth:`MatrixRSolver.update_partition`: pivoted QR and LU, rare): when cond(A_d) has grown by
+(:meth:`MatrixRSolver.update_partition`: pivoted QR and LU, rare): when κ₂ has grown by
 ``condition_growth`` (automatic partition) or passed 1e12 (any partition), the loop returns
 REPARTITION with the step reached, Python chooses again (or raises for a user partition) and the
 loop resumes from there. Holonomic models with constant inputs only (a nonholonomic row makes some
@@ -35,7 +37,7 @@ from cmbs.model.model import Model
 
 #: status codes besides fast.OK, SINGULAR and NON_FINITE
 REPARTITION, NOT_CONVERGED, VELOCITIES_KEPT = 3, 4, 5
-#: cond(A_d) above which every partition is handed back to Python (which raises for a user's)
+#: κ₂ above which every partition is handed back to Python (which raises for a user's)
 SINGULAR_CONDITION = 1e12
 
 
@@ -59,22 +61,26 @@ def _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
 
 @njit(cache=True)
 def _norms(buffer, n, m, rows, dependent, Ad, pivots, side, rows_too):
-    """(‖A_d‖₁, ‖A_d⁻¹‖₁, ‖A_d‖∞, ‖A_d⁻¹‖∞) from the A in ``buffer`` and the LU factors of A_d in
-    ``Ad``, ``pivots``: A_d⁻¹ column by column (r triangular solve pairs); the ∞-norms only when
-    ``rows_too`` (else 0).  ``side`` is overwritten."""
+    """(‖A_r‖₁, ‖A_d⁻¹‖₁, ‖A_r‖∞, ‖A_d⁻¹‖∞) from the A in ``buffer`` (A_r: the partition's rows,
+    all columns) and the LU factors of A_d in ``Ad``, ``pivots``: A_d⁻¹ column by column (r
+    triangular solve pairs); the ∞-norms only when ``rows_too`` (else 0).  ``side`` is
+    overwritten."""
     r = rows.shape[0]
     A = buffer[n + m:n + m + m * n].reshape((m, n))
-    row_sums = np.zeros(r if rows_too else 0)
     norm_one = inverse_one = norm_inf = inverse_inf = 0.0
-    for j in range(r):
+    for c in range(n):
         column = 0.0
-        row = 0.0
         for a in range(r):
-            column += abs(A[rows[a], dependent[j]])
-            if rows_too:
-                row += abs(A[rows[j], dependent[a]])
+            column += abs(A[rows[a], c])
         norm_one = max(norm_one, column)
-        norm_inf = max(norm_inf, row)
+    if rows_too:
+        for a in range(r):
+            row = 0.0
+            for c in range(n):
+                row += abs(A[rows[a], c])
+            norm_inf = max(norm_inf, row)
+    row_sums = np.zeros(r if rows_too else 0)
+    for j in range(r):
         for a in range(r):
             side[a] = 0.0
         side[j] = 1.0
@@ -92,7 +98,8 @@ def _norms(buffer, n, m, rows, dependent, Ad, pivots, side, rows_too):
 
 @njit(cache=True)
 def _condition_one(buffer, n, m, rows, dependent, Ad, pivots, side):
-    """cond₁(A_d) = ‖A_d‖₁ ‖A_d⁻¹‖₁ (as ``numpy.linalg.cond(A_d, 1)``), by :func:`_norms`."""
+    """κ₁ = ‖A_r‖₁ ‖A_d⁻¹‖₁ (as :func:`cmbs.dynamics.matrix_r.partition_condition` with norm 1),
+    by :func:`_norms`."""
     if rows.shape[0] == 0:
         return 1.0
     norm_one, inverse_one, _, _ = _norms(buffer, n, m, rows, dependent, Ad, pivots, side, False)
@@ -101,9 +108,9 @@ def _condition_one(buffer, n, m, rows, dependent, Ad, pivots, side):
 
 @njit(cache=True)
 def _condition_two_bound(buffer, n, m, rows, dependent, Ad, pivots, side):
-    """An upper bound of cond₂(A_d): sqrt(cond₁ cond_∞) ≥ cond₂, since ‖B‖₂ ≤ sqrt(‖B‖₁ ‖B‖∞)
+    """An upper bound of κ₂ = ‖A_r‖₂ ‖A_d⁻¹‖₂: sqrt(κ₁ κ_∞) ≥ κ₂, since ‖B‖₂ ≤ sqrt(‖B‖₁ ‖B‖∞)
     for every matrix B (Golub & Van Loan, Matrix Computations, 4th ed., §2.3.3), by
-    :func:`_norms`: r triangular solve pairs instead of an SVD."""
+    :func:`_norms`: r triangular solve pairs instead of SVDs."""
     if rows.shape[0] == 0:
         return 1.0
     norm_one, inverse_one, norm_inf, inverse_inf = _norms(buffer, n, m, rows, dependent, Ad, pivots, side, True)
@@ -116,8 +123,8 @@ def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent,
     """Dependent coordinates (Newton, in place in ``q``) and velocities (in place in ``qd``);
     leaves A at the recovered q in ``buffer`` and A_d's LU factors there in ``Ad``, ``pivots``.
     Returns OK, NOT_CONVERGED or NON_FINITE, or VELOCITIES_KEPT (positions recovered, q̇
-    unchanged) where cond₁(A_d) at the given q exceeds ``limit``
-    (:attr:`MatrixRSolver.recovery_limit`); raises ``worst`` = [cond₁(A_d), t] when that
+    unchanged) where κ₁ at the given q exceeds ``limit``
+    (:attr:`MatrixRSolver.recovery_limit`); raises ``worst`` = [κ₁, t] when that
     condition is the largest so far."""
     r = rows.shape[0]
     zeros = np.zeros(n)
@@ -240,16 +247,22 @@ def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dep
 
 @njit(cache=True)
 def _condition(buffer, n, m, rows, dependent):
-    """cond₂(A_d) of the A in ``buffer`` (as ``numpy.linalg.cond``, the Python solver's test)."""
+    """κ₂ = cond₂(A_d) ‖A_r‖₂ / ‖A_d‖₂ of the A in ``buffer``, as
+    :func:`cmbs.dynamics.matrix_r.partition_condition` (the Python solver's test) computes it."""
     r = rows.shape[0]
     if r == 0:
         return 1.0
     A = buffer[n + m:n + m + m * n].reshape((m, n))
     block = np.empty((r, r))
+    partition_rows = np.empty((r, n))
     for a in range(r):
+        for c in range(n):
+            partition_rows[a, c] = A[rows[a], c]
         for j in range(r):
             block[a, j] = A[rows[a], dependent[j]]
-    return np.linalg.cond(block)
+    condition = np.linalg.cond(block)
+    scale = np.linalg.norm(block, 2)
+    return condition * np.linalg.norm(partition_rows, 2) / scale if scale > 0 else np.inf
 
 
 @njit(cache=True)
@@ -258,9 +271,9 @@ def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, ro
         FORCE):
     """RK4 steps ``first`` .. ``steps`` (t = step·h) from the state (q0, q̇0) at step ``first``,
     recording every step into the given arrays (row = step; the row of ``first`` > 0 is already
-    there), and the largest stage cond₁(A_d) and its time into ``worst``.  Returns (status, step
+    there), and the largest stage κ₁ and its time into ``worst``.  Returns (status, step
     reached, rows recorded, q, q̇ at the step reached): OK at
-    the end; REPARTITION when cond(A_d) at the step reached calls for a new partition; a
+    the end; REPARTITION when κ₂ at the step reached calls for a new partition; a
     failure code where a stage of that step failed."""
     n = q0.shape[0]
     r, k = rows.shape[0], independent.shape[0]
@@ -322,7 +335,7 @@ def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0:
     """Run :func:`rk4` over ``steps`` steps of ``dt`` from (q0, q̇0), handing every re-partition
     to ``solver`` (which chooses the new partition or raises).  Returns the records
     (t, q, q̇, q̈, λ, |Φ|max, |Φ̇|max, f_c), the number recorded, the failure message ("" on
-    success) and the number of re-partitions; the largest stage cond₁(A_d) goes to
+    success) and the number of re-partitions; the largest stage κ₁ goes to
     ``solver.note_condition``."""
     kind, ints, reals, buffer, mass = kernel(model)
     n, m = model.n, model.m
@@ -354,8 +367,8 @@ def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0:
             solver.update_partition(model.jacobian(q, t), t)
         except CmbsError as error:
             return records, recorded, str(error), repartitions
-        if solver.repartitions == before:    # numpy's cond(A_d) disagrees with the loop's: cannot go on
-            return records, recorded, (f"model {model.name!r} at t={t:.6g}: cond(A_d) calls for a new partition "
-                                       "but none was chosen"), repartitions
+        if solver.repartitions == before:    # numpy's κ₂ disagrees with the loop's: cannot go on
+            return records, recorded, (f"model {model.name!r} at t={t:.6g}: the partition's condition calls for a "
+                                       "new partition but none was chosen"), repartitions
         repartitions += 1
         first = reached

@@ -160,7 +160,8 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     Trajectory
         With extras ``lam``, ``constraint_force``, ``u``, ``energy``, ``constraint_error`` and
         ``velocity_constraint_error``; ``info`` holds the options, status, message, counters
-        and wall time (matrix R adds ``max_condition``, the largest cond₁(A_d) met by its
+        and wall time (matrix R adds ``max_condition``, the largest partition condition
+        ‖A_r‖₁ ‖A_d⁻¹‖₁ (:func:`cmbs.dynamics.matrix_r.partition_condition`) met by its
         recovery of a stage or step state, at ``max_condition_t``; ``note`` warns when it passed
         :data:`cmbs.dynamics.matrix_r.ROUNDING_CONDITION`).  A failed run returns the part
         computed before the failure with ``info["status"] == "failed"``.
@@ -271,7 +272,7 @@ def _explain_failure(model: Model, trajectory: Trajectory, times: np.ndarray) ->
 
 
 def _note_rounding(info: dict, solver) -> None:
-    """For matrix R: the largest cond₁(A_d) met by its recovery (``max_condition``, at
+    """For matrix R: the largest κ₁ = ‖A_r‖₁ ‖A_d⁻¹‖₁ met by its recovery (``max_condition``, at
     ``max_condition_t``) and, when rounding there may have spoilt the motion, a warning in the note."""
     if not isinstance(solver, MatrixRSolver):
         return

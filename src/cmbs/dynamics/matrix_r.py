@@ -12,16 +12,18 @@ coordinates recovered from z by a position analysis (Newton on Φ = 0 with z hel
 the integrated values) and their velocities from A_d ḋ = -A_z ż - Φ_t; the same recovery follows
 every accepted step.  The motion is that of the ODE in z, whose right-hand side is smooth along
 the assembly branch even where A_d is ill-conditioned (near a singular position); evaluating it
-at unrecovered stage states there would amplify their constraint error by cond(A_d).  Its
-evaluation in floating point is not smooth there: the recovery amplifies rounding about
-cond(A_d)³ times (see ROUNDING_CONDITION), so close to a singular position the integrated
-velocities are kept (``velocity_recovery_growth``), and runs report the worst stage.
+at unrecovered stage states there would amplify their constraint error by the partition's
+condition κ = ‖A_r‖ ‖A_d⁻¹‖ (:func:`partition_condition`; A_r the partition's rows of A).  Its
+evaluation in floating point is not smooth there: the recovery amplifies rounding about κ³
+times (see ROUNDING_CONDITION), so close to a singular position the integrated velocities are
+kept (``velocity_recovery_growth``), and runs report the worst stage.
 
 The partition is given by the user (names of the independent coordinates) or chosen
 automatically by LU factorisation with partial pivoting of Aᵀ (pivot columns of A are
-dependent), and chosen again when the dependent block's condition number grows by
-``condition_growth``, so that the method follows the mechanism through configurations where its
-first choice of independent coordinates stops determining the others.
+dependent), and chosen again when κ grows by ``condition_growth``, so that the method follows
+the mechanism through configurations where its first choice of independent coordinates stops
+determining the others.  κ, not cond(A_d): a block can stay perfectly conditioned while it
+shrinks against the rest of A (a pendulum's x as it swings under the pivot).
 """
 
 from __future__ import annotations
@@ -38,17 +40,18 @@ from cmbs.model.model import Model, Terms
 
 linalg = lazy_module("scipy.linalg")
 
-#: cond₁(A_d) at an evaluated stage above which :func:`rounding_note` warns.  At a state δ from a
-#: singular position, cond(A_d) ~ 1/δ; the positions a recovery reaches are then uncertain by
+#: κ₁ (:func:`partition_condition`) at an evaluated stage above which :func:`rounding_note`
+#: warns.  At a state δ from a singular position, κ ~ 1/δ; the positions a recovery reaches are then uncertain by
 #: about ε/δ along A_d's near-null direction (ε the rounding of Φ), the velocities recovered from
 #: them by ε/δ² and the accelerations by ε/δ³.  Recovering every velocity, the slider-crank
 #: (gravity 9.81, RK4 for 1 s through its crossing at 0.83 s, against its branch ODE) ended
 #: 5e-10 to 1e-5 rad off at h = 0.5 ms to 10 µs (worst stages 1.5e5 to 6.3e6), within its
 #: truncation error at 10 to 1 ms (at most 2.8e4).  Keeping the integrated velocities where
-#: cond₁(A_d) has grown 100-fold (``velocity_recovery_growth``) brings all of those within 1e-10;
+#: κ₁ has grown 100-fold (``velocity_recovery_growth``) brings all of those within 1e-10;
 #: the horizontal slider-crank over 10 s (seven crossings) still loses digits at small steps
 #: (relative energy error 1e-6 at 0.1 ms, 3.3e-6 at 20 µs, worst stages 1e6 to 4e6; below 1e-7
-#: at 2.5 to 0.25 ms except 2.4e-7 at 0.5 ms, worst stages below 7e4).
+#: at 2.5 to 0.25 ms except 2.4e-7 at 0.5 ms, worst stages below 7e4).  (On the slider-crank κ₁
+#: equals cond₁(A_d), with which these were measured: A_d holds A_r's largest column.)
 ROUNDING_CONDITION = 1e5
 
 
@@ -61,22 +64,26 @@ class MatrixR:
     independent
         Names of the independent coordinates (default: chosen automatically).
     condition_growth
-        Re-partition when cond(A_d) grows beyond this factor times its value when the partition
-        was chosen (automatic partition only).  The error constant of the ODE in z grows with
-        cond(A_d) (its derivatives hold A_d⁻¹), so re-partitioning early pays: RK4 at 1 ms,
-        end error against Lagrange at 25 µs, factor 3 → 1.25: closed 8-link chain (2 s)
-        1.1e-2 → 2.1e-4, 14-link (1 s) 4.2e-2 → 7.6e-4, 50-link (1.6 s) 3.2e-4 → 2.8e-5,
-        undriven four-bar (5 s) 1.0e-8 → 3.0e-10, with 1-3 times the re-partitions; the
-        slider-crank through its singular positions is as accurate and 9 % slower.
+        Re-partition when the partition's condition κ₂ = ‖A_r‖₂ ‖A_d⁻¹‖₂
+        (:func:`partition_condition`) grows beyond this factor times its value when the
+        partition was chosen (automatic partition only).  The error constant of the ODE in z
+        grows with κ (its derivatives hold A_d⁻¹), so re-partitioning early pays: RK4 at 1 ms,
+        end error against Lagrange at 25 µs, factor 3 → 1.25 (both with cond₂(A_d) as the
+        measure): closed 8-link chain (2 s) 1.1e-2 → 2.1e-4, 14-link (1 s) 4.2e-2 → 7.6e-4,
+        50-link (1.6 s) 3.2e-4 → 2.8e-5, undriven four-bar (5 s) 1.0e-8 → 3.0e-10, with 1-3 times
+        the re-partitions; the slider-crank through its singular positions is as accurate and
+        9 % slower.  With κ₂ at 1.25: 2.0e-4, 4.5e-4, 2.8e-5 and 2.8e-10, and the pendulum and
+        the particle on a circle, whose 1 × 1 A_d has condition 1 at every position, no longer
+        fail where the pendulum passes under its pivot (5 s: 5.8e-10).
     rank_tolerance
         Relative singular-value tolerance for the rank of A.
     position_tolerance, max_iterations
         Newton recovery of the dependent coordinates.
     velocity_recovery_growth
-        Where cond₁(A_d) exceeds this factor times cond₁(A_d) at the start, the dependent
-        velocities are not recovered, only the positions.  So close to a singular position, the
-        positions' rounding error along A_d's near-null direction (about ε cond(A_d)) would turn
-        into velocity errors about cond(A_d) times larger, and accelerations larger again (see
+        Where κ₁ exceeds this factor times κ₁ at the start, the dependent velocities are not
+        recovered, only the positions.  So close to a singular position, the positions' rounding
+        error along A_d's near-null direction (about ε κ) would turn into velocity errors about
+        κ times larger, and accelerations larger again (see
         ROUNDING_CONDITION): more than the integrated velocities' small inconsistency.  Those
         states keep the integrated velocities, as an index-1 method does; the first state
         outside that zone recovers them.
@@ -134,6 +141,24 @@ def choose_partition(A: np.ndarray, rank_tolerance: float, independent: np.ndarr
     return Partition(np.setdiff1d(np.arange(n), dependent), dependent, rows)
 
 
+def partition_condition(A_rows: np.ndarray, dependent: np.ndarray, norm: int) -> float:
+    """κ_p = ‖A_r‖_p ‖A_d⁻¹‖_p = cond_p(A_d) ‖A_r‖_p / ‖A_d‖_p (p = 1 or 2): how much the recovery
+    of the dependent coordinates amplifies a constraint residual, relative to the scale of the
+    partition's rows A_r (all columns) of A, whose dependent columns are A_d.
+
+    cond(A_d) alone does not see A_d becoming small against A_r: a pendulum in natural
+    coordinates (x, z) with x dependent has A_d = [2x], of condition 1 at every x, while its
+    velocity transformation ẋ = -(z/x) ż grows without bound as the pendulum swings under its
+    pivot; κ = ‖[2x, 2z]‖ / |2x| = L/|x| does.  Since ‖A_r‖ ≥ ‖A_d‖, κ ≥ cond(A_d), and both grow
+    alike where A_r itself loses rank (a singular position).  1 without dependent coordinates."""
+    if dependent.size == 0:
+        return 1.0
+    block = A_rows[:, dependent]
+    condition = float(np.linalg.cond(block, norm))
+    scale = float(np.linalg.norm(block, norm))
+    return condition * float(np.linalg.norm(A_rows, norm)) / scale if scale > 0 else np.inf
+
+
 class MatrixRSolver:
     adjusts_state = True
 
@@ -149,9 +174,9 @@ class MatrixRSolver:
                 f"{model.n - len(self.partition.rows)} degrees of freedom")
         self.repartitions = 0
         self.reference_condition: float | None = None
-        self.worst_condition = 0.0     # largest cond₁(A_d) met by a recovery, and its time
+        self.worst_condition = 0.0     # largest κ₁ met by a recovery, and its time
         self.worst_time = 0.0
-        #: cond₁(A_d) above which the velocities are not recovered (``velocity_recovery_growth``)
+        #: κ₁ above which the velocities are not recovered (``velocity_recovery_growth``)
         self.recovery_limit = parameters.velocity_recovery_growth * self._condition_one(A0)
         self.update_partition(A0, 0.0)
 
@@ -160,7 +185,7 @@ class MatrixRSolver:
         return A[np.ix_(self.partition.rows, self.partition.dependent)]
 
     def update_partition(self, A: np.ndarray, t: float) -> None:
-        """Choose the partition again when cond(A_d) has grown by ``condition_growth`` since it was
+        """Choose the partition again when κ₂ has grown by ``condition_growth`` since it was
         chosen (automatic partition), or raise when A_d is singular (user partition)."""
         condition = self._condition(A)
         if self.reference_condition is None:
@@ -170,12 +195,12 @@ class MatrixRSolver:
         if condition > 1e12:
             names = [self.model.coordinate_names[k] for k in self.partition.independent]
             raise SingularSystemError(
-                f"model {self.model.name!r} at t={t:.6g}: the dependent block A_d is singular (condition "
+                f"model {self.model.name!r} at t={t:.6g}: the dependent block A_d is singular (condition ‖A_r‖‖A_d⁻¹‖ "
                 f"{condition:.3g}) with independent coordinates {', '.join(names)}; choose other independent "
                 "coordinates or let matrix-r choose them automatically")
 
     def repartition(self, A: np.ndarray) -> float:
-        """Choose the partition again at the configuration of ``A``; returns the new cond(A_d).
+        """Choose the partition again at the configuration of ``A``; returns the new κ₂.
 
         The number of dependent coordinates stays the rank found at the initial configuration:
         near a singular position the numerical rank of A drops for an instant, and taking that
@@ -186,14 +211,14 @@ class MatrixRSolver:
         return self.reference_condition
 
     def _condition(self, A: np.ndarray) -> float:
-        """cond₂(A_d): the re-partition test."""
-        block = self._block(A)
-        return float(np.linalg.cond(block)) if block.size else 1.0
+        """κ₂: the partition's condition in the 2-norm (the re-partition test); see
+        :func:`partition_condition`."""
+        return partition_condition(A[self.partition.rows], self.partition.dependent, 2)
 
     def _condition_one(self, A: np.ndarray) -> float:
-        """cond₁(A_d): the recovery's measure (the compiled loop's, from its LU factors)."""
-        block = self._block(A)
-        return float(np.linalg.cond(block, 1)) if block.size else 1.0
+        """κ₁: the partition's condition in the 1-norm (the recovery's measure; the compiled loop's,
+        from its LU factors)."""
+        return partition_condition(A[self.partition.rows], self.partition.dependent, 1)
 
     def velocity_matrix(self, terms: Terms) -> np.ndarray:
         """R (n, n - r) with q̇ = R ż for the current partition."""
@@ -220,7 +245,7 @@ class MatrixRSolver:
         return Accelerations(qdd, lam, -terms.A.T @ lam)
 
     def note_condition(self, condition: float, t: float) -> None:
-        """Keep the largest cond₁(A_d) met by a recovery (at the state it was given) and its time."""
+        """Keep the largest κ₁ met by a recovery (at the state it was given) and its time."""
         if condition > self.worst_condition:
             self.worst_condition, self.worst_time = condition, t
 
@@ -246,7 +271,7 @@ class MatrixRSolver:
                 integrated_velocities: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Dependent coordinates by Newton on Φ = 0 and their velocities from A_d ḋ = -A_z ż - Φ_t,
         with the independent coordinates and velocities held.  When ``qd`` holds integrated
-        velocities, they are kept as given where cond₁(A_d) at the given q exceeds
+        velocities, they are kept as given where κ₁ at the given q exceeds
         ``recovery_limit`` (``velocity_recovery_growth``); False (an integrator of z and ż alone,
         whose ḋ is only a guess) recovers them everywhere."""
         model, part = self.model, self.partition
@@ -279,10 +304,10 @@ class MatrixRSolver:
 
 
 def rounding_note(worst_condition: float, worst_time: float) -> str:
-    """A warning when a matrix-R run evaluated a stage with cond₁(A_d) above ROUNDING_CONDITION
+    """A warning when a matrix-R run evaluated a stage with κ₁ above ROUNDING_CONDITION
     (close to a singular position, where rounding costs digits), else ""."""
     if not worst_condition > ROUNDING_CONDITION:
         return ""
-    return (f"matrix-r evaluated a stage at cond(A_d) = {worst_condition:.2g} (t = {worst_time:.6g}, near a singular "
-            "position), where rounding costs digits: the motion after it may be off by more than the integrator's "
-            "error; check it with another dt or formulation (docs/formulations.md)")
+    return (f"matrix-r evaluated a stage at condition ‖A_r‖‖A_d⁻¹‖ = {worst_condition:.2g} (t = {worst_time:.6g}, "
+            "near a singular position), where rounding costs digits: the motion after it may be off by more than "
+            "the integrator's error; check it with another dt or formulation (docs/formulations.md)")
