@@ -118,6 +118,9 @@ def _describe(args: argparse.Namespace) -> int:
         print(f"masses [kg]  {masses}; total {model.total_mass:g}")
     print(f"energy at q0 T = {model.kinetic_energy(model.q0, model.qd0):.6g} J, "
           f"V = {model.potential_energy(model.q0):.6g} J")
+    sources = model.work_sources
+    print("work done by " + ("(not stated by these equations)" if sources is None else ", ".join(sources) if sources
+                             else "gravity and springs only: T + V is conserved with zero inputs"))
     return 0
 
 

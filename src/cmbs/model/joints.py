@@ -314,6 +314,8 @@ class JointEquations:
     """
 
     __slots__ = ("ip", "rp", "n", "m", "scratch_size", "python", "time_functions")
+    #: none: joint models have no dampers, forces or torques (:attr:`cmbs.model.model.Model.work_sources`)
+    work_sources: tuple[str, ...] = ()
 
     def __init__(self, ip: np.ndarray, rp: np.ndarray, n: int, m: int, scratch_size: int,
                  time_functions: TimeFunctionPack):

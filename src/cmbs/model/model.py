@@ -118,6 +118,11 @@ class ModelEquations(Protocol):
     def point_positions(self, q: np.ndarray) -> np.ndarray:
         """(n_points, 2) positions (x, z) of the model's named points."""
 
+    # Optional: ``work_sources``, a tuple naming the elements other than gravity, springs,
+    # constraints and actuators whose forces do work (dampers, applied forces and torques): ()
+    # when there are none, so that T + V is conserved without drivers and inputs.  Equations
+    # without it (user equations, wrappers that change the forces) are not known to conserve it.
+
 
 @dataclass(frozen=True)
 class Model:
@@ -312,14 +317,31 @@ class Model:
                 return pack.problem(times)
         return ""
 
-    def energy_history(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """T + V at every row of q, q̇ (k, n): vectorised when the base equations can (constant
+    def energy_parts(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """T and V at every row of q, q̇ (k, n): vectorised when the base equations can (constant
         M, linear gravity potential: natural coordinates), else row by row."""
         q, qd = np.asarray(q, dtype=float).reshape(-1, self.n), np.asarray(qd, dtype=float).reshape(-1, self.n)
         base = base_equations(self)[0]      # wrappers keep the energies of their base equations
-        if hasattr(base, "energies"):
-            return base.energies(q, qd)
-        return np.array([self.energy(qi, qdi) for qi, qdi in zip(q, qd)])
+        if hasattr(base, "energy_parts"):
+            return base.energy_parts(q, qd)
+        return (np.array([self.kinetic_energy(qi, qdi) for qi, qdi in zip(q, qd)]),
+                np.array([self.potential_energy(qi) for qi in q]))
+
+    def energy_history(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """T + V at every row of q, q̇ (k, n) (:meth:`energy_parts`)."""
+        kinetic, potential = self.energy_parts(q, qd)
+        return kinetic + potential
+
+    @property
+    def work_sources(self) -> tuple[str, ...] | None:
+        """What does work on the mechanism besides gravity, springs, actuators (which do work only
+        with nonzero inputs) and workless constraints: its drivers, dampers, applied forces and
+        torques, by name.  () means T + V is conserved by the exact motion with zero inputs; None
+        that the equations do not say (see :class:`ModelEquations`)."""
+        sources = getattr(self.equations, "work_sources", None)
+        if sources is None:
+            return None
+        return tuple(f"driver {name!r}" for name in self.driver_names) + tuple(sources)
 
     def point_positions(self, q: np.ndarray) -> np.ndarray:
         """(n_points, 2) positions (x, z) of :attr:`point_names`."""
@@ -367,4 +389,9 @@ class _RowSubset(WrappedEquations):
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
         self.inner.evaluate(q, qd, t, u, self.inner_terms)
         assign_terms(terms, self.inner_terms, self.rows)
+
+    @property
+    def work_sources(self) -> tuple[str, ...] | None:
+        """The inner equations' (dropping rows removes no force)."""
+        return getattr(self.inner, "work_sources", None)
 

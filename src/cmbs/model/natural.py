@@ -39,7 +39,7 @@ from cmbs.jit import njit_borrowing
 import numpy as np
 
 from cmbs.errors import ModelError
-from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions
+from cmbs.model.drivers import Constant, TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions
 from cmbs.model.model import Model, Terms
 from cmbs.model.packing import int_section, pack, real_section
 
@@ -363,6 +363,16 @@ class _Assembler:
             self.kinds.append("angle")
             self.q0.append(initial if initial is not None else actual)
 
+    def _work_sources(self) -> tuple[str, ...]:
+        """The forces and torques that are not constant zero, and the springs with damping."""
+        def nonzero(function: object) -> bool:
+            return not (isinstance(function, Constant) and function.value == 0)
+
+        b = self.b
+        return (tuple(f"force {name!r}" for name, (_, fx, fz) in b._point_forces.items() if nonzero(fx) or nonzero(fz))
+                + tuple(f"torque {name!r}" for name, (_, torque) in b._torques.items() if nonzero(torque))
+                + tuple(f"damper {name!r}" for name, spring in b._springs.items() if spring[3] > 0))
+
     def _direction(self, spec: str | tuple[str, str] | None, entry: str) -> tuple[list[int], np.ndarray]:
         """Extended indices (x_a, z_a, x_b, z_b) and initial value of a direction r_b - r_a:
         a segment name, a pair of points, or None for the x axis."""
@@ -552,7 +562,7 @@ class _Assembler:
             n=n, m=m, ints=ints, reals=reals, mass=mass, time_functions=tf,
             constants=np.array(self.constants), gravity_ext=gravity_ext,
             springs=(resolve(spring_rows, 4), np.array(spring_parameters).reshape(-1, 3)),
-            point_xz=point_xz, segments=tuple(segment_data))
+            point_xz=point_xz, segments=tuple(segment_data), work_sources=self._work_sources())
         return Model(
             name=b.name, coordinate_names=tuple(self.names), coordinate_kinds=tuple(self.kinds),
             constraint_names=tuple(constraint_names), drivers=drivers, actuator_names=tuple(b._actuators),
@@ -624,6 +634,8 @@ class NaturalEquations:
     springs: tuple[np.ndarray, np.ndarray]
     point_xz: np.ndarray
     segments: tuple[SegmentData, ...] = ()
+    #: the dampers, forces and torques, by name (see :attr:`cmbs.model.model.Model.work_sources`)
+    work_sources: tuple[str, ...] = ()
 
     @property
     def _scratch_size(self) -> int:
@@ -661,17 +673,17 @@ class NaturalEquations:
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
         return 0.5 * float(qd @ self.mass @ qd)
 
-    def energies(self, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """T + V at every row of q, q̇ (k, n), vectorised: T = ½ q̇ᵀ M q̇ (M constant) and V as in
-        :meth:`potential_energy`."""
+    def energy_parts(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """T and V at every row of q, q̇ (k, n), vectorised: T = ½ q̇ᵀ M q̇ (M constant) and V as
+        in :meth:`potential_energy`."""
         q_ext = np.concatenate([q, np.broadcast_to(self.constants, (q.shape[0], self.constants.size))], axis=1)
-        energy = 0.5 * np.sum((qd @ self.mass) * qd, axis=1) - q_ext @ self.gravity_ext
+        potential = -(q_ext @ self.gravity_ext)
         rows, parameters = self.springs
         if rows.size:
             d = q_ext[:, rows[:, 2:4]] - q_ext[:, rows[:, 0:2]]
             stretch = np.hypot(d[..., 0], d[..., 1]) - parameters[:, 2]
-            energy += 0.5 * np.sum(parameters[:, 0] * stretch**2, axis=1)
-        return energy
+            potential += 0.5 * np.sum(parameters[:, 0] * stretch**2, axis=1)
+        return 0.5 * np.sum((qd @ self.mass) * qd, axis=1), potential
 
     def potential_energy(self, q: np.ndarray) -> float:
         """V = -Σ m g·r_G (linear in q: -Q_gravityᵀ q_ext) + Σ ½ k (ℓ - ℓ0)²."""

@@ -1,0 +1,104 @@
+"""The energy check of a run: which models conserve T + V (Model.work_sources), the relative
+drift info["energy_drift"] computed independently from the recorded motion, and the note when it
+is large."""
+
+import numpy as np
+import pytest
+
+import cmbs
+from cmbs.cli import main
+from cmbs.control.faults import mass_fault
+from cmbs.model.natural import NaturalModelBuilder
+from cmbs.simulate import ENERGY_NOTE, simulate
+
+
+def _pendulum_with(**elements) -> cmbs.Model:
+    """The 1 m pendulum of rod O-P, plus the given force, torque or spring."""
+    builder = NaturalModelBuilder("pendulum-with")
+    builder.add_point("O", 0.0, 0.0, fixed=True)
+    builder.add_point("P", 1.0, 0.0)
+    builder.add_point("W", 1.0, 1.0, fixed=True)
+    builder.add_segment("rod", "O", "P", mass=1.0, com=(0.5, 0.0), inertia=1 / 12)
+    builder.add_angle("phi", segment="rod")
+    if "force" in elements:
+        builder.add_force("push", point="P", fx=0.0, fz=elements["force"])
+    if "torque" in elements:
+        builder.add_torque("twist", angle="phi", torque=elements["torque"])
+    if "damping" in elements:
+        builder.add_spring("band", "P", "W", stiffness=5.0, damping=elements["damping"])
+    return builder.build()
+
+
+def _independent_drift(model: cmbs.Model, run: cmbs.Trajectory) -> float:
+    """max |E - E0| / max T from the recorded states, T = ½ q̇ᵀ M(q) q̇ with M from the model."""
+    kinetic = np.array([0.5 * qd @ model.mass_matrix(q) @ qd for q, qd in zip(run.q, run.qd)])
+    energy = kinetic + np.array([model.potential_energy(q) for q in run.q])
+    return float(np.abs(energy - energy[0]).max() / kinetic.max())
+
+
+def test_work_sources_name_what_does_work():
+    assert _pendulum_with().work_sources == ()
+    assert _pendulum_with(force=0.0, torque="0").work_sources == ("torque 'twist'",)   # an expression is kept
+    assert _pendulum_with(force="sin(t)").work_sources == ("force 'push'",)
+    assert _pendulum_with(damping=0.0).work_sources == ()                 # a spring alone is in V
+    assert _pendulum_with(damping=0.5).work_sources == ("damper 'band'",)
+    driven = cmbs.load("four-bar")
+    assert driven.work_sources == ("driver 'crank'",)
+    assert driven.without_drivers().work_sources == ()
+    assert cmbs.load("slider-crank-joint").work_sources == ()
+    assert cmbs.load("chaplygin-sleigh").work_sources is None              # user equations do not say
+    assert mass_fault(cmbs.load("pendulum"), "rod", factor=1.1).work_sources is None
+
+
+def test_energy_parts_agree_with_the_row_by_row_energies():
+    model = _pendulum_with(damping=0.0)
+    generator = np.random.default_rng(3)
+    q, qd = generator.normal(size=(6, model.n)), generator.normal(size=(6, model.n))
+    kinetic, potential = model.energy_parts(q, qd)
+    np.testing.assert_allclose(kinetic, [model.kinetic_energy(a, b) for a, b in zip(q, qd)], rtol=1e-13)
+    np.testing.assert_allclose(potential, [model.potential_energy(a) for a in q], rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize("settings", [{}, {"integrator": "rk4", "dt": 0.05}, {"integrator": "rk4", "dt": 0.01,
+                                                                                "formulation": "matrix-r"}])
+def test_energy_drift_is_measured_on_conservative_runs(settings):
+    model = _pendulum_with(damping=0.0)            # gravity and a spring: conservative
+    run = simulate(model, t_end=2.0, **settings)
+    assert run.info["energy_drift"] == pytest.approx(_independent_drift(model, run), rel=1e-9)
+
+
+def test_a_large_drift_gets_a_note_and_a_small_one_none():
+    model = cmbs.load("pendulum")
+    accurate = simulate(model, t_end=2.0)
+    coarse = simulate(model, t_end=2.0, integrator="rk4", dt=0.05)
+    assert accurate.info["energy_drift"] < ENERGY_NOTE and "energy" not in accurate.info.get("note", "")
+    assert coarse.info["energy_drift"] > ENERGY_NOTE          # measured 3.4e-3
+    assert f"changed by {100 * coarse.info['energy_drift']:.2g} % of its largest kinetic energy" in coarse.info["note"]
+    assert "smaller dt" in coarse.info["note"]
+    damped = simulate(model, t_end=2.0, integrator="backward-euler", dt=0.01)
+    assert damped.info["energy_drift"] > 0.1 and "backward-euler damps numerically" in damped.info["note"]
+
+
+def test_runs_that_may_gain_or_lose_energy_are_not_judged():
+    arm = cmbs.load("two-link-arm")                           # actuated, conservative without inputs
+    assert "energy_drift" in simulate(arm, t_end=0.5).info
+    assert "energy_drift" in simulate(arm, t_end=0.5, u=np.zeros(2)).info
+    assert "energy_drift" not in simulate(arm, t_end=0.5, u=np.array([1.0, 0.0])).info
+    damped = simulate(_pendulum_with(damping=2.0), t_end=2.0, integrator="rk4", dt=0.05)
+    assert "energy_drift" not in damped.info and "energy" not in damped.info.get("note", "")
+    driven = simulate(cmbs.load("four-bar"), t_end=0.5)
+    assert "energy_drift" not in driven.info
+
+
+def test_the_cli_prints_the_note(capsys):
+    assert main(["simulate", "pendulum", "--integrator", "rk4", "--dt", "0.05", "--t-end", "2"]) == 0
+    assert "note: the energy T + V of this conservative model changed by 0.34 %" in capsys.readouterr().out
+
+
+def test_describe_names_what_does_work(capsys):
+    assert main(["describe", "four-bar"]) == 0
+    assert "work done by driver 'crank'" in capsys.readouterr().out
+    assert main(["describe", "pendulum"]) == 0
+    assert "gravity and springs only: T + V is conserved with zero inputs" in capsys.readouterr().out
+    assert main(["describe", "chaplygin-sleigh"]) == 0
+    assert "work done by (not stated by these equations)" in capsys.readouterr().out
