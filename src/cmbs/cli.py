@@ -198,14 +198,16 @@ def _compare(args: argparse.Namespace) -> int:
     runs = {name: simulate(model, formulation=name, **_simulation_settings(args)) for name in names}
     reference = runs[names[0]]
     print(f"{model.name}: {args.integrator}, t_end = {args.t_end:g} s; deviation against {names[0]}")
-    print(f"{'formulation':<16}{'status':<9}{'max |dq|':>11}{'max |phi|':>12}{'max |dE| J':>12}{'wall s':>9}")
+    print(f"{'formulation':<16}{'status':<9}{'max |dq|':>11}{'max |phi|':>12}{'max |dE| J':>12}{'drift':>10}"
+          f"{'wall s':>9}")
     failed = False
     for name, run in runs.items():
         common = min(len(run.t), len(reference.t))
         deviation = np.abs(run.q[:common] - reference.q[:common]).max(initial=0.0)
         energy = run["energy"]
+        drift = f"{run.info['energy_drift']:.3g}" if "energy_drift" in run.info else "-"
         print(f"{name:<16}{run.info['status']:<9}{deviation:>11.3g}{run['constraint_error'].max(initial=0.0):>12.3g}"
-              f"{np.abs(energy - energy[0]).max(initial=0.0):>12.3g}{run.info['wall_time']:>9.3g}")
+              f"{np.abs(energy - energy[0]).max(initial=0.0):>12.3g}{drift:>10}{run.info['wall_time']:>9.3g}")
         failed |= run.info["status"] != "success"
         if run.info["status"] != "success":
             print(f"  {name}: {run.info['message']}")

@@ -350,10 +350,13 @@ class SympyEquations:
     def __init__(self, *, name: str, n: int, m: int, n_u: int, symbols: dict[str, list],
                  inverse: dict, mass: sympy.Matrix, forces: list, phi: list, A: sympy.Matrix,
                  phi_t: list, gamma: list, potential: sympy.Expr | None, points: list, backend: str,
-                 cache: bool, constant_mass: np.ndarray | None, rebuild: tuple) -> None:
+                 cache: bool, constant_mass: np.ndarray | None, rebuild: tuple,
+                 work_sources: tuple[str, ...] | None = None) -> None:
         """Expressions are in the canonical real symbols ``symbols`` (``_q0``, ``_v0``, ``_t``,
-        ``_u0``, ...); ``inverse`` maps them back to the user's symbols."""
+        ``_u0``, ...); ``inverse`` maps them back to the user's symbols.  ``work_sources``: see
+        :func:`_work_sources`."""
         self.n, self.m, self.n_u = n, m, n_u
+        self.work_sources = work_sources
         self.backend = backend
         self.A = A.xreplace(inverse)
         self.phi_t = sympy.Matrix(m, 1, phi_t).xreplace(inverse)
@@ -500,7 +503,10 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
         Φ depends explicitly on time.
     potential
         ``V(q)`` used only for energy reports; 0.0 when not given (then :meth:`Model.energy`
-        is the kinetic energy only, and a conservative Q is not reflected in it).
+        is the kinetic energy only, and a conservative Q is not reflected in it).  The model's
+        :attr:`~cmbs.model.model.Model.work_sources` come from the power balance of Q against
+        V and M (:func:`_work_sources`): empty for a conservative model, whose runs then report
+        their energy drift; gravity in Q without its V counts as a force that does work.
     points
         Drawable points ``{name: (x(q), z(q))}``; none gives an empty (0, 2) position array.
     lines
@@ -664,6 +670,8 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
         derived.append(matrix)
     A_r, phi_t_r, gamma_r = derived
 
+    sources = _work_sources(mass.xreplace(mapping), [real(e) for e in Q],
+                            None if potential is None else real(potential), list(phi_t_r), names, mask, canonical)
     constant = None
     if not any(entry.free_symbols for entry in mass):
         try:
@@ -675,7 +683,8 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
                                A=A_r, phi_t=list(phi_t_r), gamma=list(gamma_r),
                                potential=None if potential is None else real(potential),
                                points=[(real(a), real(b)) for a, b in point_expressions],
-                               backend=backend, cache=cache, constant_mass=constant, rebuild=rebuild)
+                               backend=backend, cache=cache, constant_mass=constant, rebuild=rebuild,
+                               work_sources=sources)
     terms = _evaluate_at_q0(name, equations, q0_array, qd0_array, len(u))
     if asymmetric:
         _check_symmetric_sympy(name, equations, mass, asymmetric, q0_array)
@@ -691,6 +700,60 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
                              "potential": potential, "backend": backend},
                  constant_mass=constant is not None,
                  nonholonomic=np.arange(m) >= m_holonomic)
+
+
+#: sympy.count_ops of a power balance above which it is not simplified (its model's work sources
+#: are then left unstated unless a numeric evaluation shows power)
+POWER_CHECK_OPERATIONS = 3000
+
+
+def _work_sources(mass: sympy.Matrix, forces: list, potential: sympy.Expr | None, phi_t: list,
+                  names: tuple[str, ...], drivers: np.ndarray, symbols: dict[str, list]) -> tuple[str, ...] | None:
+    """What does work on a :func:`from_sympy` model besides its drivers (see
+    :attr:`cmbs.model.model.Model.work_sources`), from dE/dt with E = ½ q̇ᵀ M q̇ + V and
+    M q̈ + Aᵀλ = Q, A q̇ = -Φ_t::
+
+        dE/dt = P + λᵀ Φ_t,    P = q̇ᵀ (Q + ∂V/∂q) + ½ q̇ᵀ Ṁ q̇   (inputs u = 0).
+
+    P is the power of the forces that V and the kinetic terms do not account for (dampers,
+    applied forces; Q's gyroscopic and Coriolis terms contribute -½ q̇ᵀ Ṁ q̇ and cancel).  The
+    forces are named when P is not identically zero: shown by a value at a random state;
+    () when P simplifies to zero and no row but a driver has Φ_t ≠ 0 (b ≠ 0 for a velocity
+    constraint), those rows named otherwise; None when P can be shown neither way (it does not
+    simplify, or is too large to try: :data:`POWER_CHECK_OPERATIONS`)."""
+    q, qd, u = symbols["q"], symbols["qd"], symbols["u"]
+    no_input = {symbol: sympy.S.Zero for symbol in u}
+    gradient = [sympy.S.Zero] * len(q) if potential is None else [potential.diff(symbol) for symbol in q]
+    velocity = sympy.Matrix(qd)
+    mass_rate = sum((mass.diff(symbol) * rate for symbol, rate in zip(q, qd)), sympy.zeros(*mass.shape))
+    parts = [rate * (force.xreplace(no_input) + slope) for rate, force, slope in zip(qd, forces, gradient)]
+    parts.append((velocity.T * mass_rate * velocity)[0, 0] / 2)
+    power = sum(parts)
+    sources = tuple(f"rheonomic constraint {name!r}" for name, rate, driver in zip(names, phi_t, drivers)
+                    if not driver and sympy.expand(rate) != 0)
+    if sympy.expand(power) == 0:
+        return sources
+    if _shows_power(parts, [*q, *qd, *symbols["t"]]):
+        return ("forces (q̇ᵀ(Q + ∂V/∂q) + ½ q̇ᵀṀq̇ ≠ 0)", *sources)
+    if sympy.count_ops(power) <= POWER_CHECK_OPERATIONS and sympy.simplify(power) == 0:
+        return sources
+    return None
+
+
+def _shows_power(parts: list, arguments: list) -> bool:
+    """True when the sum of ``parts`` is clearly nonzero at one of a few random states: more than
+    1e-6 of the sum of their magnitudes, far beyond rounding."""
+    function = sympy.lambdify(arguments, parts, modules="numpy")
+    generator = np.random.default_rng(20)
+    for _ in range(3):
+        with np.errstate(all="ignore"):
+            try:
+                values = np.array(function(*generator.uniform(0.3, 1.7, size=len(arguments))), dtype=float)
+            except Exception:  # noqa: BLE001 - a generated function may fail in many ways at a random state
+                continue
+        if np.all(np.isfinite(values)) and abs(values.sum()) > 1e-6 * np.abs(values).sum():
+            return True
+    return False
 
 
 def _default_velocities(q: list[sympy.Symbol], forces: object, model: str,

@@ -121,7 +121,7 @@ class ModelEquations(Protocol):
     # Optional: ``work_sources``, a tuple naming the elements other than gravity, springs,
     # constraints and actuators whose forces do work (dampers, applied forces and torques): ()
     # when there are none, so that T + V is conserved without drivers and inputs.  Equations
-    # without it (user equations, wrappers that change the forces) are not known to conserve it.
+    # without it (from_callables, wrappers that change the forces) are not known to conserve it.
 
 
 @dataclass(frozen=True)
