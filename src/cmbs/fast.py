@@ -30,6 +30,7 @@ import numpy as np
 from cmbs.banded import band_factor, band_plan, band_solve, gram_profile, inverse_trace, jacobian_pattern
 from cmbs.dynamics import Baumgarte, Formulation, Lagrange, Projection
 from cmbs.errors import CmbsError, SingularSystemError
+from cmbs.integrate.grid import whole_steps
 from cmbs.model.drivers import evaluate_piecewise
 from cmbs.model.joints import JointEquations, _evaluate_kernel as _joint_kernel
 from cmbs.model.model import Model
@@ -110,13 +111,12 @@ def compiled_plan(model: Model, chosen: Formulation, integrator: str, u: object,
     can run the simulation of ``model`` under ``chosen``, else None."""
     kind = supported(model)
     inputs = control(u, model, dt)
-    steps = round(t_end / dt)
     if project or inputs is None or kind is None:
         return None
     if integrator in ("rk45", "rk23", "dop853"):
         if inputs[0] != CONSTANT:
             return None
-    elif integrator != "rk4" or abs(steps * dt - t_end) > 1e-9 * t_end:
+    elif integrator != "rk4" or whole_steps(t_end, dt) is None:
         return None
     method = method_of(chosen)
     return None if method is None else (kind, *method, *inputs)

@@ -27,6 +27,7 @@ from cmbs.dynamics.matrix_r import MatrixRSolver, rounding_note
 from cmbs.dynamics.projection import pseudo_inverse
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.integrate.explicit import Integration, integrate as integrate_explicit
+from cmbs.integrate.grid import whole_steps
 from cmbs.integrate.implicit import BACKWARD_EULER, TRAPEZOIDAL, Scheme, generalized_alpha, integrate_index3
 from cmbs.integrate.tableaus import NAMES as EXPLICIT, tableau as explicit_method
 from cmbs.kinematics import accelerations as acceleration_analysis
@@ -118,8 +119,8 @@ def output_times(t_end: float, dt: float, names: tuple[str, str] = ("t_end", "dt
         end, step = names
         raise CmbsError(f"{end} = {t_end:g} s with {step} = {dt:g} s gives {t_end / dt + 1:.3g} output instants, "
                         f"more than {MAX_SAMPLES:,}; choose a larger {step}")
-    steps = int(round(t_end / dt))
-    if abs(steps * dt - t_end) < 1e-9 * t_end:
+    steps = whole_steps(t_end, dt)
+    if steps is not None:
         return np.linspace(0.0, steps * dt, steps + 1)
     return np.append(np.arange(0.0, t_end, dt), t_end)
 
@@ -208,12 +209,11 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     for label, value in (("q0", q_start), ("qd0", qd_start)):
         if value.shape != (n,):
             raise CmbsError(f"{label} must have shape ({n},) for model {model.name!r}, got {value.shape}")
-    steps = int(round(t_end / dt))
+    steps = whole_steps(t_end, dt)
     from cmbs import fast, fast_matrix_r
 
     fast_plan = fast.compiled_plan(model, chosen, integrator, u, project, t_end, dt)
-    velocity_loop = fast_plan is None and fast_matrix_r.runs(model, chosen, integrator, u, project,
-                                                             abs(steps * dt - t_end) <= 1e-9 * t_end)
+    velocity_loop = fast_plan is None and fast_matrix_r.runs(model, chosen, integrator, u, project, steps is not None)
     if compiled and fast_plan is None and not velocity_loop:
         raise CmbsError(f"the compiled loop cannot run this simulation (it needs integrator rk4 with t_end a "
                         "multiple of dt, formulation lagrange, baumgarte or projection with the standard inertia, "
@@ -225,7 +225,7 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         trajectory = _run_compiled_adaptive(model, solver, chosen, fast_plan, inputs, q_start, qd_start, times,
                                             started, run_options)
     elif fast_plan is not None and compiled is not False:
-        trajectory = _run_compiled(model, solver, chosen, fast_plan, inputs, q_start, qd_start, t_end, dt, started,
+        trajectory = _run_compiled(model, solver, chosen, fast_plan, inputs, q_start, qd_start, steps, dt, started,
                                    run_options)
     elif velocity_loop and compiled is not False:
         trajectory = _run_compiled_matrix_r(model, solver, chosen, inputs, q_start, qd_start, steps, dt, started,
@@ -545,14 +545,13 @@ def _singular_message(model: Model, solver, q: np.ndarray, qd: np.ndarray, t: fl
 
 
 def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs: Inputs, q0: np.ndarray,
-                  qd0: np.ndarray, t_end: float, dt: float, started: float, options: dict) -> Trajectory:
-    """The whole RK4 loop in :func:`cmbs.fast.rk4`; outputs at every step (dt is the step).  A
+                  qd0: np.ndarray, steps: int, dt: float, started: float, options: dict) -> Trajectory:
+    """The whole RK4 loop in :func:`cmbs.fast.rk4`, ``steps`` steps of dt; outputs at every step.  A
     computed-torque law runs compiled (:func:`cmbs.fast.computed_torque`), recorded as
     :func:`_record` records a callable input."""
     from cmbs import fast
 
     kind, method, parameters, mode, law = plan
-    steps = int(round(t_end / dt))
     parameters = fast.bound_parameters(method, parameters, solver)
     _, ints, reals, buffer, mass, schur = fast.workspace(model)
     u0 = np.array(inputs(0.0, q0, qd0), dtype=float) if mode == fast.CONSTANT else np.zeros(model.n_u)
