@@ -9,9 +9,7 @@ The public API::
     run = cmbs.simulate(model.without_drivers(), t_end=5, formulation="projection")
 """
 
-from __future__ import annotations
-
-from pathlib import Path
+from pathlib import Path as _Path
 
 from cmbs.dynamics import (Baumgarte, Lagrange, MatrixR, Penalty, Projection, UdwadiaKalaba, formulation)
 from cmbs.errors import CmbsError, ConvergenceError, ExpressionError, ModelError, SingularSystemError
@@ -40,7 +38,7 @@ def __getattr__(name: str) -> object:
     raise AttributeError(f"module 'cmbs' has no attribute {name!r}")
 
 
-def load(name_or_path: str | Path, **parameters: object) -> Model:
+def load(name_or_path: str | _Path, **parameters: object) -> Model:
     """A model by library name (``cmbs models`` lists them) or from a TOML model file.
 
     The returned model is assembled: ``model.q0`` satisfies Φ(q0, 0) = 0 and ``model.qd0`` the
@@ -55,7 +53,7 @@ def load(name_or_path: str | Path, **parameters: object) -> Model:
     if parameters:
         raise ModelError(f"parameters {sorted(parameters)} apply to library models only, not to files",
                          source=text)
-    if text.endswith(".toml") or Path(text).exists():
+    if text.endswith(".toml") or _Path(text).exists():
         return load_model_file(text)
     raise ModelError(f"no library model or file {text!r}; library models: {', '.join(names())}")
 
