@@ -702,9 +702,10 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
                  nonholonomic=np.arange(m) >= m_holonomic)
 
 
-#: sympy.count_ops of a power balance above which it is not simplified (its model's work sources
-#: are then left unstated unless a numeric evaluation shows power)
-POWER_CHECK_OPERATIONS = 3000
+#: size (expression-tree nodes) of a power balance above which it is not expanded or simplified
+#: (its model's work sources are then left unstated unless a numeric evaluation shows power); the
+#: 8-link chain in absolute angles has 1761
+POWER_CHECK_NODES = 5000
 
 
 def _work_sources(mass: sympy.Matrix, forces: list, potential: sympy.Expr | None, phi_t: list,
@@ -720,24 +721,23 @@ def _work_sources(mass: sympy.Matrix, forces: list, potential: sympy.Expr | None
     forces are named when P is not identically zero: shown by a value at a random state;
     () when P simplifies to zero and no row but a driver has Φ_t ≠ 0 (b ≠ 0 for a velocity
     constraint), those rows named otherwise; None when P can be shown neither way (it does not
-    simplify, or is too large to try: :data:`POWER_CHECK_OPERATIONS`)."""
+    simplify, or is too large to try: :data:`POWER_CHECK_NODES`)."""
     q, qd, u = symbols["q"], symbols["qd"], symbols["u"]
     no_input = {symbol: sympy.S.Zero for symbol in u}
     gradient = [sympy.S.Zero] * len(q) if potential is None else [potential.diff(symbol) for symbol in q]
     velocity = sympy.Matrix(qd)
-    mass_rate = sum((mass.diff(symbol) * rate for symbol, rate in zip(q, qd)), sympy.zeros(*mass.shape))
+    kinetic = (velocity.T * mass * velocity)[0, 0] / 2      # ½ q̇ᵀ Ṁ q̇ = Σ_k q̇_k ∂T/∂q_k
     parts = [rate * (force.xreplace(no_input) + slope) for rate, force, slope in zip(qd, forces, gradient)]
-    parts.append((velocity.T * mass_rate * velocity)[0, 0] / 2)
-    power = sum(parts)
+    parts += [rate * kinetic.diff(symbol) for symbol, rate in zip(q, qd)]
+    power = sympy.Add(*parts)
     sources = tuple(f"rheonomic constraint {name!r}" for name, rate, driver in zip(names, phi_t, drivers)
                     if not driver and sympy.expand(rate) != 0)
-    if sympy.expand(power) == 0:
+    small = sum(1 for _ in sympy.preorder_traversal(power)) <= POWER_CHECK_NODES
+    if small and sympy.expand(power) == 0:
         return sources
     if _shows_power(parts, [*q, *qd, *symbols["t"]]):
         return ("forces (q̇ᵀ(Q + ∂V/∂q) + ½ q̇ᵀṀq̇ ≠ 0)", *sources)
-    if sympy.count_ops(power) <= POWER_CHECK_OPERATIONS and sympy.simplify(power) == 0:
-        return sources
-    return None
+    return sources if small and sympy.simplify(power) == 0 else None
 
 
 def _shows_power(parts: list, arguments: list) -> bool:
