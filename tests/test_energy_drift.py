@@ -12,6 +12,7 @@ from cmbs.control.faults import mass_fault
 from cmbs.model.equations import from_sympy
 from cmbs.model.natural import NaturalModelBuilder
 from cmbs.simulate import ENERGY_NOTE, simulate
+from cmbs.sweep import SweepResult, Variant, sweep
 
 
 def _pendulum_with(**elements) -> cmbs.Model:
@@ -140,3 +141,34 @@ def test_describe_names_what_does_work(capsys):
     assert "gravity and springs only: T + V is conserved with zero inputs" in capsys.readouterr().out
     assert main(["describe", "chaplygin-sleigh"]) == 0
     assert "T + V is conserved" in capsys.readouterr().out
+
+
+def test_sweeps_report_each_variants_energy_drift(tmp_path):
+    """The batched and process paths give the same drift, computed from the recorded outputs;
+    mass-factor variants (energies of the nominal masses) are not judged."""
+    model = cmbs.load("four-bar").without_drivers()
+    variants = [Variant(qd0=cmbs.velocities(model, model.q0, qd=np.eye(model.n)[-1] * speed), label=f"{speed}")
+                for speed in (0.0, 0.5, 1.0)]
+    batched = sweep(model, variants, t_end=2.0, dt=1e-2, every=5)
+    serial = sweep(model, variants, t_end=2.0, dt=1e-2, every=5, batched=False, workers=1)
+    assert batched.info["mode"] == "batched" and serial.info["mode"] == "processes"
+    np.testing.assert_allclose(batched.energy_drift, serial.energy_drift, rtol=1e-6)
+    for v in range(len(variants)):
+        kinetic = [model.kinetic_energy(q, qd) for q, qd in zip(batched.q[v], batched.qd[v])]
+        energy = batched.energy[v]
+        assert batched.energy_drift[v] == pytest.approx(np.abs(energy - energy[0]).max() / max(kinetic), rel=1e-9)
+    path = batched.save(tmp_path / "sweep.npz")
+    np.testing.assert_array_equal(SweepResult.load(path).energy_drift, batched.energy_drift)
+    with np.load(path) as data:                               # a file written before the drift was recorded
+        older = {key: data[key] for key in data.files if key != "energy_drift"}
+    np.savez(tmp_path / "older.npz", **older)
+    assert np.isnan(SweepResult.load(tmp_path / "older.npz").energy_drift).all()
+    masses = sweep("pendulum", [Variant(masses={"rod": 1.1})], t_end=0.5, dt=1e-2, batched=False, workers=1)
+    assert np.isnan(masses.energy_drift).all()
+
+
+def test_the_sweep_command_prints_the_drift_and_a_note(capsys):
+    assert main(["sweep", "pendulum", "--speed", "P.z=0,-1", "--t-end", "2", "--dt", "0.05",
+                 "--integrator", "rk4"]) == 0
+    out = capsys.readouterr().out
+    assert "drift  0.0034" in out and "note: 2 conservative variant(s) changed their energy" in out

@@ -514,17 +514,24 @@ def _trajectory(model: Model, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd:
                        "constraint_error": position_error, "velocity_constraint_error": velocity_error}, info)
 
 
-def _note_energy_drift(model: Model, kinetic: np.ndarray, energy: np.ndarray, u: np.ndarray, info: dict) -> None:
-    """For a run whose exact motion conserves E = T + V (nothing does work but gravity and
-    springs: :attr:`Model.work_sources` is empty and every input is zero), the energy drift
-    max |E - E0| / max T over the outputs in ``info["energy_drift"]``, and a note when it exceeds
-    :data:`ENERGY_NOTE`: the motion is then not what the model says, to more than a little."""
+def energy_drift(model: Model, kinetic: np.ndarray, energy: np.ndarray, u: np.ndarray) -> float | None:
+    """max |E - E0| / max T over a run's outputs (kinetic energies T, total energies E = T + V,
+    inputs u (k, n_u)) when its exact motion conserves E: nothing does work but gravity and
+    springs (:attr:`Model.work_sources` is empty) and every input is zero; else None (and when
+    the mechanism is at rest throughout, or an energy is not finite)."""
     if model.work_sources != () or np.any(u != 0) or not np.all(np.isfinite(energy)):
-        return
+        return None
     scale = float(kinetic.max(initial=0.0))
-    if not scale > 0:      # at rest throughout: nothing to compare with
+    return float(np.abs(energy - energy[0]).max() / scale) if scale > 0 else None
+
+
+def _note_energy_drift(model: Model, kinetic: np.ndarray, energy: np.ndarray, u: np.ndarray, info: dict) -> None:
+    """``info["energy_drift"]`` (:func:`energy_drift`) when the run is judged, and a note when it
+    exceeds :data:`ENERGY_NOTE`: the motion is then not what the model says, to more than a
+    little."""
+    drift = energy_drift(model, kinetic, energy, u)
+    if drift is None:
         return
-    drift = float(np.abs(energy - energy[0]).max() / scale)
     info["energy_drift"] = drift
     if drift > ENERGY_NOTE:
         cause = (f"{info['integrator']} damps numerically by design" if info.get("integrator") in NUMERICALLY_DAMPED

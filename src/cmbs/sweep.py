@@ -140,6 +140,10 @@ class SweepResult:
         its last output (``recorded[v]`` of them are valid) are NaN.
     recorded
         (N,) number of valid outputs of each variant.
+    energy_drift
+        (N,) max |E - E0| / max T over each variant's outputs where its exact motion conserves
+        T + V (:func:`cmbs.simulate.energy_drift`: a conservative model, zero inputs, no mass
+        change), else NaN.
     names
         The n coordinate names.
     variants
@@ -159,6 +163,11 @@ class SweepResult:
     names: tuple[str, ...]
     variants: tuple[dict, ...]
     info: dict
+    energy_drift: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.energy_drift is None:        # a file written before the drift was recorded
+            object.__setattr__(self, "energy_drift", np.full(len(self.variants), np.nan))
 
     def __len__(self) -> int:
         return len(self.variants)
@@ -171,13 +180,13 @@ class SweepResult:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the sweep as ``.npz`` atomically; arrays ``t``, ``q``, ``qd``, ``energy``,
-        ``constraint_error``, ``status``, ``message``, ``recorded``, ``names``, and JSON strings
+        ``constraint_error``, ``status``, ``message``, ``recorded``, ``energy_drift``, ``names``, and JSON strings
         ``variants`` and ``info`` (layout version ``FILE_VERSION`` in ``info``)."""
         path = checked_output(path, (".npz",), "sweep result")
         with atomic_path(path) as temporary, open(temporary, "wb") as stream:
             np.savez(stream, t=self.t, q=self.q, qd=self.qd, energy=self.energy,
                      constraint_error=self.constraint_error, status=self.status, message=self.message,
-                     recorded=self.recorded, names=np.array(self.names),
+                     recorded=self.recorded, energy_drift=self.energy_drift, names=np.array(self.names),
                      variants=np.array(json.dumps(list(self.variants))),
                      info=np.array(json.dumps({**self.info, "file_version": FILE_VERSION}, default=str)))
         return path
@@ -193,7 +202,8 @@ class SweepResult:
                 return cls(data["t"], data["q"], data["qd"], data["energy"], data["constraint_error"],
                            data["status"], data["message"], data["recorded"],
                            tuple(str(name) for name in data["names"]), tuple(json.loads(str(data["variants"]))),
-                           json.loads(str(data["info"])))
+                           json.loads(str(data["info"])),
+                           data["energy_drift"] if "energy_drift" in data.files else None)
         except (ValueError, KeyError, OSError) as error:
             raise CmbsError(f"{path}: not a cmbs sweep file ({error})") from None
 
@@ -274,7 +284,7 @@ def _check(nominal: Model, variant: Variant) -> None:
 def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> dict:
     """One variant through :func:`cmbs.simulate`, sampled on the sweep's output grid (a task of
     the process and Dask paths; a module-level function so that it pickles)."""
-    from cmbs.simulate import simulate
+    from cmbs.simulate import energy_drift, simulate
 
     built = _build(model, variant)
     times = settings.output_times()
@@ -301,8 +311,10 @@ def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> 
     valid[valid] = np.abs(run.t[index[valid]] - times[valid]) <= 1e-9 * max(1.0, settings.t_end)
     count = int(np.argmin(valid)) if not valid.all() else times.size
     picked = index[:count]
+    kinetic = built.energy_parts(run.q[picked], run.qd[picked])[0]
     return {"q": run.q[picked], "qd": run.qd[picked], "energy": energy[picked],
-            "phi": run["constraint_error"][picked], "status": status, "message": message}
+            "phi": run["constraint_error"][picked], "status": status, "message": message,
+            "drift": energy_drift(built, kinetic, energy[picked], run["u"][picked])}
 
 
 def _run_processes(model: str | Model, settings: RunSettings, variants: list[Variant], workers: int,
@@ -374,6 +386,7 @@ PROGRESS_BLOCKS = 50
 def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], plan: tuple,
                  bar: tqdm) -> list[dict]:
     from cmbs import fast, fast_lanes
+    from cmbs.simulate import energy_drift
 
     method, parameters, solver, steps = plan
     kind, ints, reals, buffer, mass, schur = fast.workspace(model)
@@ -402,9 +415,11 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
         k = int(recorded[v])
         failed = statuses[v] != fast.OK or k < records
         message = f"{reasons.get(int(statuses[v]), 'failed')} at t={k * settings.every * settings.dt:.6g}"
-        outputs.append({"q": Qs[v, :k], "qd": QDs[v, :k], "energy": model.energy_history(Qs[v, :k], QDs[v, :k]),
+        kinetic, potential = model.energy_parts(Qs[v, :k], QDs[v, :k])
+        outputs.append({"q": Qs[v, :k], "qd": QDs[v, :k], "energy": kinetic + potential,
                         "phi": PHIs[v, :k], "status": "failed" if failed else "success",
-                        "message": message if failed else ""})
+                        "message": message if failed else "",
+                        "drift": energy_drift(model, kinetic, kinetic + potential, np.tile(U0[v], (k, 1)))})
     return outputs
 
 
@@ -421,6 +436,7 @@ def _assemble(model: Model, settings: RunSettings, variants: list[Variant], outp
         q[v, :size], qd[v, :size] = output["q"], output["qd"]
         energy[v, :size], phi[v, :size] = output["energy"], output["phi"]
         recorded[v] = size
+    drift = np.array([np.nan if output.get("drift") is None else output["drift"] for output in outputs])
     return SweepResult(times, q, qd, energy, phi, np.array([output["status"] for output in outputs]),
                        np.array([output["message"] for output in outputs]), recorded, model.coordinate_names,
-                       tuple(variant.describe() for variant in variants), info)
+                       tuple(variant.describe() for variant in variants), info, drift)

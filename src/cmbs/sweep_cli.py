@@ -125,6 +125,7 @@ def _fixed(text: str) -> tuple[str, object]:
 def _sweep(args: argparse.Namespace) -> int:
     from cmbs import load
     from cmbs.files_io import checked_output
+    from cmbs.simulate import ENERGY_NOTE
     from cmbs.sweep import sweep
 
     for path, suffixes, option in ((args.out, (".npz",), "--out"), (args.plot, (".png", ".pdf", ".svg"), "--plot")):
@@ -158,10 +159,16 @@ def _sweep(args: argparse.Namespace) -> int:
           f"{failed} failed")
     for v, variant in enumerate(result.variants):
         energy = result.energy[v, :result.recorded[v]]
-        drift = float(np.abs(energy - energy[0]).max()) if energy.size else float("nan")
+        change = float(np.abs(energy - energy[0]).max()) if energy.size else float("nan")
+        drift = "-" if np.isnan(result.energy_drift[v]) else f"{result.energy_drift[v]:.2g}"
         note = "" if result.status[v] == "success" else f"  FAILED: {result.message[v]}"
         print(f"  {variant['label']:<40} max|Φ| {np.nanmax(result.constraint_error[v]):9.2e}  max|E - E0| "
-              f"{drift:9.3g} J{note}")
+              f"{change:9.3g} J  drift {drift:>7}{note}")
+    drifting = np.flatnonzero(result.energy_drift > ENERGY_NOTE)
+    if drifting.size:
+        print(f"  note: {drifting.size} conservative variant(s) changed their energy T + V by more than "
+              f"{100 * ENERGY_NOTE:g} % of their largest kinetic energy (drift = max|E - E0| / max T): a smaller "
+              f"--dt (or --rtol) reduces the integration error")
     if args.out:
         print(f"  result -> {result.save(args.out)}")
     if args.plot:
