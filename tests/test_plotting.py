@@ -48,6 +48,7 @@ def test_simulation_figure_saved_as_png(pendulum, tmp_path):
     assert len(figure.axes) == 5  # coordinates, energy, energy drift, constraint errors, mechanism
     assert names[0] == "coordinates"
     assert names[1].startswith("total energy") and names[2].startswith("energy drift")
+    assert names[2].endswith(f"J\n= {run.info['energy_drift']:.2g} of the largest kinetic energy")  # conservative
     assert names[3].startswith("constraint errors (log)") and figure.axes[3].get_yscale() == "log"
     assert names[4] == "mechanism (x, z)"
     assert len(figure.axes[0].lines) == model.n

@@ -92,7 +92,8 @@ def plot_simulation(trajectory: Trajectory, *, model: Model | None = None,
     if "energy" in trajectory.extras:
         energy = np.asarray(trajectory.extras["energy"], dtype=float).reshape(len(trajectory.t), -1)[:, 0]
         panels.append(lambda axis: _draw_energy(axis, trajectory.t, energy))
-        panels.append(lambda axis: _draw_energy_drift(axis, trajectory.t, energy))
+        panels.append(lambda axis: _draw_energy_drift(axis, trajectory.t, energy,
+                                                      trajectory.info.get("energy_drift")))
     errors = [(label, key) for label, key in ((r"position $\max|\Phi|$", "constraint_error"),
                                               (r"velocity $\max|\dot\Phi|$", "velocity_constraint_error"))
               if key in trajectory.extras]
@@ -111,7 +112,8 @@ def plot_simulation(trajectory: Trajectory, *, model: Model | None = None,
     for axis in cells[len(panels):]:
         figure.delaxes(axis)
     title = trajectory.info.get("model", "")
-    how = ", ".join(str(trajectory.info[key]) for key in ("analysis", "formulation", "integrator") if trajectory.info.get(key))
+    how = ", ".join(str(trajectory.info[key]) for key in ("analysis", "formulation", "integrator")
+                    if trajectory.info.get(key))
     title = f"{title} ({how})" if how and title else title or how
     if trajectory.info.get("status") == "failed":
         message = trajectory.info.get("message", "")
@@ -138,7 +140,9 @@ def _draw_energy(axis: plt.Axes, t: np.ndarray, energy: np.ndarray) -> None:
     axis.grid(alpha=0.3)
 
 
-def _draw_energy_drift(axis: plt.Axes, t: np.ndarray, energy: np.ndarray) -> None:
+def _draw_energy_drift(axis: plt.Axes, t: np.ndarray, energy: np.ndarray, relative: float | None) -> None:
+    """E(t) - E(0); the title adds the run's relative drift max |E - E0| / max T when it was
+    judged (a conservative model: ``info["energy_drift"]``)."""
     drift = energy - energy[0]
     axis.plot(t, drift, color="C3")
     axis.axhline(0.0, color="0.5", linewidth=0.8)
@@ -146,7 +150,8 @@ def _draw_energy_drift(axis: plt.Axes, t: np.ndarray, energy: np.ndarray) -> Non
     axis.set_ylabel("E(t) - E(0) [J]")
     worst = np.nanmax(np.abs(drift)) if np.any(np.isfinite(drift)) else float("nan")
     # raised above the axis' power-of-ten label (e.g. "1e-6"), which matplotlib puts at its top left
-    axis.set_title(f"energy drift, max |E - E(0)| = {worst:.3g} J", fontsize="medium", pad=14)
+    share = "" if relative is None else f"\n= {relative:.2g} of the largest kinetic energy"
+    axis.set_title(f"energy drift, max |E - E(0)| = {worst:.3g} J{share}", fontsize="medium", pad=14)
     axis.grid(alpha=0.3)
 
 
