@@ -129,9 +129,13 @@ def test_runs_that_may_gain_or_lose_energy_are_not_judged():
     assert "energy_drift" not in driven.info
 
 
-def test_the_cli_prints_the_note(capsys):
+def test_the_cli_prints_the_drift_and_the_note(capsys):
     assert main(["simulate", "pendulum", "--integrator", "rk4", "--dt", "0.05", "--t-end", "2"]) == 0
-    assert "note: the energy T + V of this conservative model changed by 0.34 %" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "J (0.0034 of the largest kinetic energy)" in out
+    assert "note: the energy T + V of this conservative model changed by 0.34 %" in out
+    assert main(["simulate", "four-bar", "--t-end", "0.5"]) == 0           # driven: not judged
+    assert "kinetic energy" not in capsys.readouterr().out
 
 
 def test_describe_names_what_does_work(capsys):

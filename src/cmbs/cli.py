@@ -167,9 +167,10 @@ def _simulate(args: argparse.Namespace) -> int:
     energy, error = run["energy"], run["constraint_error"]
     print(f"{model.name}: {info['formulation']} + {info['integrator']}, {info['status']} at t = {run.t[-1]:.6g} s "
           f"({info['steps']} steps, {info['wall_time']:.3g} s wall)")
+    drift = f" ({info['energy_drift']:.2g} of the largest kinetic energy)" if "energy_drift" in info else ""
     print(f"  max constraint error {error.max(initial=0.0):.3g}, max velocity constraint error "
           f"{run['velocity_constraint_error'].max(initial=0.0):.3g}, max |E - E0| "
-          f"{np.abs(energy - energy[0]).max(initial=0.0):.3g} J")
+          f"{np.abs(energy - energy[0]).max(initial=0.0):.3g} J{drift}")
     if info.get("note"):
         print(f"  note: {info['note']}")
     if args.out:
