@@ -53,6 +53,37 @@ def test_work_sources_name_what_does_work():
     assert mass_fault(cmbs.load("pendulum"), "rod", factor=1.1).work_sources is None
 
 
+def test_a_driver_of_a_constant_does_no_work():
+    """Φ = q_c - c has Φ_t = 0: the human body with its hip held by two such drivers conserves
+    T + V, in natural coordinates, joint coordinates and from SymPy alike; a moving driver does
+    not."""
+    assert cmbs.load("human", fixed_hip=True).work_sources == ()
+    builder = NaturalModelBuilder("held")
+    builder.add_point("O", 0.0, 0.0, fixed=True)
+    builder.add_point("P", 1.0, 0.0)
+    builder.add_segment("rod", "O", "P", mass=1.0, com=(0.5, 0.0), inertia=1 / 12)
+    builder.add_angle("phi", segment="rod")
+    builder.add_driver("phi", 0.2, name="hold")
+    assert builder.build().work_sources == ()
+    builder.add_driver("P.x", "cos(t)", name="swing")
+    assert builder.build().work_sources == ("driver 'swing'",)
+    from cmbs.model.joints import JointModelBuilder
+
+    joint = JointModelBuilder("arm")
+    joint.add_link("upper", parent=None, coordinate="a", length=1.0, mass=1.0, com=(0.5, 0.0), inertia=0.1)
+    joint.add_link("lower", parent="upper", coordinate="b", origin=(1.0, 0.0), length=1.0, mass=1.0,
+                   com=(0.5, 0.0), inertia=0.1)
+    joint.add_driver("b", 0.3)
+    assert joint.build().work_sources == ()
+    x, z, t = sp.symbols("x z t")
+    steady = from_sympy("steady", coordinates=[x, z], mass_matrix=sp.eye(2), forces=[0, -9.81], potential=9.81 * z,
+                        constraints=[x - 0.5, x**2 + z**2 - 1], drivers=[True, False], q0=[0.5, -0.8])
+    assert steady.work_sources == ()
+    moving = from_sympy("moving", coordinates=[x, z], mass_matrix=sp.eye(2), forces=[0, -9.81], potential=9.81 * z,
+                        constraints=[x - 0.5 * sp.cos(t), x**2 + z**2 - 1], q0=[0.5, -0.8])
+    assert moving.work_sources == ("driver 'phi[0]'",)
+
+
 def test_from_sympy_models_are_judged_by_their_power_balance():
     """P = q̇ᵀ(Q + ∂V/∂q) + ½ q̇ᵀṀq̇ (u = 0) must vanish identically: gravity with its potential,
     a central force with Coriolis terms in polar coordinates and the double pendulum in absolute

@@ -57,6 +57,11 @@ class Constant(TimeFunction):
             parse_expression(f"-{-float(self.value)!r}")
 
 
+def is_constant(function: TimeFunction) -> bool:
+    """True for a :class:`Constant`: a driver of it holds its coordinate (Φ_t = 0) and does no work."""
+    return isinstance(function, Constant)
+
+
 @dataclass(frozen=True)
 class Expression(TimeFunction):
     """Closed-form expression of ``t``, e.g. ``"pi/4*sin(pi*t - pi/2)"``."""

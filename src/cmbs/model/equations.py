@@ -351,12 +351,13 @@ class SympyEquations:
                  inverse: dict, mass: sympy.Matrix, forces: list, phi: list, A: sympy.Matrix,
                  phi_t: list, gamma: list, potential: sympy.Expr | None, points: list, backend: str,
                  cache: bool, constant_mass: np.ndarray | None, rebuild: tuple,
-                 work_sources: tuple[str, ...] | None = None) -> None:
+                 work_sources: tuple[str, ...] | None = None, steady_drivers: frozenset[str] = frozenset()) -> None:
         """Expressions are in the canonical real symbols ``symbols`` (``_q0``, ``_v0``, ``_t``,
         ``_u0``, ...); ``inverse`` maps them back to the user's symbols.  ``work_sources``: see
-        :func:`_work_sources`."""
+        :func:`_work_sources`; ``steady_drivers``: the driver rows with Φ_t = 0."""
         self.n, self.m, self.n_u = n, m, n_u
         self.work_sources = work_sources
+        self.steady_drivers = steady_drivers
         self.backend = backend
         self.A = A.xreplace(inverse)
         self.phi_t = sympy.Matrix(m, 1, phi_t).xreplace(inverse)
@@ -672,6 +673,7 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
 
     sources = _work_sources(mass.xreplace(mapping), [real(e) for e in Q],
                             None if potential is None else real(potential), list(phi_t_r), names, mask, canonical)
+    steady = frozenset(name for name, rate, driver in zip(names, phi_t_r, mask) if driver and sympy.expand(rate) == 0)
     constant = None
     if not any(entry.free_symbols for entry in mass):
         try:
@@ -684,7 +686,7 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
                                potential=None if potential is None else real(potential),
                                points=[(real(a), real(b)) for a, b in point_expressions],
                                backend=backend, cache=cache, constant_mass=constant, rebuild=rebuild,
-                               work_sources=sources)
+                               work_sources=sources, steady_drivers=steady)
     terms = _evaluate_at_q0(name, equations, q0_array, qd0_array, len(u))
     if asymmetric:
         _check_symmetric_sympy(name, equations, mass, asymmetric, q0_array)

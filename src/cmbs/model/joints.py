@@ -48,7 +48,8 @@ from cmbs.jit import njit, njit_borrowing
 import numpy as np
 
 from cmbs.errors import ModelError
-from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions
+from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions, \
+    is_constant
 from cmbs.model.model import Model, Terms
 
 __all__ = ["JointModelBuilder", "JointEquations", "JointLayout"]
@@ -313,12 +314,14 @@ class JointEquations:
     into the scratch rows the kernel reads).
     """
 
-    __slots__ = ("ip", "rp", "n", "m", "scratch_size", "python", "time_functions")
+    __slots__ = ("ip", "rp", "n", "m", "scratch_size", "python", "time_functions", "steady_drivers")
     #: none: joint models have no dampers, forces or torques (:attr:`cmbs.model.model.Model.work_sources`)
     work_sources: tuple[str, ...] = ()
 
     def __init__(self, ip: np.ndarray, rp: np.ndarray, n: int, m: int, scratch_size: int,
-                 time_functions: TimeFunctionPack):
+                 time_functions: TimeFunctionPack, steady_drivers: frozenset[str] = frozenset()):
+        #: the drivers of a constant, which hold their coordinate and do no work
+        self.steady_drivers = steady_drivers
         self.ip = ip
         self.rp = rp
         self.n = n
@@ -841,7 +844,8 @@ class JointModelBuilder:
         ip.setflags(write=False)
         rp.setflags(write=False)
         scratch = 3 * pack.count + 3 * pack.depth + _WORK_PER_LINK * n
-        equations = JointEquations(ip, rp, n, nr + nd, scratch, pack)
+        equations = JointEquations(ip, rp, n, nr + nd, scratch, pack,
+                                   frozenset(d.name for d in self._drivers.values() if is_constant(d.function)))
 
         parameters = {
             "builder": "joints",

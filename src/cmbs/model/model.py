@@ -122,6 +122,8 @@ class ModelEquations(Protocol):
     # constraints and actuators whose forces do work (dampers, applied forces and torques): ()
     # when there are none, so that T + V is conserved without drivers and inputs.  Equations
     # without it (from_callables, wrappers that change the forces) are not known to conserve it.
+    # Optional too: ``steady_drivers``, the names of the driver rows with Φ_t = 0 (a constant),
+    # which do no work.
 
 
 @dataclass(frozen=True)
@@ -335,13 +337,15 @@ class Model:
     @property
     def work_sources(self) -> tuple[str, ...] | None:
         """What does work on the mechanism besides gravity, springs, actuators (which do work only
-        with nonzero inputs) and workless constraints: its drivers, dampers, applied forces and
-        torques, by name.  () means T + V is conserved by the exact motion with zero inputs; None
-        that the equations do not say (see :class:`ModelEquations`)."""
+        with nonzero inputs) and workless constraints: its moving drivers (a driver of a constant
+        holds its coordinate), dampers, applied forces and torques, by name.  () means T + V is
+        conserved by the exact motion with zero inputs; None that the equations do not say (see
+        :class:`ModelEquations`)."""
         sources = getattr(self.equations, "work_sources", None)
         if sources is None:
             return None
-        return tuple(f"driver {name!r}" for name in self.driver_names) + tuple(sources)
+        steady = getattr(self.equations, "steady_drivers", frozenset())
+        return tuple(f"driver {name!r}" for name in self.driver_names if name not in steady) + tuple(sources)
 
     def point_positions(self, q: np.ndarray) -> np.ndarray:
         """(n_points, 2) positions (x, z) of :attr:`point_names`."""
@@ -394,4 +398,9 @@ class _RowSubset(WrappedEquations):
     def work_sources(self) -> tuple[str, ...] | None:
         """The inner equations' (dropping rows removes no force)."""
         return getattr(self.inner, "work_sources", None)
+
+    @property
+    def steady_drivers(self) -> frozenset[str]:
+        """The inner equations' (the rows kept keep their names)."""
+        return getattr(self.inner, "steady_drivers", frozenset())
 

@@ -39,7 +39,7 @@ from cmbs.jit import njit_borrowing
 import numpy as np
 
 from cmbs.errors import ModelError
-from cmbs.model.drivers import Constant, TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions
+from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions, is_constant
 from cmbs.model.model import Model, Terms
 from cmbs.model.packing import int_section, pack, real_section
 
@@ -365,8 +365,8 @@ class _Assembler:
 
     def _work_sources(self) -> tuple[str, ...]:
         """The forces and torques that are not constant zero, and the springs with damping."""
-        def nonzero(function: object) -> bool:
-            return not (isinstance(function, Constant) and function.value == 0)
+        def nonzero(function: TimeFunction) -> bool:
+            return not (is_constant(function) and function.value == 0)
 
         b = self.b
         return (tuple(f"force {name!r}" for name, (_, fx, fz) in b._point_forces.items() if nonzero(fx) or nonzero(fz))
@@ -562,7 +562,8 @@ class _Assembler:
             n=n, m=m, ints=ints, reals=reals, mass=mass, time_functions=tf,
             constants=np.array(self.constants), gravity_ext=gravity_ext,
             springs=(resolve(spring_rows, 4), np.array(spring_parameters).reshape(-1, 3)),
-            point_xz=point_xz, segments=tuple(segment_data), work_sources=self._work_sources())
+            point_xz=point_xz, segments=tuple(segment_data), work_sources=self._work_sources(),
+            steady_drivers=frozenset(name for name, (_, function) in b._drivers.items() if is_constant(function)))
         return Model(
             name=b.name, coordinate_names=tuple(self.names), coordinate_kinds=tuple(self.kinds),
             constraint_names=tuple(constraint_names), drivers=drivers, actuator_names=tuple(b._actuators),
@@ -636,6 +637,8 @@ class NaturalEquations:
     segments: tuple[SegmentData, ...] = ()
     #: the dampers, forces and torques, by name (see :attr:`cmbs.model.model.Model.work_sources`)
     work_sources: tuple[str, ...] = ()
+    #: the drivers of a constant, which hold their coordinate and do no work
+    steady_drivers: frozenset[str] = frozenset()
 
     @property
     def _scratch_size(self) -> int:
