@@ -416,10 +416,11 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
         failed = statuses[v] != fast.OK or k < records
         message = f"{reasons.get(int(statuses[v]), 'failed')} at t={k * settings.every * settings.dt:.6g}"
         kinetic, potential = model.energy_parts(Qs[v, :k], QDs[v, :k])
-        outputs.append({"q": Qs[v, :k], "qd": QDs[v, :k], "energy": kinetic + potential,
+        energy = kinetic + potential
+        outputs.append({"q": Qs[v, :k], "qd": QDs[v, :k], "energy": energy,
                         "phi": PHIs[v, :k], "status": "failed" if failed else "success",
                         "message": message if failed else "",
-                        "drift": energy_drift(model, kinetic, kinetic + potential, np.tile(U0[v], (k, 1)))})
+                        "drift": energy_drift(model, kinetic, energy, np.tile(U0[v], (k, 1)))})
     return outputs
 
 

@@ -142,9 +142,9 @@ def choose_partition(A: np.ndarray, rank_tolerance: float, independent: np.ndarr
 
 
 def partition_condition(A_rows: np.ndarray, dependent: np.ndarray, norm: int) -> float:
-    """κ_p = ‖A_r‖_p ‖A_d⁻¹‖_p = cond_p(A_d) ‖A_r‖_p / ‖A_d‖_p (p = 1 or 2): how much the recovery
-    of the dependent coordinates amplifies a constraint residual, relative to the scale of the
-    partition's rows A_r (all columns) of A, whose dependent columns are A_d.
+    """κ_p = ‖A_r‖_p ‖A_d⁻¹‖_p (p = 1 or 2; ‖A_d⁻¹‖₂ = 1/σ_min(A_d)), inf for a singular A_d: how
+    much the recovery of the dependent coordinates amplifies a constraint residual, relative to
+    the scale of the partition's rows A_r (all columns) of A, whose dependent columns are A_d.
 
     cond(A_d) alone does not see A_d becoming small against A_r: a pendulum in natural
     coordinates (x, z) with x dependent has A_d = [2x], of condition 1 at every x, while its
@@ -154,9 +154,14 @@ def partition_condition(A_rows: np.ndarray, dependent: np.ndarray, norm: int) ->
     if dependent.size == 0:
         return 1.0
     block = A_rows[:, dependent]
-    condition = float(np.linalg.cond(block, norm))
-    scale = float(np.linalg.norm(block, norm))
-    return condition * float(np.linalg.norm(A_rows, norm)) / scale if scale > 0 else np.inf
+    if norm == 2:
+        smallest = np.linalg.svd(block, compute_uv=False)[-1]
+        return float(np.linalg.norm(A_rows, 2) / smallest) if smallest > 0 else np.inf
+    try:
+        inverse = np.linalg.inv(block)
+    except np.linalg.LinAlgError:
+        return np.inf
+    return float(np.linalg.norm(A_rows, 1) * np.linalg.norm(inverse, 1))
 
 
 class MatrixRSolver:

@@ -671,9 +671,10 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
         derived.append(matrix)
     A_r, phi_t_r, gamma_r = derived
 
+    moving = [sympy.expand(rate) != 0 for rate in phi_t_r]          # rows with Φ_t ≠ 0 (b ≠ 0)
     sources = _work_sources(mass.xreplace(mapping), [real(e) for e in Q],
-                            None if potential is None else real(potential), list(phi_t_r), names, mask, canonical)
-    steady = frozenset(name for name, rate, driver in zip(names, phi_t_r, mask) if driver and sympy.expand(rate) == 0)
+                            None if potential is None else real(potential), moving, names, mask, canonical)
+    steady = frozenset(name for name, moves, driver in zip(names, moving, mask) if driver and not moves)
     constant = None
     if not any(entry.free_symbols for entry in mass):
         try:
@@ -710,7 +711,7 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
 POWER_CHECK_NODES = 5000
 
 
-def _work_sources(mass: sympy.Matrix, forces: list, potential: sympy.Expr | None, phi_t: list,
+def _work_sources(mass: sympy.Matrix, forces: list, potential: sympy.Expr | None, moving: list[bool],
                   names: tuple[str, ...], drivers: np.ndarray, symbols: dict[str, list]) -> tuple[str, ...] | None:
     """What does work on a :func:`from_sympy` model besides its drivers (see
     :attr:`cmbs.model.model.Model.work_sources`), from dE/dt with E = ½ q̇ᵀ M q̇ + V and
@@ -721,8 +722,8 @@ def _work_sources(mass: sympy.Matrix, forces: list, potential: sympy.Expr | None
     P is the power of the forces that V and the kinetic terms do not account for (dampers,
     applied forces; Q's gyroscopic and Coriolis terms contribute -½ q̇ᵀ Ṁ q̇ and cancel).  The
     forces are named when P is not identically zero: shown by a value at a random state;
-    () when P simplifies to zero and no row but a driver has Φ_t ≠ 0 (b ≠ 0 for a velocity
-    constraint), those rows named otherwise; None when P can be shown neither way (it does not
+    () when P simplifies to zero and no row but a driver is ``moving`` (Φ_t ≠ 0, or b ≠ 0 for a
+    velocity constraint), those rows named otherwise; None when P can be shown neither way (it does not
     simplify, or is too large to try: :data:`POWER_CHECK_NODES`)."""
     q, qd, u = symbols["q"], symbols["qd"], symbols["u"]
     no_input = {symbol: sympy.S.Zero for symbol in u}
@@ -732,8 +733,8 @@ def _work_sources(mass: sympy.Matrix, forces: list, potential: sympy.Expr | None
     parts = [rate * (force.xreplace(no_input) + slope) for rate, force, slope in zip(qd, forces, gradient)]
     parts += [rate * kinetic.diff(symbol) for symbol, rate in zip(q, qd)]
     power = sympy.Add(*parts)
-    sources = tuple(f"rheonomic constraint {name!r}" for name, rate, driver in zip(names, phi_t, drivers)
-                    if not driver and sympy.expand(rate) != 0)
+    sources = tuple(f"rheonomic constraint {name!r}" for name, moves, driver in zip(names, moving, drivers)
+                    if moves and not driver)
     small = sum(1 for _ in sympy.preorder_traversal(power)) <= POWER_CHECK_NODES
     if small and sympy.expand(power) == 0:
         return sources
