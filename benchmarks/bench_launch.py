@@ -9,9 +9,11 @@ launch, compiled code cached; the first launch's compile time stated).
 Timed from the parent around ``subprocess.run`` (interpreter start and exit included), beside:
 an empty interpreter; the floor any numba program pays (import numpy and numba, initialise
 numba's CPU target, which imports scipy.linalg for its BLAS, and exit with the objects frozen out
-of the final garbage collection, as ``cmbs.jit`` arranges); and MuJoCo (if
-installed) on the same four-bar (``bench_dynamics.mujoco_xml``), 10 000 steps of its default
-implicitfast integrator.  The launches write and use Python's bytecode cache, as an installed
+of the final garbage collection, as ``cmbs.jit`` arranges); the same with the garbage collector
+paused while numpy and numba are imported and initialised, as ``cmbs.collector`` does; and MuJoCo
+(if installed) on the same four-bar (``bench_dynamics.mujoco_xml``), 10 000 steps of its default
+implicitfast integrator.  The programs take turns, one launch of each per round, so that all
+see the same machine load.  The launches write and use Python's bytecode cache, as an installed
 package does.  The cold launch uses a fresh ``NUMBA_CACHE_DIR``, so it compiles every
 kernel the run needs; the warm launches share that directory.
 """
@@ -37,6 +39,9 @@ CMBS_RUN = ("import cmbs; model = cmbs.load('four-bar').without_drivers(); "
             "assert run.info['compiled'] and run.info['status'] == 'success', run.info")
 NUMBA_FLOOR = ("import atexit, gc, numpy, numba; from numba.core.registry import cpu_target; "
                "cpu_target.target_context.refresh(); atexit.register(gc.freeze)")
+NUMBA_FLOOR_PAUSED = ("import atexit, gc; gc.disable(); import numpy, numba; "
+                      "from numba.core.registry import cpu_target; cpu_target.target_context.refresh(); "
+                      "gc.freeze(); gc.enable(); atexit.register(gc.freeze)")
 MUJOCO_RUN = ("import sys, mujoco, numpy; xml, q0, v0 = open(sys.argv[1]).read().split('\\n'); "
               "model = mujoco.MjModel.from_xml_string(xml); data = mujoco.MjData(model); "
               "data.qpos[:] = [float(x) for x in q0.split()]; data.qvel[:] = [float(x) for x in v0.split()]\n"
@@ -50,8 +55,13 @@ def launch(code: str, environment: dict, *arguments: str) -> float:
     return time.perf_counter() - started
 
 
-def warm(code: str, environment: dict, repeat: int, *arguments: str) -> list[float]:
-    return [launch(code, environment, *arguments) for _ in range(repeat)]
+def interleaved(programs: dict[str, tuple], environment: dict, repeat: int) -> dict[str, list[float]]:
+    """Wall seconds of ``repeat`` launches of each program (name: (code, *arguments)), taking turns."""
+    times: dict[str, list[float]] = {name: [] for name in programs}
+    for _ in range(repeat):
+        for name, (code, *arguments) in programs.items():
+            times[name].append(launch(code, environment, *arguments))
+    return times
 
 
 def describe(times: list[float]) -> str:
@@ -92,15 +102,18 @@ def main() -> None:
         if not args.no_cold:
             environment["NUMBA_CACHE_DIR"] = os.path.join(directory, "numba")
             print(f"cmbs first launch, cold numba cache (compiles): {launch(CMBS_RUN, environment):.1f} s")
-        empty = warm("pass", environment, args.repeat)
-        floor = warm(NUMBA_FLOOR, environment, args.repeat)
-        cmbs_times = warm(CMBS_RUN, environment, args.repeat)
         model_file = mujoco_file(directory)
-        mujoco_times = warm(MUJOCO_RUN, environment, args.repeat, model_file) if model_file else None
-    cmbs_median = statistics.median(cmbs_times)
-    print(f"empty interpreter:                          {describe(empty)}")
-    print(f"numpy + numba imported and initialised:     {describe(floor)} (the floor of any numba program)")
-    print(f"cmbs, import + four-bar + 10 s RK4 (warm):  {describe(cmbs_times)}; target {TARGET_S} s, ratio "
+        programs = {"empty": ("pass",), "floor": (NUMBA_FLOOR,), "paused": (NUMBA_FLOOR_PAUSED,),
+                    "cmbs": (CMBS_RUN,)}
+        if model_file:
+            programs["mujoco"] = (MUJOCO_RUN, model_file)
+        times = interleaved(programs, environment, args.repeat)
+    cmbs_median = statistics.median(times["cmbs"])
+    mujoco_times = times.get("mujoco")
+    print(f"empty interpreter:                          {describe(times['empty'])}")
+    print(f"numpy + numba imported and initialised:     {describe(times['floor'])} (the floor of any numba program)")
+    print(f"  the same, garbage collector paused:       {describe(times['paused'])} (as cmbs does it)")
+    print(f"cmbs, import + four-bar + 10 s RK4 (warm):  {describe(times['cmbs'])}; target {TARGET_S} s, ratio "
           f"{cmbs_median / TARGET_S:.2f} -> {'PASS' if cmbs_median <= TARGET_S else 'MISS'}")
     if mujoco_times:
         print(f"MuJoCo, import + four-bar + 10 000 steps:   {describe(mujoco_times)}; cmbs / MuJoCo = "

@@ -10,10 +10,10 @@ against the compiled kernels, tests/test_jit_fallback.py) and 100-1000× slower.
 
 from __future__ import annotations
 
-import atexit
-import gc
 import os
 from typing import Callable
+
+from cmbs.collector import freeze_at_exit, initialise_numba_target_on_first_use
 
 try:
     if os.environ.get("CMBS_DISABLE_NUMBA", "") not in ("", "0"):
@@ -23,22 +23,19 @@ except ImportError:
     _numba = None
 
 if _numba is not None:
-    # numba's typing registries are a large graph of objects, which every full garbage
-    # collection walks: about 20 ms each while a process starts (more once numba's target is
-    # initialised), and 0.2 s in the interpreter's final collection at exit.  The objects alive
-    # now (numpy's, numba's, and those the program made before importing cmbs: module-level
-    # objects, which live as long as the process) are moved out of the collector's reach
-    # (gc.freeze), and so is everything at exit.  A reference cycle among the frozen objects that
-    # becomes garbage is kept until exit; memory is returned to the system at exit as always, and
-    # only finalizers of objects left in cycles are skipped there, which CPython does not promise
-    # to run at exit anyway.
-    gc.freeze()
-    atexit.register(gc.freeze)
+    freeze_at_exit()
 
 #: True when the kernels are compiled by numba.
 COMPILED = _numba is not None
 #: numba's version, or "none": part of the name of generated equation modules.
 VERSION = _numba.__version__ if _numba is not None else "none"
+
+
+def initialise_on_first_use() -> None:
+    """With numba, initialise its CPU target at the next compiled call without the collector
+    walking what it builds (:func:`cmbs.collector.initialise_numba_target_on_first_use`)."""
+    if _numba is not None:
+        initialise_numba_target_on_first_use()
 
 
 def njit(*args, **options) -> Callable:
