@@ -210,10 +210,14 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         if value.shape != (n,):
             raise CmbsError(f"{label} must have shape ({n},) for model {model.name!r}, got {value.shape}")
     steps = whole_steps(t_end, dt)
-    from cmbs import fast, fast_matrix_r
+    from cmbs import fast
 
     fast_plan = fast.compiled_plan(model, chosen, integrator, u, project, t_end, dt)
-    velocity_loop = fast_plan is None and fast_matrix_r.runs(model, chosen, integrator, u, project, steps is not None)
+    velocity_loop = False
+    if fast_plan is None:
+        from cmbs import fast_matrix_r      # imported only for the runs the first plan turned down
+
+        velocity_loop = fast_matrix_r.runs(model, chosen, integrator, u, project, steps is not None)
     if compiled and fast_plan is None and not velocity_loop:
         raise CmbsError(f"the compiled loop cannot run this simulation (it needs integrator rk4 with t_end a "
                         "multiple of dt, formulation lagrange, baumgarte or projection with the standard inertia, "
