@@ -13,23 +13,30 @@ def run(code: str) -> str:
 
 def test_long_lived_pauses_the_collector_and_freezes_what_the_block_made():
     output = run("""
-import gc
+import gc, weakref
 from cmbs.collector import long_lived
 gc.enable()
+gc.set_threshold(10**6)                          # no automatic collection: only the block's frees it
+class Node:
+    pass
+garbage = Node()
+garbage.itself = garbage                         # a reference cycle: only the collector frees it
+garbage = weakref.ref(garbage)
 with long_lived():
+    freed_first = garbage() is None              # the freeze does not keep it
     paused = not gc.isenabled()
     made = [[] for _ in range(1000)]
     with long_lived():
         pass
     still_paused = not gc.isenabled()            # an inner block leaves the pause to the outer one
 tracked = {id(item) for item in gc.get_objects()}
-print(paused, still_paused, gc.isenabled(), any(id(item) in tracked for item in made))
+print(freed_first, paused, still_paused, gc.isenabled(), any(id(item) in tracked for item in made))
 gc.disable()
 with long_lived():
     pass
 print("disabled before, after:", gc.isenabled())
 """)
-    assert "True True True False" in output          # paused, restored, the block's lists out of reach
+    assert "True True True True False" in output     # garbage freed, paused, restored, the lists frozen
     assert "disabled before, after: False" in output
 
 

@@ -31,10 +31,15 @@ _was_enabled = True
 @contextlib.contextmanager
 def long_lived() -> Iterator[None]:
     """Run the block with the cyclic collector paused, then freeze every object alive and
-    restore the collector's state.  Blocks may nest: the outermost one freezes and restores."""
+    restore the collector's state.  Blocks may nest: the outermost one freezes and restores.
+    The outermost one starts with a full collection (when the collector is enabled), so that
+    the freeze keeps no garbage made before the block; it walks only the objects not frozen
+    yet (those of the program since its start, or since the last block)."""
     global _depth, _was_enabled
     if _depth == 0:
         _was_enabled = gc.isenabled()
+        if _was_enabled:
+            gc.collect()            # what is garbage already is freed, not frozen
         gc.disable()
     _depth += 1
     try:
