@@ -31,13 +31,17 @@ from cmbs.banded import band_factor, band_plan, band_solve, gram_profile, invers
 from cmbs.dynamics import Baumgarte, Formulation, Lagrange, Projection
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.integrate.grid import whole_steps
+from cmbs.lazy import lazy_module
 from cmbs.model.drivers import evaluate_piecewise
-from cmbs.model.joints import JointEquations, _evaluate_kernel as _joint_kernel
 from cmbs.model.model import Model
 from cmbs.model.natural import NaturalEquations, _evaluate as _natural_kernel
 
 if TYPE_CHECKING:
     from cmbs.control.computed_torque import ComputedTorque
+
+#: the joint-coordinate model module, executed at its first use: a run of a natural model never
+#: needs it (numba reads ``joints._evaluate_kernel`` when it compiles :func:`_evaluate`)
+joints = lazy_module("cmbs.model.joints")
 
 KIND_NATURAL, KIND_JOINT = 0, 1
 LAGRANGE, BAUMGARTE, PROJECTION = 0, 1, 2
@@ -53,7 +57,7 @@ def supported(model: Model) -> int | None:
     equations = model.equations
     if isinstance(equations, NaturalEquations) and not equations.time_functions.python:
         return KIND_NATURAL
-    if isinstance(equations, JointEquations) and not equations.python:
+    if isinstance(equations, joints.JointEquations) and not equations.python:
         return KIND_JOINT
     return None
 
@@ -311,7 +315,7 @@ def _evaluate(kind, q, qd, t, u, ints, reals, buffer):
     if kind == KIND_NATURAL:
         _natural_kernel(q, qd, t, u, ints, reals, buffer)
     else:
-        _joint_kernel(ints, reals, q, qd, t, u, buffer)
+        joints._evaluate_kernel(ints, reals, q, qd, t, u, buffer)
 
 
 @njit_borrowing(cache=True)
