@@ -179,8 +179,7 @@ def test_describe_names_what_does_work(capsys):
 
 
 def test_sweeps_report_each_variants_energy_drift(tmp_path):
-    """The batched and process paths give the same drift, computed from the recorded outputs;
-    mass-factor variants (energies of the nominal masses) are not judged."""
+    """The batched and process paths give the same drift, computed from the recorded outputs."""
     model = cmbs.load("four-bar").without_drivers()
     variants = [Variant(qd0=cmbs.velocities(model, model.q0, qd=np.eye(model.n)[-1] * speed), label=f"{speed}")
                 for speed in (0.0, 0.5, 1.0)]
@@ -198,8 +197,32 @@ def test_sweeps_report_each_variants_energy_drift(tmp_path):
         older = {key: data[key] for key in data.files if key != "energy_drift"}
     np.savez(tmp_path / "older.npz", **older)
     assert np.isnan(SweepResult.load(tmp_path / "older.npz").energy_drift).all()
-    masses = sweep("pendulum", [Variant(masses={"rod": 1.1})], t_end=0.5, dt=1e-2, batched=False, workers=1)
-    assert np.isnan(masses.energy_drift).all()
+
+
+def _double_pendulum(lower_mass: float) -> cmbs.Model:
+    """Two rods, 1 m, the upper of 1 kg, under gravity, released from the horizontal."""
+    builder = NaturalModelBuilder("double", gravity=(0.0, -9.81))
+    builder.add_point("O", 0.0, 0.0, fixed=True)
+    builder.add_point("A", 1.0, 0.0)
+    builder.add_point("B", 2.0, 0.0)
+    for name, i, j, mass in (("upper", "O", "A", 1.0), ("lower", "A", "B", lower_mass)):
+        builder.add_segment(name, i, j, mass=mass, com=(0.5, 0.0), inertia=mass / 12.0, length=1.0)
+    return builder.build()
+
+
+def test_a_sweeps_mass_factors_are_judged_on_the_changed_mechanisms_energy():
+    """The variant with the lower rod 1.5 times heavier against the mechanism built with it:
+    its recorded energies and drift are that mechanism's T + V on the recorded states."""
+    nominal, heavy = _double_pendulum(1.0), _double_pendulum(1.5)
+    result = sweep(nominal, [Variant(masses={"lower": 1.5})], t_end=1.0, dt=1e-2, integrator="rk4",
+                   batched=False, workers=1)
+    kinetic, potential = heavy.energy_parts(result.q[0], result.qd[0])
+    np.testing.assert_allclose(result.energy[0], kinetic + potential, rtol=1e-12, atol=1e-12)
+    expected = np.abs(kinetic + potential - kinetic[0] - potential[0]).max() / kinetic.max()
+    assert result.energy_drift[0] == pytest.approx(expected, rel=1e-9)
+    alone = simulate(heavy, t_end=1.0, dt=1e-2, integrator="rk4")     # the same motion, its own check
+    np.testing.assert_allclose(result.q[0], alone.q, atol=1e-12)
+    assert result.energy_drift[0] == pytest.approx(alone.info["energy_drift"], rel=1e-9)
 
 
 def test_the_sweep_command_prints_the_drift_and_a_note(capsys):

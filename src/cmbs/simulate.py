@@ -518,12 +518,13 @@ def _trajectory(model: Model, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd:
                        "constraint_error": position_error, "velocity_constraint_error": velocity_error}, info)
 
 
-def energy_drift(model: Model, kinetic: np.ndarray, energy: np.ndarray, u: np.ndarray) -> float | None:
+def energy_drift(sources: tuple[str, ...] | None, kinetic: np.ndarray, energy: np.ndarray,
+                 u: np.ndarray) -> float | None:
     """max |E - E0| / max T over a run's outputs (kinetic energies T, total energies E = T + V,
     inputs u (k, n_u)) when its exact motion conserves E: nothing does work but gravity and
-    springs (:attr:`Model.work_sources` is empty) and every input is zero; else None (and when
-    the mechanism is at rest throughout, or an energy is not finite)."""
-    if model.work_sources != () or np.any(u != 0) or not np.all(np.isfinite(energy)):
+    springs (``sources``, the model's :attr:`Model.work_sources`, is empty) and every input is
+    zero; else None (and when the mechanism is at rest throughout, or an energy is not finite)."""
+    if sources != () or np.any(u != 0) or not np.all(np.isfinite(energy)):
         return None
     scale = float(kinetic.max(initial=0.0))
     return float(np.abs(energy - energy[0]).max() / scale) if scale > 0 else None
@@ -533,7 +534,7 @@ def _note_energy_drift(model: Model, kinetic: np.ndarray, energy: np.ndarray, u:
     """``info["energy_drift"]`` (:func:`energy_drift`) when the run is judged, and a note when it
     exceeds :data:`ENERGY_NOTE`: the motion is then not what the model says, to more than a
     little."""
-    drift = energy_drift(model, kinetic, energy, u)
+    drift = energy_drift(model.work_sources, kinetic, energy, u)
     if drift is None:
         return
     info["energy_drift"] = drift

@@ -142,8 +142,8 @@ class SweepResult:
         (N,) number of valid outputs of each variant.
     energy_drift
         (N,) max |E - E0| / max T over each variant's outputs where its exact motion conserves
-        T + V (:func:`cmbs.simulate.energy_drift`: a conservative model, zero inputs, no mass
-        change), else NaN.
+        T + V (:func:`cmbs.simulate.energy_drift`: a conservative model, zero inputs; with mass
+        factors, the changed mechanism's own energy), else NaN.
     names
         The n coordinate names.
     variants
@@ -301,20 +301,21 @@ def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> 
         empty = np.zeros((0, n))
         return {"q": empty, "qd": empty, "energy": np.zeros(0), "phi": np.zeros(0), "status": "failed",
                 "message": str(error)}
-    energy = run["energy"]
-    if variant.masses:                      # the energy of the heavier or lighter mechanism
-        from cmbs.control.faults import mass_fault_energy
-
-        energy = energy + mass_fault_energy(built, run.q, run.qd)
     index = np.searchsorted(run.t, times - 1e-9 * settings.dt)
     valid = index < run.t.size
     valid[valid] = np.abs(run.t[index[valid]] - times[valid]) <= 1e-9 * max(1.0, settings.t_end)
     count = int(np.argmin(valid)) if not valid.all() else times.size
     picked = index[:count]
-    kinetic = built.energy_parts(run.q[picked], run.qd[picked])[0]
-    return {"q": run.q[picked], "qd": run.qd[picked], "energy": energy[picked],
-            "phi": run["constraint_error"][picked], "status": status, "message": message,
-            "drift": energy_drift(built, kinetic, energy[picked], run["u"][picked])}
+    q, qd = run.q[picked], run.qd[picked]
+    kinetic, energy, sources = built.energy_parts(q, qd)[0], run["energy"][picked], built.work_sources
+    if variant.masses:          # the heavier or lighter mechanism's own energy, conserved as the nominal one's
+        from cmbs.control.faults import mass_fault_energy_parts, nominal_work_sources
+
+        added_kinetic, added_potential = mass_fault_energy_parts(built, q, qd)
+        kinetic, energy = kinetic + added_kinetic, energy + added_kinetic + added_potential
+        sources = nominal_work_sources(built)
+    return {"q": q, "qd": qd, "energy": energy, "phi": run["constraint_error"][picked], "status": status,
+            "message": message, "drift": energy_drift(sources, kinetic, energy, run["u"][picked])}
 
 
 def _run_processes(model: str | Model, settings: RunSettings, variants: list[Variant], workers: int,
@@ -420,7 +421,7 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
         outputs.append({"q": Qs[v, :k], "qd": QDs[v, :k], "energy": energy,
                         "phi": PHIs[v, :k], "status": "failed" if failed else "success",
                         "message": message if failed else "",
-                        "drift": energy_drift(model, kinetic, energy, np.tile(U0[v], (k, 1)))})
+                        "drift": energy_drift(model.work_sources, kinetic, energy, np.tile(U0[v], (k, 1)))})
     return outputs
 
 
