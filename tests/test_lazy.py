@@ -27,6 +27,15 @@ def test_import_cmbs_defers_scipy_submodules_until_first_use():
     assert "after use: True 6.25" in output            # the cubic through x² is x² itself
 
 
+def test_a_lazy_submodule_is_bound_to_its_package_and_executed_at_first_use():
+    """``import cmbs.model.joints`` after cmbs.fast made it lazy: the attribute path works."""
+    probe = ("import sys, cmbs, cmbs.fast; lazy = type(sys.modules['cmbs.model.joints']).__name__; "
+             "import cmbs.model.joints; print(lazy, cmbs.model.joints.JointModelBuilder.__name__, "
+             "type(sys.modules['cmbs.model.joints']).__name__)")
+    output = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
+    assert output.split() == ["_LazyModule", "JointModelBuilder", "module"]
+
+
 def test_lazy_module_returns_an_imported_module_and_rejects_unknown_names():
     import math
 

@@ -8,9 +8,9 @@ each full collection: in a whole launch (import, the four-bar, 10 s of RK4) abou
 collections that found nothing to free, a tenth of the process.
 
 :func:`long_lived` pauses the collector while a block creates such objects and then moves
-everything alive out of its reach (``gc.freeze``, Python ≥ 3.7, which is what the Python
-documentation recommends for long-lived state); ``import cmbs`` runs in one, and so does numba's
-target initialisation (:func:`initialise_numba_target_on_first_use`).  The cost is the usual one
+everything alive out of its reach (``gc.freeze``: a permanent generation that no collection
+walks); ``import cmbs`` runs in one, and so does numba's target initialisation
+(:func:`initialise_numba_target_on_first_use`).  The cost is the usual one
 of ``gc.freeze``: a reference cycle among the frozen objects that becomes garbage is kept until
 exit.  :func:`freeze_at_exit` spares the interpreter's final collection the same walk (about
 0.2 s); memory is returned to the system at exit as always, and only finalizers of objects left

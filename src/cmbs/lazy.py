@@ -28,4 +28,7 @@ def lazy_module(name: str) -> ModuleType:
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     loader.exec_module(module)
+    parent, _, child = name.rpartition(".")
+    if parent:      # bound to its package, as the import system binds a submodule it imports
+        setattr(sys.modules[parent], child, module)
     return module
