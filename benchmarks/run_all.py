@@ -37,7 +37,7 @@ def commands(out: Path, quick: bool) -> dict[str, list[str]]:
         "work-precision": ["work_precision.py", *fast, "--out-dir", str(out), "--json",
                            str(out / "work-precision.json")],
         "sweep": ["bench_sweep.py", *fast],
-        "launch": ["bench_launch.py", *(["--repeat", "3", "--no-cold"] if quick else [])],
+        "launch": ["bench_launch.py", *(["--repeat", "5", "--no-cold"] if quick else [])],
         "control": ["bench_control.py", *fast],
         "servo": ["bench_servo.py", *fast, "--json", str(out / "servo.json")],
         "gait": ["bench_gait.py", *(["--repeat", "2"] if quick else [])],
