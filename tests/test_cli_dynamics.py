@@ -37,6 +37,16 @@ def test_compare_prints_one_row_per_formulation(capsys):
     assert capsys.readouterr().out.splitlines()[2].split()[-2] == "-"      # driven: not judged
 
 
+def test_compare_runs_all_six_formulations_by_default_and_only_with_an_explicit_integrator(capsys):
+    assert main(["compare", "pendulum", "--t-end", "0.5", "--rtol", "1e-10", "--atol", "1e-12"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split()[0] for line in lines[2:]] == ["lagrange", "baumgarte", "penalty", "matrix-r", "projection",
+                                                       "udwadia-kalaba"]
+    assert "deviation against lagrange" in lines[0]
+    assert main(["compare", "pendulum", "--t-end", "0.5", "--integrator", "trapezoidal"]) == 2
+    assert "--integrator trapezoidal brings its own formulation" in capsys.readouterr().err
+
+
 def test_bad_dynamics_options_exit_2(tmp_path, capsys):
     assert main(["simulate", "pendulum", "--t-end", "1", "--formulation", "baumgarte", "--option", "alpha=3"]) == 2
     assert main(["simulate", "pendulum", "--t-end", "-1"]) == 2

@@ -190,9 +190,14 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from cmbs.simulate import simulate
+    from cmbs.dynamics import FORMULATIONS
+    from cmbs.simulate import EXPLICIT, simulate
 
-    names = [name.strip() for name in args.formulations.split(",") if name.strip()]
+    if args.integrator not in EXPLICIT:
+        raise _UsageError(f"--integrator {args.integrator} brings its own formulation; compare runs formulations side "
+                          f"by side with an explicit integrator ({', '.join(EXPLICIT)}): use cmbs simulate for it")
+    names = list(FORMULATIONS) if args.formulations is None else \
+        [name.strip() for name in args.formulations.split(",") if name.strip()]
     if not names:
         raise _UsageError("--formulations needs at least one name, e.g. lagrange,projection")
     model = _load(args)
@@ -475,7 +480,8 @@ def build_parser() -> argparse.ArgumentParser:
     track.set_defaults(run=_track)
 
     compare = model_command("compare", "run several formulations on the same model and tabulate them")
-    compare.add_argument("--formulations", required=True, help="comma-separated names, the first is the reference")
+    compare.add_argument("--formulations", help="comma-separated names, the first is the reference (default: all "
+                         "six, lagrange first)")
     dynamics_options(compare)
     compare.set_defaults(run=_compare)
 
