@@ -48,6 +48,17 @@ def test_kinematics_writes_result_and_figure(tmp_path, capsys):
     assert "alpha" in capsys.readouterr().out
 
 
+def test_kinematics_without_out_prints_the_ranges_and_writes_nothing(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["kinematics", "four-bar", "--t-end", "1", "--dt", "0.5"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "four-bar: kinematics of 3 instants over [0, 1] s"
+    alpha = next(line.split() for line in out if line.split()[0] == "alpha")
+    assert float(alpha[2]) == pytest.approx(-np.pi / 4, abs=1e-4)     # (pi/4) sin(pi t - pi/2) at t = 0 and 1
+    assert float(alpha[4]) == pytest.approx(np.pi / 4, abs=1e-4)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_bad_options_exit_2_without_writing(tmp_path, capsys):
     assert main(["kinematics", "four-bar", "--t-end", "-1", "--dt", "0.1", "--out", str(tmp_path / "a.npz")]) == 2
     assert main(["kinematics", "pendulum", "--t-end", "1", "--dt", "0.1", "--out", str(tmp_path / "a.npz")]) == 2

@@ -127,15 +127,12 @@ def _describe(args: argparse.Namespace) -> int:
 def _kinematics(args: argparse.Namespace) -> int:
     from cmbs.plotting import plot_trajectory, save_figure
 
-    times = _grid(args)
-    _check_output(args.out, (".npz", ".csv"), "--out")
-    if args.plot:
-        _check_output(args.plot, (".png", ".pdf", ".svg"), "--plot")
+    times = _check_time_grid_and_outputs(args)
     model = _load(args)
     motion = cmbs.kinematic_analysis(model, times)
     singular = cmbs.singular_configurations(model, motion)
-    path = motion.save(args.out)
-    print(f"{model.name}: kinematics of {len(times)} instants over [0, {args.t_end:g}] s -> {path}")
+    saved = f" -> {motion.save(args.out)}" if args.out else ""
+    print(f"{model.name}: kinematics of {len(times)} instants over [0, {args.t_end:g}] s{saved}")
     for name in model.coordinate_names:
         column = motion[name]
         print(f"  {name:<18} min {column.min(): .5g}  max {column.max(): .5g}")
@@ -397,7 +394,7 @@ def build_parser() -> argparse.ArgumentParser:
     kinematics = model_command("kinematics", "kinematic analysis of a fully driven model over time")
     kinematics.add_argument("--t-end", type=float, required=True, help="final time [s]")
     kinematics.add_argument("--dt", type=float, required=True, help="time step of the output grid [s]")
-    kinematics.add_argument("--out", required=True, help="result file (.npz or .csv)")
+    kinematics.add_argument("--out", help="result file (.npz or .csv)")
     kinematics.add_argument("--plot", help="figure of the motion (.png, .pdf or .svg)")
     kinematics.set_defaults(run=_kinematics)
 
