@@ -131,8 +131,11 @@ CASES = [
     ("expression-not-string", driver(None, expression="true"), r"drivers\.d", r"expression must be a string"),
     # keys and types
     ("unknown-key", POINTS + CRANK.replace("mass = 1.0", "mas = 1.0"), r"segments\.crank",
-     r"unknown key\(s\) 'mas' \(allowed: points, mass, com, inertia, length\)"),
-    ("unknown-key-in-model", "[model]\nnmae = 'x'\n" + PENDULUM, r"model", r"unknown key\(s\) 'nmae'"),
+     r"unknown key\(s\) 'mas' \(did you mean 'mass'\?\) \(allowed: points, mass, com, inertia, length\)"),
+    ("unknown-key-in-model", "[model]\nnmae = 'x'\n" + PENDULUM, r"model",
+     r"unknown key\(s\) 'nmae' \(did you mean 'name'\?\)"),
+    ("unknown-key-far-from-any", POINTS + CRANK.replace("mass = 1.0", "mass = 1.0\ncolour = 1"), r"segments\.crank",
+     r"unknown key\(s\) 'colour' \(allowed:"),
     ("missing-key", POINTS + CRANK.replace('points = ["O", "P"]\n', ""), r"segments\.crank",
      r"missing key\(s\) 'points'"),
     ("missing-coordinate-of-point", POINTS.replace("P = { x = 1.0, z = 0.0 }", "P = { x = 1.0 }") + CRANK,
@@ -268,8 +271,17 @@ def test_unknown_library_model(capsys):
     assert main(["describe", "four-barr"]) == 2
     line = one_error_line(capsys)
     assert "no library model or file 'four-barr'" in line and "four-bar" in line
-    with pytest.raises(cmbs.ModelError, match="no library model or file 'four-barr'"):
+    with pytest.raises(cmbs.ModelError, match="no library model or file 'four-barr' \\(did you mean 'four-bar'\\?\\)"):
         cmbs.load("four-barr")
+    with pytest.raises(cmbs.ModelError, match="no library model or file 'zzz'; library models"):
+        cmbs.load("zzz")                                     # nothing close: no suggestion
+
+
+def test_misspelt_formulation_and_integrator_get_a_suggestion():
+    with pytest.raises(cmbs.CmbsError, match="unknown formulation 'projektion' \\(did you mean 'projection'\\?\\)"):
+        cmbs.formulation("projektion")
+    with pytest.raises(cmbs.CmbsError, match="unknown integrator 'rk5' \\(did you mean 'rk45'\\?\\)"):
+        cmbs.simulate("pendulum", t_end=1.0, integrator="rk5")
 
 
 # ---------------------------------------------------------------- kinematics output paths

@@ -17,6 +17,7 @@ with _long_lived():  # the modules live as long as the process: no collections w
     from cmbs.jit import initialise_on_first_use as _initialise_on_first_use
     from cmbs.dynamics import (Baumgarte, Lagrange, MatrixR, Penalty, Projection, UdwadiaKalaba, formulation)
     from cmbs.errors import CmbsError, ConvergenceError, ExpressionError, ModelError, SingularSystemError
+    from cmbs.errors import did_you_mean as _did_you_mean
     from cmbs.inputs import SampledInput
     from cmbs.kinematics import (ConstraintReport, accelerations, assemble, constraint_report, kinematic_analysis,
                                  singular_configurations, velocities)
@@ -60,7 +61,8 @@ def load(name_or_path: str | _Path, **parameters: object) -> Model:
                          source=text)
     if text.endswith(".toml") or _Path(text).exists():
         return load_model_file(text)
-    raise ModelError(f"no library model or file {text!r}; library models: {', '.join(names())}")
+    raise ModelError(f"no library model or file {text!r}{_did_you_mean(text, names())}; library models: "
+                     f"{', '.join(names())}")
 
 
 __all__ = [

@@ -8,6 +8,9 @@ failed, e.g. a non-convergent assembly of a valid model).
 
 from __future__ import annotations
 
+import difflib
+from collections.abc import Iterable
+
 
 class CmbsError(Exception):
     """Base class of every error cmbs raises on purpose."""
@@ -57,3 +60,10 @@ class SingularSystemError(CmbsError):
     """A linear system is singular: redundant constraints or a singular configuration."""
 
     exit_status = 1
+
+
+def did_you_mean(name: str, choices: Iterable[str]) -> str:
+    """`` (did you mean 'x'?)`` for the choice closest to a misspelt ``name`` (difflib's ratio
+    at least 0.6), or an empty string when none is close."""
+    close = difflib.get_close_matches(name, list(choices), n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""

@@ -25,7 +25,7 @@ import numpy as np
 from cmbs.dynamics import Formulation, formulation as make_formulation
 from cmbs.dynamics.matrix_r import MatrixRSolver, rounding_note
 from cmbs.dynamics.projection import pseudo_inverse
-from cmbs.errors import CmbsError, SingularSystemError
+from cmbs.errors import CmbsError, SingularSystemError, did_you_mean
 from cmbs.integrate.explicit import Integration, integrate as integrate_explicit
 from cmbs.integrate.grid import whole_steps
 from cmbs.integrate.implicit import BACKWARD_EULER, TRAPEZOIDAL, Scheme, generalized_alpha, integrate_index3
@@ -186,7 +186,8 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         if not (value > 0 and np.isfinite(value)):  # a zero or negative scale makes the error norm meaningless
             raise CmbsError(f"{name} must be a finite number > 0, got {value}")
     if integrator not in INTEGRATORS:
-        raise CmbsError(f"unknown integrator {integrator!r}; choose one of {', '.join(INTEGRATORS)}")
+        raise CmbsError(f"unknown integrator {integrator!r}{did_you_mean(integrator, INTEGRATORS)}; "
+                        f"choose one of {', '.join(INTEGRATORS)}")
     if integrator not in EXPLICIT and model.nonholonomic.any():
         raise CmbsError(f"integrator {integrator!r} enforces constraints at position level and cannot impose the "
                         f"nonholonomic constraints of model {model.name!r}; use rk45, rk23, dop853 or rk4")

@@ -14,7 +14,7 @@ from cmbs.dynamics.matrix_r import MatrixR
 from cmbs.dynamics.penalty import Penalty
 from cmbs.dynamics.projection import Projection
 from cmbs.dynamics.udwadia_kalaba import UdwadiaKalaba
-from cmbs.errors import CmbsError
+from cmbs.errors import CmbsError, did_you_mean
 
 FORMULATIONS: dict[str, type] = {cls.name: cls for cls in (Lagrange, Baumgarte, Penalty, MatrixR, Projection,
                                                            UdwadiaKalaba)}
@@ -23,7 +23,8 @@ FORMULATIONS: dict[str, type] = {cls.name: cls for cls in (Lagrange, Baumgarte, 
 def formulation(name: str, **options: object) -> Formulation:
     """The formulation called ``name`` with its ``options`` (CmbsError naming the valid ones)."""
     if name not in FORMULATIONS:
-        raise CmbsError(f"unknown formulation {name!r}; choose one of {', '.join(FORMULATIONS)}")
+        raise CmbsError(f"unknown formulation {name!r}{did_you_mean(name, FORMULATIONS)}; choose one of "
+                        f"{', '.join(FORMULATIONS)}")
     cls = FORMULATIONS[name]
     allowed = [field.name for field in dataclasses.fields(cls)]
     unknown = sorted(set(options) - set(allowed))

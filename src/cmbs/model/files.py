@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from cmbs.errors import ConvergenceError, ModelError
+from cmbs.errors import ConvergenceError, ModelError, did_you_mean
 from cmbs.model.drivers import Table, TimeFunction, as_time_function
 from cmbs.model.model import Model
 from cmbs.model.natural import NaturalModelBuilder
@@ -34,7 +34,8 @@ class _Entry:
             raise ModelError(f"expected a table of keys, got {table!r}", entry=label)
         unknown = sorted(set(table) - set(allowed))
         if unknown:
-            raise ModelError(f"unknown key(s) {', '.join(map(repr, unknown))} (allowed: {', '.join(allowed)})",
+            hint = did_you_mean(unknown[0], set(allowed) - set(table)) if len(unknown) == 1 else ""
+            raise ModelError(f"unknown key(s) {', '.join(map(repr, unknown))}{hint} (allowed: {', '.join(allowed)})",
                              entry=label)
         missing = [key for key in required if key not in table]
         if missing:
