@@ -277,6 +277,13 @@ def test_unknown_library_model(capsys):
         cmbs.load("zzz")                                     # nothing close: no suggestion
 
 
+def test_misspelt_parameter_and_option_get_a_suggestion(capsys):
+    assert main(["describe", "chain", "--param", "link=3"]) == 2
+    assert "no parameter(s) link (did you mean 'links'?) (parameters: links=3, closed=False)" in one_error_line(capsys)
+    with pytest.raises(cmbs.CmbsError, match="no option\\(s\\) omaga \\(did you mean 'omega'\\?\\)"):
+        cmbs.formulation("baumgarte", omaga=20.0)
+
+
 def test_misspelt_formulation_and_integrator_get_a_suggestion():
     with pytest.raises(cmbs.CmbsError, match="unknown formulation 'projektion' \\(did you mean 'projection'\\?\\)"):
         cmbs.formulation("projektion")

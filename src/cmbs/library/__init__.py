@@ -13,7 +13,7 @@ from importlib import import_module, resources
 from pathlib import Path
 from typing import Callable
 
-from cmbs.errors import ModelError
+from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.model import Model
 
 
@@ -112,7 +112,8 @@ def check_parameters(name: str, **parameters: object) -> dict[str, object]:
     unknown = sorted(set(parameters) - set(allowed))
     if unknown:
         accepted = ", ".join(f"{k}={v!r}" for k, v in allowed.items()) or "none"
-        raise ModelError(f"model {name!r} has no parameter(s) {', '.join(unknown)} (parameters: {accepted})")
+        hint = did_you_mean(unknown[0], set(allowed) - set(parameters)) if len(unknown) == 1 else ""
+        raise ModelError(f"model {name!r} has no parameter(s) {', '.join(unknown)}{hint} (parameters: {accepted})")
     return {key: _check_parameter(name, key, value, allowed[key]) for key, value in parameters.items()}
 
 
