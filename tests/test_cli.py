@@ -97,7 +97,7 @@ def test_console_script(tmp_path):
     (["sweep", "slider-crank", "--vary", "crank_speed=1,abc", "--t-end", "0.1"],
      "parameter crank_speed must be a finite number, got 'abc'"),
     (["sweep", "slider-crank", "--vary", "crank_speed=1,2", "--formulation", "lagrangee", "--t-end", "0.1"],
-     "--formulation: unknown 'lagrangee'"),
+     "--formulation: unknown 'lagrangee' (did you mean 'lagrange'?)"),
     (["sweep", "four-bar", "--undriven", "--mass", "crank=1,-1", "--t-end", "0.1"], "mass factors must be > 0"),
 ])
 def test_bad_values_one_line_exit_2(arguments, message, tmp_path, monkeypatch, capsys):

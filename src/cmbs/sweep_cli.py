@@ -10,7 +10,7 @@ from typing import Callable
 
 import numpy as np
 
-from cmbs.errors import CmbsError
+from cmbs.errors import CmbsError, did_you_mean
 
 
 class SweepUsageError(CmbsError):
@@ -136,7 +136,9 @@ def _sweep(args: argparse.Namespace) -> int:
     from cmbs.dynamics import FORMULATIONS
 
     if args.formulation not in FORMULATIONS:
-        raise SweepUsageError(f"--formulation: unknown {args.formulation!r}; choose one of {', '.join(FORMULATIONS)}")
+        hint = did_you_mean(args.formulation, FORMULATIONS)
+        raise SweepUsageError(f"--formulation: unknown {args.formulation!r}{hint}; choose one of "
+                              f"{', '.join(FORMULATIONS)}")
     if args.undriven and args.vary:
         raise SweepUsageError("--undriven cannot be combined with --vary (the varied model is rebuilt by name)")
     parameters = dict(_fixed(text) for text in args.param)
