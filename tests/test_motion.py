@@ -66,7 +66,7 @@ def test_cli_motion_on_a_joint_model_with_reactions(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("motion, message", [
-    ("thet1 = 2*t", "has no coordinate 'thet1'"),
+    ("thet1 = 2*t", "has no coordinate 'thet1' (did you mean 'theta1'?)"),
     ("theta1 = 2*t+", "unexpected end"),
     ("theta1 = __import__('os')", "unexpected character"),
     ("theta1 2*t", "expected NAME = EXPRESSION"),

@@ -72,8 +72,10 @@ def test_load_errors(tmp_path):
 def test_access_by_name():
     trajectory = sample()
     np.testing.assert_array_equal(trajectory.velocity("a.x"), trajectory.qd[:, 0])
-    with pytest.raises(KeyError, match="no coordinate or array 'nope'"):
+    with pytest.raises(KeyError, match="no coordinate or array 'nope'; coordinates: .*; arrays: "):
         trajectory["nope"]
+    with pytest.raises(KeyError, match=r"no coordinate or array 'a\.xx' \(did you mean 'a\.x'\?\)"):
+        trajectory["a.xx"]
 
 
 def test_written_files_get_the_usual_permissions(tmp_path):

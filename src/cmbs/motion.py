@@ -21,7 +21,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from cmbs.errors import CmbsError, ExpressionError
+from cmbs.errors import CmbsError, ExpressionError, did_you_mean
 from cmbs.inverse.ida import driven_columns
 from cmbs.model.drivers import Expression, Table, TimeFunction
 from cmbs.model.model import Model, Terms, WrappedEquations
@@ -74,7 +74,8 @@ def prescribe(model: Model, functions: Mapping[str, TimeFunction]) -> Model:
     free = model.without_drivers()
     unknown = [name for name in functions if name not in model.coordinate_names]
     if unknown:
-        raise CmbsError(f"model {model.name!r} has no coordinate(s) {', '.join(unknown)}; coordinates: "
+        hint = did_you_mean(unknown[0], model.coordinate_names) if len(unknown) == 1 else ""
+        raise CmbsError(f"model {model.name!r} has no coordinate(s) {', '.join(unknown)}{hint}; coordinates: "
                         f"{', '.join(model.coordinate_names)}")
     names = list(functions)
     columns = model.coordinate_indices(names)
@@ -117,7 +118,8 @@ def _motion_from_expressions(text: str, model: Model, coordinates: Sequence[str]
             raise CmbsError(f"motion {item!r}: expected NAME = EXPRESSION (several separated by ';'), "
                             "or a .npz/.csv file")
         if name not in model.coordinate_names:
-            raise CmbsError(f"motion {item!r}: model {model.name!r} has no coordinate {name!r}; "
+            raise CmbsError(f"motion {item!r}: model {model.name!r} has no coordinate {name!r}"
+                            f"{did_you_mean(name, model.coordinate_names)}; "
                             f"coordinates: {', '.join(model.coordinate_names)}")
         if name in functions:
             raise CmbsError(f"motion: coordinate {name!r} is given twice")

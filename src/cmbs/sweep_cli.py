@@ -87,7 +87,8 @@ def variants_from(args: argparse.Namespace, model) -> list:
     if args.speed:
         key, values = _values(args.speed, "--speed")
         if key not in model.coordinate_names:
-            raise SweepUsageError(f"--speed: model {model.name!r} has no coordinate {key!r}; coordinates: "
+            raise SweepUsageError(f"--speed: model {model.name!r} has no coordinate {key!r}"
+                                  f"{did_you_mean(key, model.coordinate_names)}; coordinates: "
                                   f"{_listing(model.coordinate_names)}")
         axes.append(("speed", key, _numbers(key, values, "--speed")))
     if not axes:

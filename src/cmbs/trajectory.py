@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cmbs.errors import CmbsError
+from cmbs.errors import CmbsError, did_you_mean
 from cmbs.files_io import atomic_path, checked_output
 
 _CORE = ("t", "q", "qd", "qdd", "names", "info")
@@ -55,7 +55,9 @@ class Trajectory:
             return self.q[:, self.names.index(name)]
         if name in self.extras:
             return self.extras[name]
-        raise KeyError(f"no coordinate or array {name!r}; coordinates: {', '.join(self.names)}")
+        hint = did_you_mean(name, [*self.names, *self.extras])
+        raise KeyError(f"no coordinate or array {name!r}{hint}; coordinates: {', '.join(self.names)}; arrays: "
+                       f"{', '.join(self.extras) or 'none'}")
 
     def velocity(self, name: str) -> np.ndarray:
         return self.qd[:, self.names.index(name)]

@@ -28,7 +28,7 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
-from cmbs.errors import ModelError
+from cmbs.errors import ModelError, did_you_mean
 
 
 class Terms:
@@ -236,7 +236,8 @@ class Model:
         try:
             return self.coordinate_names.index(name)
         except ValueError:
-            raise ModelError(f"model {self.name!r} has no coordinate {name!r}; "
+            raise ModelError(f"model {self.name!r} has no coordinate {name!r}"
+                             f"{did_you_mean(name, self.coordinate_names)}; "
                              f"coordinates: {', '.join(self.coordinate_names)}") from None
 
     def coordinate_indices(self, names: Sequence[str | int]) -> np.ndarray:
