@@ -74,10 +74,12 @@ CASES = [
     # names
     ("unknown-point", POINTS + CRANK.replace('["O", "P"]', '["O", "Q"]'), r"segments\.crank",
      r"unknown point 'Q' \(points: O, P\)"),
+    ("unknown-point-in-other-case", POINTS + CRANK.replace('["O", "P"]', '["O", "p"]'), r"segments\.crank",
+     r"unknown point 'p' \(did you mean 'P'\?\) \(points: O, P\)"),
     ("unknown-point-in-spring", PENDULUM + '[springs.k]\npoints = ["P", "R"]\nstiffness = 1.0\n', r"springs\.k",
      r"unknown point 'R'"),
     ("unknown-segment-in-angle", POINTS + CRANK + '[angles.th]\nsegment = "crnak"\n', r"angles\.th",
-     r"unknown segment 'crnak' \(segments: crank\)"),
+     r"unknown segment 'crnak' \(did you mean 'crank'\?\) \(segments: crank\)"),
     ("duplicate-angle-and-distance", PENDULUM + '[distances.th]\npoints = ["O", "P"]\n', r"angles\.th",
      r"name 'th' is already a coordinate"),
     ("duplicate-point-coordinate", PENDULUM + '[distances."P.x"]\npoints = ["O", "P"]\n', r"distances\.P\.x",

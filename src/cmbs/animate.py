@@ -19,7 +19,7 @@ import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from PIL import Image  # noqa: E402  (a dependency of matplotlib)
 
-from cmbs.errors import CmbsError  # noqa: E402
+from cmbs.errors import CmbsError, did_you_mean  # noqa: E402
 from cmbs.files_io import atomic_path, checked_output  # noqa: E402
 from cmbs.model.model import Model  # noqa: E402
 from cmbs.trajectory import Trajectory  # noqa: E402
@@ -132,7 +132,8 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
     trail_index = None
     if trail is not None:
         if trail not in model.point_names:
-            raise CmbsError(f"no point {trail!r} to trail in model {model.name!r}; points: "
+            raise CmbsError(f"no point {trail!r}{did_you_mean(trail, model.point_names)} to trail in model "
+                            f"{model.name!r}; points: "
                             f"{', '.join(model.point_names) or 'none'}")
         trail_index = model.point_names.index(trail)
 

@@ -63,7 +63,10 @@ class SingularSystemError(CmbsError):
 
 
 def did_you_mean(name: str, choices: Iterable[str]) -> str:
-    """`` (did you mean 'x'?)`` for the choice closest to a misspelt ``name`` (difflib's ratio
-    at least 0.6), or an empty string when none is close."""
-    close = difflib.get_close_matches(name, list(choices), n=1)
+    """`` (did you mean 'x'?)`` for the choice closest to a misspelt ``name``: one that differs
+    in case only, else the closest by difflib's ratio (at least 0.6); an empty string when none
+    is close."""
+    choices = list(choices)
+    close = [choice for choice in choices if choice.lower() == name.lower()] or \
+        difflib.get_close_matches(name, choices, n=1)
     return f" (did you mean {close[0]!r}?)" if close else ""

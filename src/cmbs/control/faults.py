@@ -15,7 +15,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from cmbs.errors import CmbsError
+from cmbs.errors import CmbsError, did_you_mean
 from cmbs.model.model import Model, Terms, WrappedEquations, assign_terms
 from cmbs.model.natural import NaturalEquations
 
@@ -81,7 +81,8 @@ def mass_fault(model: Model, segment: str, *, factor: float, t0: float = 0.0) ->
         raise CmbsError(f"mass faults need a natural-coordinate model; {model.name!r} is not one")
     names = [s.name for s in equations.segments]
     if segment not in names:
-        raise CmbsError(f"model {model.name!r} has no segment {segment!r}; segments: {', '.join(names)}")
+        raise CmbsError(f"model {model.name!r} has no segment {segment!r}{did_you_mean(segment, names)}; "
+                        f"segments: {', '.join(names)}")
     data = equations.segments[names.index(segment)]
     n = model.n
     keep = data.indices < n

@@ -47,7 +47,7 @@ from typing import Sequence
 from cmbs.jit import njit, njit_borrowing
 import numpy as np
 
-from cmbs.errors import ModelError
+from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions, \
     is_constant
 from cmbs.model.model import Model, Terms
@@ -768,7 +768,8 @@ class JointModelBuilder:
 
         def point_of(name: str, entry: str) -> tuple[int, tuple[float, float]]:
             if name not in point_index:
-                raise ModelError(f"unknown point {name!r}; points: {', '.join(point_names)}", entry=entry)
+                raise ModelError(f"unknown point {name!r}{did_you_mean(name, point_names)}; points: "
+                                 f"{', '.join(point_names)}", entry=entry)
             k = point_index[name]
             return point_links[k], point_locals[k]
 

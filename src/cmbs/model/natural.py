@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 from cmbs.jit import njit_borrowing
 import numpy as np
 
-from cmbs.errors import ModelError
+from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions, is_constant
 from cmbs.model.model import Model, Terms
 from cmbs.model.packing import int_section, pack, real_section
@@ -391,7 +391,8 @@ class _Assembler:
     def _point(self, name: str, entry: str) -> _Point:
         if name not in self.b._points:
             known = ", ".join(self.b._points) or "none"
-            raise ModelError(f"unknown point {name!r} (points: {known})", entry=entry)
+            raise ModelError(f"unknown point {name!r}{did_you_mean(name, self.b._points)} (points: {known})",
+                             entry=entry)
         return self.b._points[name]
 
     def _position(self, name: str, entry: str) -> np.ndarray:
@@ -401,7 +402,8 @@ class _Assembler:
     def _segment(self, name: str, entry: str) -> _Segment:
         if name not in self.b._segments:
             known = ", ".join(self.b._segments) or "none"
-            raise ModelError(f"unknown segment {name!r} (segments: {known})", entry=entry)
+            raise ModelError(f"unknown segment {name!r}{did_you_mean(name, self.b._segments)} (segments: {known})",
+                             entry=entry)
         return self.b._segments[name]
 
     def _coordinate(self, name: str, entry: str) -> int:
