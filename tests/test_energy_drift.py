@@ -9,7 +9,7 @@ import sympy as sp
 import cmbs
 from cmbs.cli import main
 from cmbs.control.faults import mass_fault
-from cmbs.model.equations import from_sympy
+from cmbs.model.equations import from_callables, from_sympy
 from cmbs.model.natural import NaturalModelBuilder
 from cmbs.simulate import ENERGY_NOTE, simulate
 from cmbs.sweep import SweepResult, Variant, sweep
@@ -145,8 +145,32 @@ def test_a_large_drift_gets_a_note_and_a_small_one_none():
     assert coarse.info["energy_drift"] > ENERGY_NOTE          # measured 3.4e-3
     assert f"changed by {100 * coarse.info['energy_drift']:.2g} % of its largest kinetic energy" in coarse.info["note"]
     assert "smaller dt" in coarse.info["note"]
+    python = simulate(model, t_end=2.0, integrator="rk4", dt=0.05, compiled=False)   # both notes, neither lost
+    assert python.info["note"].startswith("Python loop: compiled=False; the energy T + V of this conservative model")
     damped = simulate(model, t_end=2.0, integrator="backward-euler", dt=0.01)
     assert damped.info["energy_drift"] > 0.1 and "backward-euler damps numerically" in damped.info["note"]
+
+
+def _callable_pendulum(damping: float, conservative: bool) -> cmbs.Model:
+    """The 1 m point pendulum (1 kg) in (x, z) from Python functions, with viscous damping."""
+    return from_callables("callable-pendulum", coordinate_names=["x", "z"], mass_matrix=lambda q: np.eye(2),
+                          forces=lambda q, qd, t, u: np.array([0.0, -9.81]) - damping * qd,
+                          constraints=lambda q, t: np.array([q @ q - 1.0]),
+                          jacobian=lambda q, t: np.array([2.0 * q]), gamma=lambda q, qd, t: np.array([-2.0 * qd @ qd]),
+                          potential=lambda q: 9.81 * q[1], q0=[1.0, 0.0], conservative=conservative)
+
+
+def test_a_from_callables_model_is_judged_when_its_author_states_it_conservative():
+    assert _callable_pendulum(0.0, conservative=False).work_sources is None
+    stated = _callable_pendulum(0.0, conservative=True)
+    assert stated.work_sources == ()
+    run = simulate(stated, t_end=2.0, integrator="rk4", dt=0.01)
+    assert run.info["energy_drift"] == pytest.approx(_independent_drift(stated, run), rel=1e-9)
+    assert run.info["energy_drift"] < ENERGY_NOTE and "changed by" not in run.info["note"]   # RK4, 10 ms: 2.3e-6
+    wrong = simulate(_callable_pendulum(0.5, conservative=True), t_end=2.0, integrator="rk4", dt=0.01)
+    assert wrong.info["energy_drift"] > 0.1                 # the damper's loss, against the statement
+    assert "changed by" in wrong.info["note"]
+    assert "energy_drift" not in simulate(_callable_pendulum(0.5, conservative=False), t_end=0.5).info
 
 
 def test_runs_that_may_gain_or_lose_energy_are_not_judged():

@@ -265,8 +265,9 @@ def _run_python(model: Model, solver, chosen: Formulation, inputs: Inputs, q_sta
                          else None, {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol,
                                      "project": project, "loop_wall_time": loop_wall})
     trajectory.info["wall_time"] = time.perf_counter() - started
-    if integrator == "rk4":
-        trajectory.info["note"] = _python_loop_note(model, chosen, u, project, compiled)
+    if integrator == "rk4":                 # before the energy note, which the recording may have made
+        loop, info = _python_loop_note(model, chosen, u, project, compiled), trajectory.info
+        info["note"] = f"{loop}; {info['note']}" if info.get("note") else loop
     _note_rounding(trajectory.info, solver)
     return trajectory
 

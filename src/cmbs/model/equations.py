@@ -834,10 +834,13 @@ class CallableEquations:
                  constraints: Callable | None, jacobian: Callable, gamma: Callable,
                  constraints_t: Callable | None, potential: Callable | None, points: Callable | None,
                  n_points: int, m_velocity: int = 0, velocity_constraints: Callable | None = None,
-                 velocity_gamma: Callable | None = None) -> None:
+                 velocity_gamma: Callable | None = None, work_sources: tuple[str, ...] | None = None) -> None:
         """``m`` holonomic rows, then ``m_velocity`` nonholonomic rows from
-        ``velocity_constraints(q, t) -> (B, b)`` and ``velocity_gamma(q, qd, t)``."""
+        ``velocity_constraints(q, t) -> (B, b)`` and ``velocity_gamma(q, qd, t)``;
+        ``work_sources`` () when the user states the model conservative (:func:`from_callables`),
+        else None (not known)."""
         self.n, self.m_holonomic, self.m_velocity, self.n_u = n, m, m_velocity, n_u
+        self.work_sources = work_sources
         self.m = m + m_velocity
         self._mass, self._forces = mass_matrix, forces
         self._phi, self._A, self._gamma, self._phi_t = constraints, jacobian, gamma, constraints_t
@@ -954,7 +957,8 @@ def from_callables(name: str, *, coordinate_names: Sequence[str],
                    velocity_gamma: Callable[[np.ndarray, np.ndarray, float], np.ndarray] | None = None,
                    velocity_constraint_names: Sequence[str] | None = None,
                    finite_differences: bool = False,
-                   check: bool = True) -> Model:
+                   check: bool = True,
+                   conservative: bool = False) -> Model:
     """A :class:`Model` from Python functions of the equations of motion (THEORY §1).
 
     Every function receives float64 numpy arrays (and a float ``t``) and returns array-likes:
@@ -986,6 +990,13 @@ def from_callables(name: str, *, coordinate_names: Sequence[str],
         shows as constraint drift), and ``Φ_t`` too when ``constraints_t`` is None.  This costs
         2n + 3 (+2) calls of ``constraints`` per evaluation.  A missing ``velocity_gamma`` is
         computed likewise (step 1e-5, 2 calls of ``velocity_constraints``).
+    conservative
+        Your statement that with zero inputs nothing but ``potential`` does work: ``forces`` is
+        -∂V/∂q plus forces that do no work (such as gyroscopic ones), and no constraint but a
+        driver moves.  cmbs cannot check Python functions for it, so by default their runs are
+        not judged by their energy; with True, :attr:`Model.work_sources` lists only the
+        drivers, and runs with zero inputs and no driver report their energy drift (a drift
+        then means integration error, or that the statement is wrong).
     check
         At build, compare the given ``jacobian``, ``gamma``, ``constraints_t`` and
         ``velocity_gamma`` with finite differences at ``(q0, q̇, 0)`` (q̇ a fixed pseudo-random
@@ -1147,7 +1158,8 @@ def from_callables(name: str, *, coordinate_names: Sequence[str],
                                   constraints=constraints, jacobian=jacobian, gamma=gamma,
                                   constraints_t=constraints_t, potential=potential, points=points,
                                   n_points=n_points, m_velocity=m_velocity,
-                                  velocity_constraints=velocity_constraints, velocity_gamma=velocity_gamma)
+                                  velocity_constraints=velocity_constraints, velocity_gamma=velocity_gamma,
+                                  work_sources=() if conservative else None)
     return Model(name=name, coordinate_names=coordinate_names, coordinate_kinds=("generic",) * n,
                  constraint_names=names, drivers=mask, actuator_names=actuator_names, q0=q0_array,
                  qd0=qd0_array, point_names=point_names, lines=line_pairs, equations=equations,
