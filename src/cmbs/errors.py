@@ -9,7 +9,7 @@ failed, e.g. a non-convergent assembly of a valid model).
 from __future__ import annotations
 
 import difflib
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 
 class CmbsError(Exception):
@@ -62,10 +62,14 @@ class SingularSystemError(CmbsError):
     exit_status = 1
 
 
-def did_you_mean(name: str, choices: Iterable[str]) -> str:
+def did_you_mean(name: str | Sequence[str], choices: Iterable[str]) -> str:
     """`` (did you mean 'x'?)`` for the choice closest to a misspelt ``name``: one that differs
     in case only, else the closest by difflib's ratio (at least 0.6); an empty string when none
-    is close."""
+    is close.  Given a list of unknown names, a suggestion only when it holds one."""
+    if not isinstance(name, str):
+        if len(name) != 1:
+            return ""
+        name = name[0]
     choices = list(choices)
     close = [choice for choice in choices if choice.lower() == name.lower()] or \
         difflib.get_close_matches(name, choices, n=1)

@@ -74,8 +74,8 @@ def prescribe(model: Model, functions: Mapping[str, TimeFunction]) -> Model:
     free = model.without_drivers()
     unknown = [name for name in functions if name not in model.coordinate_names]
     if unknown:
-        hint = did_you_mean(unknown[0], model.coordinate_names) if len(unknown) == 1 else ""
-        raise CmbsError(f"model {model.name!r} has no coordinate(s) {', '.join(unknown)}{hint}; coordinates: "
+        raise CmbsError(f"model {model.name!r} has no coordinate(s) {', '.join(unknown)}"
+                        f"{did_you_mean(unknown, model.coordinate_names)}; coordinates: "
                         f"{', '.join(model.coordinate_names)}")
     names = list(functions)
     columns = model.coordinate_indices(names)

@@ -266,8 +266,7 @@ def _run_python(model: Model, solver, chosen: Formulation, inputs: Inputs, q_sta
                                      "project": project, "loop_wall_time": loop_wall})
     trajectory.info["wall_time"] = time.perf_counter() - started
     if integrator == "rk4":                 # before the energy note, which the recording may have made
-        loop, info = _python_loop_note(model, chosen, u, project, compiled), trajectory.info
-        info["note"] = f"{loop}; {info['note']}" if info.get("note") else loop
+        _add_note(trajectory.info, _python_loop_note(model, chosen, u, project, compiled), first=True)
     _note_rounding(trajectory.info, solver)
     return trajectory
 
@@ -295,7 +294,14 @@ def _note_rounding(info: dict, solver) -> None:
     info["max_condition"], info["max_condition_t"] = solver.worst_condition, solver.worst_time
     warning = rounding_note(solver.worst_condition, solver.worst_time)
     if warning:
-        info["note"] = f"{info['note']}; {warning}" if info.get("note") else warning
+        _add_note(info, warning)
+
+
+def _add_note(info: dict, text: str, *, first: bool = False) -> None:
+    """``text`` joined to ``info["note"]`` (notes separated by '; '), before the others when
+    ``first``."""
+    parts = (text, info.get("note")) if first else (info.get("note"), text)
+    info["note"] = "; ".join(part for part in parts if part)
 
 
 def _python_loop_note(model: Model, chosen: Formulation, u: object, project: bool, compiled: bool | None) -> str:
@@ -543,9 +549,8 @@ def _note_energy_drift(model: Model, kinetic: np.ndarray, energy: np.ndarray, u:
     if drift > ENERGY_NOTE:
         cause = (f"{info['integrator']} damps numerically by design" if info.get("integrator") in NUMERICALLY_DAMPED
                  else "integration error: a smaller dt, or rtol for an adaptive integrator, reduces it")
-        warning = (f"the energy T + V of this conservative model changed by {100 * drift:.2g} % of its largest "
-                   f"kinetic energy ({cause})")
-        info["note"] = f"{info['note']}; {warning}" if info.get("note") else warning
+        _add_note(info, f"the energy T + V of this conservative model changed by {100 * drift:.2g} % of its "
+                        f"largest kinetic energy ({cause})")
 
 
 def _singular_message(model: Model, solver, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray) -> str:

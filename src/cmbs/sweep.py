@@ -411,6 +411,7 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
             recorded[a:b])
         bar.update(b - a)
     reasons = {fast.SINGULAR: "singular system (rank of A)", fast.NON_FINITE: "the motion diverged"}
+    sources = model.work_sources
     outputs = []
     for v in range(count):
         k = int(recorded[v])
@@ -421,7 +422,7 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
         outputs.append({"q": Qs[v, :k], "qd": QDs[v, :k], "energy": energy,
                         "phi": PHIs[v, :k], "status": "failed" if failed else "success",
                         "message": message if failed else "",
-                        "drift": energy_drift(model.work_sources, kinetic, energy, np.tile(U0[v], (k, 1)))})
+                        "drift": energy_drift(sources, kinetic, energy, np.tile(U0[v], (k, 1)))})
     return outputs
 
 

@@ -29,8 +29,8 @@ def formulation(name: str, **options: object) -> Formulation:
     allowed = [field.name for field in dataclasses.fields(cls)]
     unknown = sorted(set(options) - set(allowed))
     if unknown:
-        hint = did_you_mean(unknown[0], set(allowed) - set(options)) if len(unknown) == 1 else ""
-        raise CmbsError(f"formulation {name!r} has no option(s) {', '.join(unknown)}{hint} "
+        raise CmbsError(f"formulation {name!r} has no option(s) {', '.join(unknown)}"
+                        f"{did_you_mean(unknown, set(allowed) - set(options))} "
                         f"(options: {', '.join(allowed) or 'none'})")
     try:
         return cls(**options)

@@ -112,7 +112,7 @@ def check_parameters(name: str, **parameters: object) -> dict[str, object]:
     unknown = sorted(set(parameters) - set(allowed))
     if unknown:
         accepted = ", ".join(f"{k}={v!r}" for k, v in allowed.items()) or "none"
-        hint = did_you_mean(unknown[0], set(allowed) - set(parameters)) if len(unknown) == 1 else ""
+        hint = did_you_mean(unknown, set(allowed) - set(parameters))
         raise ModelError(f"model {name!r} has no parameter(s) {', '.join(unknown)}{hint} (parameters: {accepted})")
     return {key: _check_parameter(name, key, value, allowed[key]) for key, value in parameters.items()}
 

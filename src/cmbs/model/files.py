@@ -34,8 +34,8 @@ class _Entry:
             raise ModelError(f"expected a table of keys, got {table!r}", entry=label)
         unknown = sorted(set(table) - set(allowed))
         if unknown:
-            hint = did_you_mean(unknown[0], set(allowed) - set(table)) if len(unknown) == 1 else ""
-            raise ModelError(f"unknown key(s) {', '.join(map(repr, unknown))}{hint} (allowed: {', '.join(allowed)})",
+            raise ModelError(f"unknown key(s) {', '.join(map(repr, unknown))}"
+                             f"{did_you_mean(unknown, set(allowed) - set(table))} (allowed: {', '.join(allowed)})",
                              entry=label)
         missing = [key for key in required if key not in table]
         if missing:
