@@ -81,10 +81,75 @@ def _free_mask(model: Model, fixed: Sequence[str | int]) -> np.ndarray:
     return mask
 
 
+#: Coordinate kinds measured in metres; the others (angles, joint and generic coordinates) are
+#: scaled by 1 (radians, or the model's own units).
+LENGTH_KINDS = frozenset({"x", "z", "distance"})
+
+
+def model_size(model: Model, q: np.ndarray) -> float:
+    """The model's characteristic length L at ``q``: the diagonal of the box around its named
+    points (fixed points included), else the largest length coordinate; 1 for a model with
+    neither (user equations in their own units)."""
+    points = np.asarray(model.point_positions(q), dtype=float).reshape(-1, 2) if model.point_names else np.zeros((0, 2))
+    size = float(np.hypot(*np.ptp(points, axis=0))) if len(points) > 1 else 0.0
+    if not size > 0.0:
+        lengths = [abs(value) for value, kind in zip(q, model.coordinate_kinds) if kind in LENGTH_KINDS]
+        size = max(lengths, default=0.0)
+    return size if np.isfinite(size) and size > 0.0 else 1.0
+
+
+def coordinate_scales(model: Model, q: np.ndarray) -> np.ndarray:
+    """The scale of each coordinate: L (:func:`model_size`) for lengths, 1 for the others."""
+    size = model_size(model, q)
+    return np.array([size if kind in LENGTH_KINDS else 1.0 for kind in model.coordinate_kinds])
+
+
+def scaled_residuals(phi: np.ndarray, A: np.ndarray, size: float) -> np.ndarray:
+    """|Φ_i| / (‖A_i‖ L): each constraint's error as the displacement that would remove it (a
+    Newton step of row i alone), relative to the model's size L.  Unit-free, so that one
+    tolerance means the same on a centimetre mechanism (rows in m² of 1e-4 m² scale) as on a
+    ten-metre one."""
+    norms = np.linalg.norm(A, axis=1)
+    return np.abs(phi) / (np.where(norms > 0.0, norms, 1.0) * size)
+
+
+def half_turn_angles(model: Model, q: np.ndarray, t: float = 0.0) -> list[tuple[str, float]]:
+    """The angle coordinates of a natural-coordinate model that sit half a turn away from the
+    direction they measure, as (name, value) pairs.
+
+    The angle constraint cos φ (u×v) - sin φ (u·v) = |u||v| sin(θ - φ) also vanishes at
+    φ = θ + π.  On the right branch ∂Φ/∂φ = -|u||v| cos(θ - φ) < 0; on the spurious one it is
+    > 0 (see :mod:`cmbs.model.natural`).  Models of other kinds have no such root: [].
+    """
+    from cmbs.model.model import base_equations
+    from cmbs.model.natural import NaturalEquations
+
+    if not isinstance(base_equations(model)[0], NaturalEquations):
+        return []
+    A = model.jacobian(q, t)
+    wrong = []
+    for row, constraint in enumerate(model.constraint_names):
+        kind, _, name = constraint.partition(" ")
+        if kind == "angle" and name in model.coordinate_names:
+            column = model.coordinate_index(name)
+            if A[row, column] > 0:
+                wrong.append((name, float(q[column])))
+    return wrong
+
+
+class BranchError(ConvergenceError):
+    """Assembly converged on a spurious root: an angle coordinate half a turn away from the
+    direction it measures.  ``constraint`` names the angle's constraint row."""
+
+
 def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed: Sequence[str | int] = (),
-             tolerance: float = 1e-10, max_iterations: int = 50) -> np.ndarray:
+             tolerance: float = 1e-12, max_iterations: int = 50) -> np.ndarray:
     """Solve Φ(q, t) = 0 by Newton-Raphson from ``q`` (default ``model.q0``), on the holonomic
     rows (nonholonomic rows constrain velocities only).
+
+    The one assembly routine of cmbs: every position analysis (model files and library models,
+    prescribed motions, kinematic analysis, gait reconstruction, sweeps) goes through it, and it
+    refuses a solution with an angle half a turn away from its direction (:func:`half_turn_angles`).
 
     Parameters
     ----------
@@ -92,12 +157,15 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
         Coordinates (names or indices) held at their given values: the independent coordinates
         of a position analysis.
     tolerance
-        Convergence when max |Φ_i| < tolerance (in the constraints' own units).
+        Convergence when every :func:`scaled_residuals` |Φ_i| / (‖A_i‖ L) < tolerance: the
+        constraint errors as displacements relative to the model's size L (:func:`model_size`).
 
     Raises
     ------
     ConvergenceError
-        Naming the iteration count, the largest residual and its constraint.
+        Naming the iteration count, the largest residual and its constraint (``constraint``).
+    BranchError
+        When Newton converged with an angle half a turn away from its direction.
     """
     q = np.array(model.q0 if q is None else q, dtype=float)
     rows = np.flatnonzero(model.holonomic)
@@ -106,13 +174,15 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
     free = _free_mask(model, fixed)
     terms = model.new_terms()
     zeros = np.zeros(model.n)
+    size = model_size(model, q)
     for iteration in range(max_iterations + 1):
         model.evaluate(q, zeros, t, out=terms)
         phi = terms.phi[rows]
-        residual = np.max(np.abs(phi))
+        residual = np.max(scaled_residuals(phi, terms.A[rows], size))
         if not np.isfinite(residual):
             break
         if residual < tolerance:
+            _refuse_half_turns(model, q, t)
             return q
         if iteration == max_iterations:
             break
@@ -120,14 +190,109 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
         q[free] += step
     phi = terms.phi[rows]
     worst = int(np.nanargmax(np.abs(phi))) if np.any(np.isfinite(phi)) else 0
-    where = f"largest residual {abs(phi[worst]):.3g} in constraint {model.constraint_names[rows[worst]]!r}"
+    constraint = model.constraint_names[rows[worst]]
+    where = f"largest residual {abs(phi[worst]):.3g} in constraint {constraint!r}"
     problem = model.time_function_problem([t]) if not np.all(np.isfinite(phi)) else ""
     if problem:
-        raise ConvergenceError(f"model {model.name!r}: assembly at t={t:g} met a non-finite residual ({where}): "
-                               f"{problem}")
-    raise ConvergenceError(
-        f"model {model.name!r}: assembly at t={t:g} did not converge in {max_iterations} Newton iterations "
-        f"({where}); check the initial positions, the segment lengths and the drivers' values")
+        error = ConvergenceError(f"model {model.name!r}: assembly at t={t:g} met a non-finite residual ({where}): "
+                                 f"{problem}")
+    else:
+        error = ConvergenceError(
+            f"model {model.name!r}: assembly at t={t:g} did not converge in {max_iterations} Newton iterations "
+            f"({where}); check the initial positions, the segment lengths and the drivers' values")
+    error.constraint = constraint
+    raise error
+
+
+def _refuse_half_turns(model: Model, q: np.ndarray, t: float) -> None:
+    wrong = half_turn_angles(model, q, t)
+    if wrong:
+        name, value = wrong[0]
+        error = BranchError(
+            f"model {model.name!r}: assembly put angle {name} half a turn away from the direction it measures "
+            f"({name} = {value:.6g} rad at t = {t:g}; the angle constraint's spurious root): start from points "
+            "drawn near that angle, or give the angle a value within 90 degrees of the angle of the points")
+        error.constraint = f"angle {name}"
+        raise error
+
+
+def follow_branch(model: Model, q: np.ndarray, t_from: float, t_to: float, *, fixed: Sequence[str | int] = (),
+                  fixed_to: np.ndarray | None = None, tolerance: float = 1e-12, max_iterations: int = 50,
+                  max_correction: float = 0.05) -> np.ndarray:
+    """Carry the assembled configuration ``q`` at ``t_from`` to ``t_to`` along its own assembly
+    branch (natural-parameter continuation, Allgower & Georg, *Introduction to Numerical
+    Continuation Methods*, 2003, ch. 2), while the ``fixed`` coordinates move linearly from their
+    values in ``q`` to ``fixed_to``.
+
+    On the path s ∈ [0, 1], t(s) = t_from + s Δt and q_c(s) = q_c + s Δc for the fixed
+    coordinates c.  Each sub-step s → s + h predicts with the path's tangent q' (A_f q'_f =
+    -Φ_t Δt - A_c Δc) and, when time moves, its curvature (A q̈ = γ at q̇ = q'/Δt), then corrects
+    with :func:`assemble`.  A sub-step is accepted when the correction, in units of
+    :func:`coordinate_scales`, is at most ``max_correction`` (5 % of the model's size, or
+    0.05 rad) and no angle sits half a turn away; else it is halved.  Other branches lie much
+    farther away except at a singular configuration, so the result is the configuration the
+    mechanism reaches by moving continuously — never one of another assembly mode.
+
+    Raises
+    ------
+    ConvergenceError
+        When the sub-step shrinks below 1e-9 of the path without an accepted step (a singular
+        configuration where branches meet, or a driver demanding an impossible position).
+    """
+    q = np.array(q, dtype=float)
+    columns = model.coordinate_indices(list(fixed))
+    start_values = q[columns].copy()
+    change = np.zeros(columns.size) if fixed_to is None else np.asarray(fixed_to, dtype=float) - start_values
+    duration = t_to - t_from
+    if not model.holonomic.any():
+        q[columns] = start_values + change
+        return q
+    if duration == 0.0 and not np.any(change):
+        return assemble(model, q, t_to, fixed=fixed, tolerance=tolerance, max_iterations=max_iterations)
+    problem = model.time_function_problem([t_to]) if duration != 0.0 else ""
+    if problem:
+        raise ConvergenceError(f"model {model.name!r}: no configuration at t={t_to:g}: {problem}")
+    scales = coordinate_scales(model, q)
+    s, h = 0.0, 1.0
+    while s < 1.0:
+        h = min(h, 1.0 - s)
+        guess = _predict(model, q, t_from + s * duration, h, duration, columns, change)
+        guess[columns] = start_values + (s + h) * change
+        t = t_from + (s + h) * duration if s + h < 1.0 else t_to
+        try:
+            candidate = assemble(model, guess, t, fixed=fixed, tolerance=tolerance, max_iterations=max_iterations)
+            accepted = np.max(np.abs(candidate - guess) / scales) <= max_correction
+        except ConvergenceError:
+            accepted = False
+        if accepted:
+            q, s, h = candidate, s + h, 2.0 * h
+        elif h > 1e-9:
+            h *= 0.5
+        else:
+            raise ConvergenceError(
+                f"model {model.name!r}: cannot follow the assembly branch beyond t={t_from + s * duration:.6g} "
+                f"(on the way to t={t_to:g}): the position analysis would jump to another assembly mode or does "
+                "not converge — a singular configuration, or a motion the mechanism cannot reach")
+    return q
+
+
+def _predict(model: Model, q: np.ndarray, t: float, h: float, duration: float, columns: np.ndarray,
+             change: np.ndarray) -> np.ndarray:
+    """q(s + h) ≈ q + h q' + ½ h² q'' on the path of :func:`follow_branch` (q'' only when time
+    moves and no coordinate is held: the fixed coordinates' path is linear in s)."""
+    terms = model.evaluate(q, np.zeros(model.n), t)
+    rows = model.holonomic
+    free = np.ones(model.n, dtype=bool)
+    free[columns] = False
+    tangent = np.zeros(model.n)
+    tangent[columns] = change
+    rhs = -terms.phi_t[rows] * duration - terms.A[rows] @ tangent
+    tangent[free] = np.linalg.lstsq(terms.A[np.ix_(rows, free)], rhs, rcond=None)[0]
+    guess = q + h * tangent
+    if duration != 0.0 and columns.size == 0:
+        qdd = accelerations(model, q, tangent / duration, t)
+        guess += 0.5 * (h * duration) ** 2 * qdd
+    return guess
 
 
 def velocities(model: Model, q: np.ndarray, t: float = 0.0, *, qd: np.ndarray | None = None,
@@ -159,17 +324,21 @@ def _correct(A: np.ndarray, rhs: np.ndarray, base: np.ndarray, free: np.ndarray)
 
 
 def kinematic_analysis(model: Model, times: np.ndarray, *, q0: np.ndarray | None = None,
-                       tolerance: float = 1e-10, max_iterations: int = 50) -> Trajectory:
+                       tolerance: float = 1e-12, max_iterations: int = 50) -> Trajectory:
     """Positions, velocities and accelerations of a fully driven model over ``times``.
 
     This is the kinematics of the thesis's inverse dynamic analysis (§4): drivers fix every
     degree of freedom, so at each t, Φ = 0, A q̇ = -Φ_t and A q̈ = γ have unique solutions.
-    Each position analysis starts from the previous solution plus a velocity predictor.
+    The configuration is carried from one output instant to the next along its assembly branch
+    by :func:`follow_branch` (sub-steps between outputs as the motion needs), so that a coarse
+    output grid gives the same configurations as a fine one.
 
     Raises
     ------
     ModelError
         When the model is not fully driven (DOF > 0 at the start).
+    ConvergenceError
+        When the branch cannot be followed (see :func:`follow_branch`).
     """
     times = np.asarray(times, dtype=float)
     q = assemble(model, q0, float(times[0]), tolerance=tolerance, max_iterations=max_iterations)
@@ -181,9 +350,8 @@ def kinematic_analysis(model: Model, times: np.ndarray, *, q0: np.ndarray | None
     Q, QD, QDD = np.zeros((k, n)), np.zeros((k, n)), np.zeros((k, n))
     for step, t in enumerate(times):
         if step > 0:
-            h = t - times[step - 1]
-            guess = Q[step - 1] + h * QD[step - 1] + 0.5 * h * h * QDD[step - 1]
-            q = assemble(model, guess, float(t), tolerance=tolerance, max_iterations=max_iterations)
+            q = follow_branch(model, q, float(times[step - 1]), float(t), tolerance=tolerance,
+                              max_iterations=max_iterations)
         qd = velocities(model, q, float(t), qd=np.zeros(n))
         Q[step], QD[step], QDD[step] = q, qd, accelerations(model, q, qd, float(t))
     return Trajectory(times, Q, QD, QDD, model.coordinate_names,

@@ -66,8 +66,13 @@ class _PrescribedEquations(WrappedEquations):
 
 def prescribe(model: Model, functions: Mapping[str, TimeFunction]) -> Model:
     """``model`` with its drivers replaced by ``q_c = f_c(t)`` for every coordinate c in
-    ``functions``; q0 is re-assembled at t = 0 so that it satisfies the new drivers."""
-    from cmbs.kinematics import assemble, velocities
+    ``functions``.
+
+    The new q0 is reached from the model's own assembled q0 by moving the prescribed coordinates
+    continuously to f_c(0) (:func:`cmbs.kinematics.follow_branch` on the undriven mechanism), so
+    it lies on the model's assembly branch: the same elbow up or down, never a point half a turn
+    from its angle."""
+    from cmbs.kinematics import assemble, follow_branch, velocities
 
     if not functions:
         raise CmbsError("a prescribed motion needs at least one coordinate")
@@ -85,10 +90,10 @@ def prescribe(model: Model, functions: Mapping[str, TimeFunction]) -> Model:
         constraint_names=free.constraint_names + tuple(f"motion {name}" for name in names),
         drivers=np.concatenate([free.drivers, np.ones(len(names), dtype=bool)]),
         nonholonomic=np.concatenate([free.nonholonomic, np.zeros(len(names), dtype=bool)]))
-    q0 = model.q0.copy()
+    start = np.array([functions[name](0.0) for name in names])
+    q0 = follow_branch(free, assemble(free, model.q0, 0.0), 0.0, 0.0, fixed=names, fixed_to=start[:, 0])
     qd0 = model.qd0.copy()
-    for column, name in zip(columns, names):
-        q0[column], qd0[column], _ = functions[name](0.0)
+    qd0[columns] = start[:, 1]
     q0 = assemble(prescribed, q0, 0.0, fixed=names)
     return prescribed.replace(q0=q0, qd0=velocities(prescribed, q0, 0.0, qd=qd0, fixed=names))
 

@@ -274,39 +274,17 @@ def _entry_of_constraint(constraint: str) -> str:
 
 def assembled(model: Model, source: str) -> Model:
     """Return ``model`` with q0 assembled and q̇0 consistent, or a :class:`ModelError` naming the
-    constraint that could not be closed (e.g. a segment whose points cannot be at its length)."""
+    constraint that could not be closed (e.g. a segment whose points cannot be at its length, or
+    an angle half a turn away from the direction of its points)."""
     from cmbs.kinematics import assemble, velocities
 
     try:
         q0 = assemble(model, model.q0, 0.0)
     except ConvergenceError as error:
-        worst = str(error).split("in constraint '")[-1].split("'")[0]
-        raise ModelError(f"cannot be assembled: {error}", source=source, entry=_entry_of_constraint(worst)) from None
-    _check_angle_branches(model, q0, source)
+        raise ModelError(f"cannot be assembled: {error}", source=source,
+                         entry=_entry_of_constraint(getattr(error, "constraint", ""))) from None
     qd0 = velocities(model, q0, 0.0, qd=model.qd0)
     return model.replace(q0=q0, qd0=qd0)
-
-
-def _check_angle_branches(model: Model, q0: np.ndarray, source: str) -> None:
-    """An angle constraint |u||v| sin(θ - φ) = 0 also holds at φ = θ + π; assembly lands there when the
-    points are drawn about half a turn away from the angle's initial or driven value.  On the right
-    branch ∂Φ/∂φ = -|u||v| cos(θ - φ) < 0, on the wrong one it is > 0."""
-    from cmbs.model.natural import NaturalEquations
-
-    if not isinstance(model.equations, NaturalEquations):
-        return
-    A = model.jacobian(q0, 0.0)
-    for row, constraint in enumerate(model.constraint_names):
-        kind, _, name = constraint.partition(" ")
-        if kind != "angle" or name not in model.coordinate_names:
-            continue
-        column = model.coordinate_index(name)
-        if A[row, column] > 0:
-            raise ModelError(
-                f"assembled with the angle coordinate half a turn away from the direction it measures "
-                f"({name} = {q0[column]:.6g} rad at t = 0): draw the points near that angle, or give an "
-                "'initial' (or driver value at t = 0) within 90 degrees of the angle of the points",
-                source=source, entry=f"angles.{name}")
 
 
 def load_model_file(path: str | Path) -> Model:
