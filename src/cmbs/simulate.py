@@ -44,6 +44,9 @@ NUMERICALLY_DAMPED = tuple(INDEX3)
 #: (rk45, rtol 1e-6: 2e-5 to 4e-4 over 5 s), and exceed it where the motion is visibly wrong
 #: (RK4 at 10 ms on the 3-link chain: 0.17; backward Euler at 10 ms: 0.03 to 1.3).
 ENERGY_NOTE = 1e-3
+#: A run whose constraint error, as a displacement relative to the mechanism's size, passes this
+#: gets a note (:func:`constraint_violation`).
+CONSTRAINT_NOTE = 1e-3
 
 
 def _inputs(model: Model, u: Inputs | np.ndarray | None) -> Inputs:
@@ -268,6 +271,9 @@ def _run_python(model: Model, solver, chosen: Formulation, inputs: Inputs, q_sta
     if integrator == "rk4":                 # before the energy note, which the recording may have made
         _add_note(trajectory.info, _python_loop_note(model, chosen, u, project, compiled), first=True)
     _note_rounding(trajectory.info, solver)
+    solver_note = getattr(solver, "run_note", str)()
+    if solver_note:
+        _add_note(trajectory.info, solver_note)
     return trajectory
 
 
@@ -521,6 +527,7 @@ def _trajectory(model: Model, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd:
     kinetic, potential = model.energy_parts(q, qd)
     energy = kinetic + potential
     _note_energy_drift(model, kinetic, energy, u, info)
+    _note_constraint_violation(model, t, q, position_error, info)
     return Trajectory(t, q, qd, qdd, model.coordinate_names,
                       {"lam": lam, "constraint_force": force, "u": u, "energy": energy,
                        "constraint_error": position_error, "velocity_constraint_error": velocity_error}, info)
@@ -551,6 +558,31 @@ def _note_energy_drift(model: Model, kinetic: np.ndarray, energy: np.ndarray, u:
                  else "integration error: a smaller dt, or rtol for an adaptive integrator, reduces it")
         _add_note(info, f"the energy T + V of this conservative model changed by {100 * drift:.2g} % of its "
                         f"largest kinetic energy ({cause})")
+
+
+def constraint_violation(model: Model, q: np.ndarray, t: float) -> float:
+    """The largest constraint error at (q, t) as a displacement relative to the model's size at q0
+    (:func:`cmbs.kinematics.scaled_residuals`), holonomic rows only."""
+    from cmbs.kinematics import model_size, scaled_residuals
+
+    terms = model.evaluate(q, np.zeros(model.n), t)
+    rows = model.holonomic
+    return float(np.max(scaled_residuals(terms.phi[rows], terms.A[rows], model_size(model, model.q0)), initial=0.0))
+
+
+def _note_constraint_violation(model: Model, t: np.ndarray, q: np.ndarray, position_error: np.ndarray,
+                               info: dict) -> None:
+    """A note when the constraints are violated by more than :data:`CONSTRAINT_NOTE` of the model's
+    size (at the output with the largest |Φ| or the last one): the motion is then not the
+    mechanism's."""
+    if not t.size or not model.holonomic.any():
+        return
+    for k in dict.fromkeys((int(np.nanargmax(position_error)) if np.any(np.isfinite(position_error)) else -1, -1)):
+        violation = constraint_violation(model, q[k], float(t[k])) if np.all(np.isfinite(q[k])) else np.inf
+        if not violation <= CONSTRAINT_NOTE:
+            _add_note(info, f"the constraints are violated by up to {violation:.2g} times the mechanism's size (t = "
+                            f"{t[k]:.6g}): the motion is not the mechanism's (a smaller dt or rtol, or project=True)")
+            return
 
 
 def _singular_message(model: Model, solver, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray) -> str:

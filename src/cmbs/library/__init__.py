@@ -79,6 +79,8 @@ _BUILDERS = [
     ("human", "human", "human", "12-segment 14-DOF planar human body (thesis Table 3.2), 38 coordinates"),
     ("chaplygin-sleigh", "mechanisms", "chaplygin_sleigh",
      "Chaplygin sleigh: rigid body with a knife edge (nonholonomic), 3 DOF, 2 velocity DOF"),
+    ("andrews", "andrews", "andrews",
+     "Andrews' squeezing mechanism (Hairer & Wanner's seven-body benchmark), relative angles, 1 DOF"),
 ]
 
 
