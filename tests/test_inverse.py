@@ -87,3 +87,44 @@ def test_cli_inverse_with_reactions(tmp_path, capsys):
     np.testing.assert_allclose(result.extras["joint torque alpha"], result.extras["driver_forces"][:, 0],
                                rtol=1e-9, atol=1e-9)
     assert "reaction coupler@P1" in capsys.readouterr().out
+
+
+def test_every_method_reads_a_motion_by_one_rule():
+    """A motion whose accelerations disagree with the drivers' (q̈ doubled) is refused by every
+    method — lagrange used the drivers' f''(t) and matrix-r the motion's q̈, giving torques that
+    differed by a factor of two — and an agreeing one gives the same torque to every method."""
+    model = cmbs.load("four-bar")
+    motion = cmbs.kinematic_analysis(model, np.linspace(0.0, 2.0, 41))
+    doubled = Trajectory(motion.t, motion.q, motion.qd, 2 * motion.qdd, motion.names)
+    moved = Trajectory(motion.t, motion.q + 1e-3, motion.qd, motion.qdd, motion.names)
+    reference = inverse_dynamics(model, motion.t).force("alpha")
+    for method in ("lagrange", "baumgarte", "penalty", "matrix-r"):
+        with pytest.raises(CmbsError, match=r"accelerations differ from the drivers' by .* in P2\.x"):
+            inverse_dynamics(model, doubled, method=method)
+        with pytest.raises(CmbsError, match="positions violate its constraints"):
+            inverse_dynamics(model, moved, method=method)
+        np.testing.assert_allclose(inverse_dynamics(model, motion, method=method).force("alpha"), reference,
+                                   rtol=1e-7, atol=1e-7 * np.abs(reference).max())
+
+
+def test_inputs_act_during_inverse_dynamics():
+    """A spring law u = -k θ on the two-link arm's joint actuators (a Python input, as in
+    simulate): the drivers supply what the springs do not, τ(u) = τ(0) - u, by both methods."""
+    from cmbs.motion import prescribe, read_motion
+
+    arm = cmbs.load("two-link-arm-joint")
+    driven = prescribe(arm, read_motion("theta1 = 0.3*sin(2*t); theta2 = 0.5*cos(3*t)", arm))
+    stiffness = np.array([4.0, 7.0])
+    columns = arm.coordinate_indices(["theta1", "theta2"])
+
+    def springs(t, q, qd):
+        return -stiffness * q[columns]
+
+    times = np.linspace(0.0, 1.0, 21)
+    for method in ("lagrange", "matrix-r"):
+        free = inverse_dynamics(driven, times, method=method)
+        loaded = inverse_dynamics(driven, times, method=method, u=springs)
+        spring_torques = -stiffness * free.motion.q[:, columns]
+        order = [loaded.driven_coordinates.index(name) for name in ("theta1", "theta2")]
+        np.testing.assert_allclose(loaded.forces[:, order], free.forces[:, order] - spring_torques, atol=1e-10)
+        np.testing.assert_allclose(loaded.motion["u"], spring_torques, atol=1e-12)

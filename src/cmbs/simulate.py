@@ -49,7 +49,8 @@ ENERGY_NOTE = 1e-3
 CONSTRAINT_NOTE = 1e-3
 
 
-def _inputs(model: Model, u: Inputs | np.ndarray | None) -> Inputs:
+def input_law(model: Model, u: Inputs | np.ndarray | None) -> Inputs:
+    """The inputs u(t, q, q̇) of a run: zero (None), a constant (n_u,) array, or a function."""
     if u is None:
         zeros = np.zeros(model.n_u)
         return lambda t, q, qd: zeros
@@ -206,7 +207,7 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         chosen = make_formulation(formulation or "lagrange", **(formulation_options or {}))
     started = time.perf_counter()
     solver = chosen.bind(model)
-    inputs = _inputs(model, u)
+    inputs = input_law(model, u)
     n = model.n
     q_start = np.array(model.q0 if q0 is None else q0, dtype=float)
     qd_start = np.array(model.qd0 if qd0 is None else qd0, dtype=float)

@@ -87,7 +87,9 @@ def base_equations(model: "Model") -> tuple[object, np.ndarray]:
     while hasattr(equations, "inner"):
         origin = getattr(equations, "row_origin", None)
         if origin is not None:
-            rows = np.where(rows >= 0, np.asarray(origin)[np.maximum(rows, 0)], -1)
+            mapped, kept = np.full(rows.shape, -1), rows >= 0
+            mapped[kept] = np.asarray(origin)[rows[kept]]
+            rows = mapped
         equations = equations.inner
     return equations, rows
 
