@@ -47,6 +47,9 @@ ENERGY_NOTE = 1e-3
 #: A run whose constraint error, as a displacement relative to the mechanism's size, passes this
 #: gets a note (:func:`constraint_violation`).
 CONSTRAINT_NOTE = 1e-3
+#: ... and a run whose constraints are violated by more than the mechanism's size has diverged: it
+#: is marked failed.
+DIVERGED = 1.0
 
 
 def input_law(model: Model, u: Inputs | np.ndarray | None) -> Inputs:
@@ -583,6 +586,10 @@ def _note_constraint_violation(model: Model, t: np.ndarray, q: np.ndarray, posit
         if not violation <= CONSTRAINT_NOTE:
             _add_note(info, f"the constraints are violated by up to {violation:.2g} times the mechanism's size (t = "
                             f"{t[k]:.6g}): the motion is not the mechanism's (a smaller dt or rtol, or project=True)")
+            if not violation <= DIVERGED and info.get("status") == "success":
+                info["status"] = "failed"
+                info["message"] = (f"the motion diverged: at t = {t[k]:.6g} the constraints are violated by "
+                                   f"{violation:.2g} times the mechanism's size")
             return
 
 
