@@ -171,3 +171,20 @@ def test_assembly_accuracy_does_not_depend_on_the_mechanism_size(tmp_path, scale
     for (i, j), length in zip((("A", "P1"), ("P1", "P2"), ("P2", "B")), (2.0, 10.0, 6.0)):
         d = points[model.point_names.index(j)] - points[model.point_names.index(i)]
         assert abs(np.hypot(*d) / (length * scale) - 1.0) < 1e-12
+
+
+def test_a_run_refuses_a_start_off_the_constraints_or_half_a_turn_away():
+    """simulate used to integrate from any q0: a link drawn the wrong way round (theta3 = 0 while
+    link 3 points back along link 2) ran as another mechanism, with exit status 0."""
+    model = cmbs.load("passive-manipulator")
+    moved = model.q0.copy()
+    moved[model.coordinate_index("P1.x")] += 0.01
+    flipped = model.q0.copy()
+    flipped[model.coordinate_index("P3.x")] = 0.0        # P3 back at P1's x: link 3 reversed, lengths kept
+    assert np.max(np.abs(model.constraints(flipped))) < 1e-12
+    with pytest.raises(cmbs.CmbsError, match="q0 violates constraint 'rigid link[12]'"):
+        cmbs.simulate(model, t_end=0.1, q0=moved)
+    with pytest.raises(cmbs.CmbsError, match="qd0 violates constraint"):
+        cmbs.simulate(model, t_end=0.1, qd0=np.ones(model.n))
+    with pytest.raises(cmbs.CmbsError, match="angle theta3 = 0 rad .* half a turn away"):
+        cmbs.simulate(model, t_end=0.1, q0=flipped)

@@ -65,6 +65,40 @@ def input_law(model: Model, u: Inputs | np.ndarray | None) -> Inputs:
     return lambda t, q, qd: constant
 
 
+#: The start of a run must satisfy the constraints to this: positions as displacements relative to
+#: the mechanism's size, velocities relative to ‖A_i‖ max|q̇0| + |Φ_t,i| (the terms of A q̇ + Φ_t).
+START_TOLERANCE = 1e-6
+
+
+def check_start(model: Model, q: np.ndarray, qd: np.ndarray) -> None:
+    """Refuse, before any work, a start state off the constraints or with an angle half a turn from
+    its points (:func:`cmbs.kinematics.half_turn_angles`): the run would be another mechanism's."""
+    from cmbs.kinematics import half_turn_angles, model_size, scaled_residuals
+
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
+        raise CmbsError(f"the start state of model {model.name!r} is not finite")
+    if not model.m:
+        return
+    terms = model.evaluate(q, qd, 0.0)
+    rows = np.flatnonzero(model.holonomic)
+    positions = scaled_residuals(terms.phi[rows], terms.A[rows], model_size(model, model.q0))
+    if positions.size and not positions.max() <= START_TOLERANCE:
+        worst = rows[int(np.argmax(positions))]
+        raise CmbsError(f"q0 violates constraint {model.constraint_names[worst]!r} of model {model.name!r} by "
+                        f"{positions.max():.3g} times the mechanism's size: assemble it first (cmbs.assemble)")
+    scale = np.abs(terms.A).max(axis=1) * np.abs(qd).max(initial=0.0) + np.abs(terms.phi_t)
+    rates = np.abs(terms.A @ qd + terms.phi_t) / np.where(scale > 0, scale, 1.0)
+    if not rates.max() <= START_TOLERANCE:
+        worst = int(np.argmax(rates))
+        raise CmbsError(f"qd0 violates constraint {model.constraint_names[worst]!r} of model {model.name!r} (A q̇ + Φ_t "
+                        f"is {rates.max():.3g} of its terms): make it consistent first (cmbs.velocities)")
+    wrong = half_turn_angles(model, q, 0.0)
+    if wrong:
+        name, value = wrong[0]
+        raise CmbsError(f"q0 puts angle {name} = {value:.6g} rad of model {model.name!r} half a turn away from the "
+                        "direction it measures (the angle constraint's spurious root): assemble it first")
+
+
 def project_state(model: Model, q: np.ndarray, qd: np.ndarray, t: float, *, tolerance: float = 1e-10,
                   max_iterations: int = 10, threshold: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
     """Coordinate and velocity projection onto Φ = 0, A q̇ = -Φ_t (Aghili 2005, eq. 45-47).
@@ -217,6 +251,7 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     for label, value in (("q0", q_start), ("qd0", qd_start)):
         if value.shape != (n,):
             raise CmbsError(f"{label} must have shape ({n},) for model {model.name!r}, got {value.shape}")
+    check_start(model, q_start, qd_start)
     steps = whole_steps(t_end, dt)
     from cmbs import fast
 

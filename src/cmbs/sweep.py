@@ -279,6 +279,14 @@ def _check(nominal: Model, variant: Variant) -> None:
                             f"{np.shape(value)}")
         if value is not None and not np.all(np.isfinite(np.asarray(value, dtype=float))):
             raise CmbsError(f"sweep variant {variant.name()!r}: {key} has non-finite values")
+    if variant.q0 is not None or variant.qd0 is not None:
+        from cmbs.simulate import check_start
+
+        try:
+            check_start(nominal, np.asarray(nominal.q0 if variant.q0 is None else variant.q0, dtype=float),
+                        np.asarray(nominal.qd0 if variant.qd0 is None else variant.qd0, dtype=float))
+        except CmbsError as error:
+            raise CmbsError(f"sweep variant {variant.name()!r}: {error}") from None
 
 
 def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> dict:
