@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 
 import cmbs
+from cmbs import jit
+from cmbs.cli import main
 from cmbs.errors import CmbsError
 
 
@@ -61,3 +63,82 @@ def test_every_name_the_readme_shows_resolves_after_a_plain_import_cmbs():
         for prefix, names in groups.items()}
     failures = {prefix: process.communicate()[1].strip().splitlines()[-1:] for prefix, process in processes.items()}
     assert {prefix: lines for prefix, lines in failures.items() if lines} == {}
+
+
+def _free_mass(n_inputs: int = 1) -> cmbs.Model:
+    """A 1 kg point on a line, pushed by its input: q̈ = u."""
+    from cmbs.model.equations import from_callables
+
+    return from_callables("pushed-mass", coordinate_names=["x"], mass_matrix=lambda q: np.eye(1),
+                          forces=lambda q, qd, t, u: np.array([u[0]]), n_inputs=n_inputs, q0=[0.0])
+
+
+@pytest.mark.skipif(not jit.COMPILED, reason="numba is not installed: nothing compiles")
+def test_a_run_reports_the_time_it_spent_compiling_apart_from_its_run_time():
+    """A numba input law defined here compiles at its first call, inside the first run only."""
+    import numba
+
+    @numba.njit
+    def push(t):
+        return np.sin(t)
+
+    model = _free_mass()
+    first = cmbs.simulate(model, t_end=0.1, dt=0.01, u=lambda t, q, qd: np.array([push(t)]))
+    assert 0 < first.info["compile_time"] <= first.info["wall_time"]
+    second = cmbs.simulate(model, t_end=0.1, dt=0.01, u=lambda t, q, qd: np.array([push(t)]))
+    assert second.info["compile_time"] == 0.0
+
+
+def _pretend_compiling(monkeypatch, seconds: float) -> None:
+    """cmbs.simulate.simulate as it is, but reporting ``seconds`` more of compiling and of wall time."""
+    module = sys.modules["cmbs.simulate"]
+    original = module.simulate
+
+    def compiling(*args, **kwargs):
+        run = original(*args, **kwargs)
+        run.info["wall_time"] += seconds
+        run.info["compile_time"] += seconds
+        return run
+
+    monkeypatch.setattr(module, "simulate", compiling)
+
+
+def test_simulate_and_compare_print_the_compile_time_apart_from_the_run_time(monkeypatch, capsys):
+    _pretend_compiling(monkeypatch, 100.0)
+    assert main(["simulate", "pendulum", "--t-end", "0.1", "--integrator", "rk4"]) == 0
+    line = capsys.readouterr().out.splitlines()[0]
+    run_time, compile_time = re.search(r"run (\S+) s, compile (\S+) s", line).groups()
+    assert float(run_time) < 50 and float(compile_time) >= 100
+    assert main(["compare", "pendulum", "--t-end", "0.1", "--formulations", "lagrange,projection"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[1].split()[-4:] == ["run", "s", "compile", "s"]
+    for row in lines[2:]:
+        assert float(row.split()[-2]) < 50 and float(row.split()[-1]) >= 100
+
+
+def test_a_sweep_prints_the_compile_time_apart_from_the_run_time(monkeypatch, capsys):
+    module = sys.modules["cmbs.sweep"]
+    original = module.sweep
+
+    def compiling(*args, **kwargs):
+        result = original(*args, **kwargs)
+        result.info["wall_time"] += 100.0
+        result.info["compile_time"] += 100.0
+        return result
+
+    monkeypatch.setattr(module, "sweep", compiling)
+    assert main(["sweep", "pendulum", "--undriven", "--speed", "P.z=0,1", "--t-end", "0.1", "--dt", "0.01",
+                 "--integrator", "rk4", "--workers", "1"]) == 0
+    run_time, compile_time = re.search(r"run (\S+) s, compile (\S+) s", capsys.readouterr().out).groups()
+    assert float(run_time) < 50 and float(compile_time) >= 100
+
+
+def test_a_study_table_shows_run_and_compile_time_apart():
+    from cmbs.control.study import TrackingRun, format_table
+
+    run = cmbs.simulate(_free_mass(), t_end=0.1, dt=0.01)
+    table = format_table([TrackingRun("nominal", run, ("x",), np.array([0.01]), 0.5, 1.0, 2.0, wall_time=3.0,
+                                      compile_time=2.5)])
+    header, row = table.splitlines()[0], table.splitlines()[2]
+    assert header.split()[-5:] == ["run", "s", "compile", "s", "status"]
+    assert row.split()[-3:] == ["0.5", "2.5", "success"]

@@ -81,6 +81,17 @@ def _simulation_settings(args: argparse.Namespace) -> dict[str, object]:
             "project": args.project}
 
 
+def run_seconds(info: dict) -> float:
+    """A run's time without the time it spent compiling kernels (``wall_time - compile_time``)."""
+    return info["wall_time"] - info.get("compile_time", 0.0)
+
+
+def timing(info: dict) -> str:
+    """``run R s, compile C s`` of a run's (or a sweep's) ``info``: the compile time, which only
+    a first use pays, apart from the run's own time."""
+    return f"run {run_seconds(info):.3g} s, compile {info.get('compile_time', 0.0):.3g} s"
+
+
 def _models(args: argparse.Namespace) -> int:
     from cmbs.library import entry, names
 
@@ -163,7 +174,7 @@ def _simulate(args: argparse.Namespace) -> int:
     info = run.info
     energy, error = run["energy"], run["constraint_error"]
     print(f"{model.name}: {info['formulation']} + {info['integrator']}, {info['status']} at t = {run.t[-1]:.6g} s "
-          f"({info['steps']} steps, {info['wall_time']:.3g} s wall)")
+          f"({info['steps']} steps, {timing(info)})")
     drift = f" ({info['energy_drift']:.2g} of the largest kinetic energy)" if "energy_drift" in info else ""
     print(f"  max constraint error {error.max(initial=0.0):.3g}, max velocity constraint error "
           f"{run['velocity_constraint_error'].max(initial=0.0):.3g}, max |E - E0| "
@@ -202,7 +213,7 @@ def _compare(args: argparse.Namespace) -> int:
     reference = runs[names[0]]
     print(f"{model.name}: {args.integrator}, t_end = {args.t_end:g} s; deviation against {names[0]}")
     print(f"{'formulation':<16}{'status':<9}{'max |dq|':>11}{'max |phi|':>12}{'max |dE| J':>12}{'drift':>10}"
-          f"{'wall s':>9}")
+          f"{'run s':>9}{'compile s':>11}")
     failed = False
     for name, run in runs.items():
         common = min(len(run.t), len(reference.t))
@@ -210,7 +221,8 @@ def _compare(args: argparse.Namespace) -> int:
         energy = run["energy"]
         drift = f"{run.info['energy_drift']:.3g}" if "energy_drift" in run.info else "-"
         print(f"{name:<16}{run.info['status']:<9}{deviation:>11.3g}{run['constraint_error'].max(initial=0.0):>12.3g}"
-              f"{np.abs(energy - energy[0]).max(initial=0.0):>12.3g}{drift:>10}{run.info['wall_time']:>9.3g}")
+              f"{np.abs(energy - energy[0]).max(initial=0.0):>12.3g}{drift:>10}{run_seconds(run.info):>9.3g}"
+              f"{run.info['compile_time']:>11.3g}")
         failed |= run.info["status"] != "success"
         if run.info["status"] != "success":
             print(f"  {name}: {run.info['message']}")

@@ -30,6 +30,7 @@ from cmbs.integrate.explicit import Integration, integrate as integrate_explicit
 from cmbs.integrate.grid import whole_steps
 from cmbs.integrate.implicit import BACKWARD_EULER, TRAPEZOIDAL, Scheme, generalized_alpha, integrate_index3
 from cmbs.integrate.tableaus import NAMES as EXPLICIT, tableau as explicit_method
+from cmbs.jit import compile_seconds
 from cmbs.kinematics import accelerations as acceleration_analysis
 from cmbs.model.model import Model
 from cmbs.trajectory import Trajectory
@@ -168,9 +169,11 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     Trajectory
         With extras ``lam``, ``constraint_force``, ``u``, ``energy``, ``constraint_error`` and
         ``velocity_constraint_error``; ``info`` holds the options, status, message, counters
-        and wall time (matrix R adds ``max_condition``, the largest partition condition
-        ‖A_r‖₁ ‖A_d⁻¹‖₁ (:func:`cmbs.dynamics.matrix_r.partition_condition`) met by its
-        recovery of a stage or step state, at ``max_condition_t``; ``note`` warns when it passed
+        and wall time ``wall_time`` [s], of which ``compile_time`` [s] compiling kernels (0 when
+        they were compiled or cached before; :func:`cmbs.jit.compile_seconds`) (matrix R adds
+        ``max_condition``, the largest partition condition ‖A_r‖₁ ‖A_d⁻¹‖₁
+        (:func:`cmbs.dynamics.matrix_r.partition_condition`) met by its recovery of a stage or
+        step state, at ``max_condition_t``; ``note`` warns when it passed
         :data:`cmbs.dynamics.matrix_r.ROUNDING_CONDITION`).  When the exact motion conserves
         T + V (:attr:`~cmbs.model.model.Model.work_sources` empty, zero inputs), ``energy_drift``
         is max |E - E0| / max T over the outputs, and ``note`` says when it passed
@@ -201,7 +204,7 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         chosen = formulation
     else:
         chosen = make_formulation(formulation or "lagrange", **(formulation_options or {}))
-    started = time.perf_counter()
+    started, compiled_before = time.perf_counter(), compile_seconds()
     solver = chosen.bind(model)
     inputs = _inputs(model, u)
     n = model.n
@@ -238,6 +241,7 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     else:
         trajectory = _run_python(model, solver, chosen, inputs, q_start, qd_start, times, integrator, u, dt, rtol,
                                  atol, project, projection_tolerance, newton_tolerance, compiled, progress, started)
+    trajectory.info["compile_time"] = compile_seconds() - compiled_before
     _explain_failure(model, trajectory, times)
     return trajectory
 

@@ -158,7 +158,11 @@ def _sweep(args: argparse.Namespace) -> int:
     mode, used = result.info["mode"], result.info["workers"]
     where = {"dask": f"scheduler {used}", "batched": f"{used} threads"}.get(
         mode, "in this process" if used == 1 or len(result) == 1 else f"{used} worker processes")
-    print(f"{nominal.name}: {len(result)} variants, {mode} ({where}), {result.info['wall_time']:.3g} s wall, "
+    from cmbs.cli import timing
+
+    workers_compiled = result.info.get("worker_compile_time")
+    compiled_elsewhere = "" if workers_compiled is None else f" (the workers compiled for {workers_compiled:.3g} s)"
+    print(f"{nominal.name}: {len(result)} variants, {mode} ({where}), {timing(result.info)}{compiled_elsewhere}, "
           f"{failed} failed")
     for v, variant in enumerate(result.variants):
         energy = result.energy[v, :result.recorded[v]]
