@@ -142,3 +142,33 @@ def test_a_study_table_shows_run_and_compile_time_apart():
     header, row = table.splitlines()[0], table.splitlines()[2]
     assert header.split()[-5:] == ["run", "s", "compile", "s", "status"]
     assert row.split()[-3:] == ["0.5", "2.5", "success"]
+
+
+def test_the_work_of_a_constant_push_is_force_times_distance():
+    """q̈ = F from rest: x = F t²/2, so W = F x = F² t²/2 = T; the mass stated conservative."""
+    from cmbs.model.equations import from_callables
+    from cmbs.simulate import supplied_work
+
+    model = from_callables("pushed-mass", coordinate_names=["x"], mass_matrix=lambda q: np.eye(1),
+                           forces=lambda q, qd, t, u: np.array([u[0]]), n_inputs=1, q0=[0.0], conservative=True)
+    force = 3.0
+    run = cmbs.simulate(model, t_end=1.0, dt=0.01, u=np.array([force]), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(supplied_work(model, run), force**2 * run.t**2 / 2, atol=1e-9)
+    unstated = from_callables("pushed-mass", coordinate_names=["x"], mass_matrix=lambda q: np.eye(1),
+                              forces=lambda q, qd, t, u: np.array([u[0]]), n_inputs=1, q0=[0.0])
+    assert supplied_work(unstated, cmbs.simulate(unstated, t_end=0.1, u=np.array([force]))) is None
+
+
+def test_a_driven_run_prints_its_energy_balance_not_the_drivers_work_as_an_error(capsys):
+    """The driven four-bar's crank driver does ~95 J of work and takes it back: E - E0 - W is the
+    run's error (rtol 1e-10: below 1e-4 J), E - E0 is not."""
+    from cmbs.simulate import supplied_work
+
+    model = cmbs.load("four-bar")
+    run = cmbs.simulate(model, t_end=2.0, rtol=1e-10, atol=1e-12)
+    change = run["energy"] - run["energy"][0]
+    assert np.abs(change).max() > 50
+    assert np.abs(change - supplied_work(model, run)).max() < 1e-4
+    assert main(["simulate", "four-bar", "--t-end", "2", "--rtol", "1e-10", "--atol", "1e-12"]) == 0
+    balance = re.search(r"energy balance max \|E - E0 - W\| (\S+) J", capsys.readouterr().out)
+    assert balance and float(balance.group(1)) < 1e-4
