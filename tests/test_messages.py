@@ -172,3 +172,37 @@ def test_a_driven_run_prints_its_energy_balance_not_the_drivers_work_as_an_error
     assert main(["simulate", "four-bar", "--t-end", "2", "--rtol", "1e-10", "--atol", "1e-12"]) == 0
     balance = re.search(r"energy balance max \|E - E0 - W\| (\S+) J", capsys.readouterr().out)
     assert balance and float(balance.group(1)) < 1e-4
+
+
+def test_coordinate_and_force_units_follow_what_each_coordinate_is():
+    from cmbs.model.joints import JointModelBuilder
+    from cmbs.units import coordinate_unit, force_unit
+
+    four_bar = cmbs.load("four-bar")
+    assert [coordinate_unit(four_bar, name) for name in ("P1.x", "P1.z", "alpha")] == ["m", "m", "rad"]
+    assert [force_unit(four_bar, name) for name in ("P1.x", "alpha")] == ["N", "N m"]
+    builder = JointModelBuilder("arm on a rail")
+    builder.add_link("carriage", parent=None, joint="prismatic", coordinate="s", length=0.2, mass=1.0,
+                     com=(0.1, 0.0), inertia=0.01)
+    builder.add_link("arm", parent="carriage", coordinate="theta", length=0.5, mass=1.0, com=(0.25, 0.0),
+                     inertia=0.02)
+    rail = builder.build()
+    assert [force_unit(rail, name) for name in ("s", "theta")] == ["N", "N m"]
+    assert coordinate_unit(_free_mass(), "x") == ""                 # the user's own equations do not say
+
+
+def test_inverse_prints_and_plots_each_force_with_its_unit(tmp_path, capsys):
+    import matplotlib.pyplot as plt
+
+    from cmbs.plotting import plot_driver_forces
+
+    assert main(["inverse", "slider-crank-joint", "--motion", "theta1 = pi/4 + 2*t", "--t-end", "0.2", "--dt",
+                 "0.01", "--reactions"]) == 0
+    out = capsys.readouterr().out
+    assert "force on theta1 [N m]" in out and "N or N m" not in out
+    assert re.search(r"joint force theta1 +max \S+ N m\n", out)
+    model = cmbs.load("four-bar")
+    ida = cmbs.inverse_dynamics(model, np.linspace(0.0, 0.2, 21))
+    figure = plot_driver_forces(ida.motion, ida.driven_coordinates, model=model)
+    assert [axis.get_ylabel() for axis in figure.axes] == ["torques [N m]", "coordinates [rad]"]
+    plt.close(figure)

@@ -16,6 +16,7 @@ import numpy as np
 import cmbs
 from cmbs.errors import CmbsError
 from cmbs.files_io import checked_output
+from cmbs.units import bracketed, force_unit
 
 
 class _UsageError(CmbsError):
@@ -272,14 +273,14 @@ def _inverse(args: argparse.Namespace) -> int:
     print(f"{model.name}: inverse dynamics ({args.method}) over {len(times)} instants")
     for name in result.driven_coordinates:
         force = result.force(name)
-        print(f"  force on {name:<14} min {force.min(): .6g}  max {force.max(): .6g}  "
-              f"RMS {np.sqrt(np.mean(force**2)):.6g}")
+        print(f"  force on {name + bracketed(force_unit(model, name)):<20} min {force.min(): .6g}  "
+              f"max {force.max(): .6g}  RMS {np.sqrt(np.mean(force**2)):.6g}")
     motion = result.motion
     if args.reactions:
         from cmbs.inverse import joint_reaction_history
 
         extras = dict(motion.extras)
-        for label, value, unit in _reaction_series(joint_reaction_history(model, motion)):
+        for label, value, unit in _reaction_series(model, joint_reaction_history(model, motion)):
             extras[label] = value
             size = np.hypot(*value.T) if value.ndim == 2 else np.abs(value)
             print(f"  {label:<32} max {size.max():.6g} {unit}")
@@ -289,7 +290,8 @@ def _inverse(args: argparse.Namespace) -> int:
     if args.plot:
         from cmbs.plotting import plot_driver_forces, save_figure
 
-        print(f"  figure -> {save_figure(plot_driver_forces(result.motion, result.driven_coordinates), args.plot)}")
+        figure = plot_driver_forces(result.motion, result.driven_coordinates, model=model)
+        print(f"  figure -> {save_figure(figure, args.plot)}")
     return 0
 
 
@@ -307,12 +309,14 @@ def _prescribed(model: cmbs.Model, args: argparse.Namespace) -> cmbs.Model:
     return prescribe(model, functions)
 
 
-def _reaction_series(reactions: dict) -> list[tuple[str, np.ndarray, str]]:
+def _reaction_series(model: cmbs.Model, reactions: dict) -> list[tuple[str, np.ndarray, str]]:
     """(label, history, unit) of every joint reaction, for printing and saving; natural-coordinate
-    models report forces per segment end, joint-coordinate models per joint."""
+    models report forces per segment end, joint-coordinate models per joint (a torque in N m at a
+    revolute joint, a force in N along a prismatic one)."""
     if "joint_forces" in reactions:
         return ([(f"reaction on {link}", force, "N") for link, force in reactions["forces"].items()]
-                + [(f"joint force {name}", force, "N or N m") for name, force in reactions["joint_forces"].items()]
+                + [(f"joint force {name}", force, force_unit(model, name))
+                   for name, force in reactions["joint_forces"].items()]
                 + [(f"closure force {name}", force, "N") for name, force in reactions["closures"].items()])
     return ([(f"reaction {segment}@{point}", force, "N") for (segment, point), force in reactions["forces"].items()]
             + [(f"joint torque {angle}", torque, "N m") for angle, torque in reactions["torques"].items()]

@@ -212,21 +212,48 @@ def save_figure(figure: plt.Figure, path: str | os.PathLike) -> Path:
     return path
 
 
-def plot_driver_forces(trajectory: Trajectory, driven: Sequence[str]) -> plt.Figure:
+def plot_driver_forces(trajectory: Trajectory, driven: Sequence[str], *, model: Model | None = None) -> plt.Figure:
     """Inverse dynamics: the generalized force on each driven coordinate against time, and the
-    prescribed coordinates themselves."""
+    prescribed coordinates themselves; with ``model``, one panel per unit (torques in N m on
+    angles, forces in N on lengths; coordinates in rad and m, :mod:`cmbs.units`)."""
+    from cmbs.units import FORCE, coordinate_unit
+
     forces = np.asarray(trajectory.extras["driver_forces"])
-    figure, (top, bottom) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, constrained_layout=True)
-    for k, name in enumerate(driven):
-        top.plot(trajectory.t, forces[:, k], label=f"on {name}")
-        bottom.plot(trajectory.t, trajectory[name], label=name)
-    top.set(title="driving forces / torques (inverse dynamics)", ylabel="N or N m")
-    bottom.set(title="prescribed motion", xlabel="t [s]")
-    for axis in (top, bottom):
+    units = [coordinate_unit(model, name) if model is not None else "" for name in driven]
+    force_groups = _unit_groups(driven, [FORCE.get(unit, "") for unit in units])
+    motion_groups = _unit_groups(driven, units)
+    panels = len(force_groups) + len(motion_groups)
+    figure, axes = plt.subplots(panels, 1, figsize=(8, 3 * panels), sharex=True, constrained_layout=True,
+                                squeeze=False)
+    axes = list(axes[:, 0])
+    for axis, (unit, names) in zip(axes, force_groups):
+        for name in names:
+            axis.plot(trajectory.t, forces[:, list(driven).index(name)], label=f"on {name}")
+        kind = {"N m": "torques", "N": "forces"}.get(unit, "forces / torques")
+        axis.set(title=f"driving {kind} (inverse dynamics)", ylabel=f"{kind}{_bracketed(unit, 'N or N m')}")
+    for axis, (unit, names) in zip(axes[len(force_groups):], motion_groups):
+        for name in names:
+            axis.plot(trajectory.t, trajectory[name], label=name)
+        axis.set(title="prescribed motion", ylabel=f"coordinates{_bracketed(unit, 'm or rad')}")
+    axes[-1].set_xlabel("t [s]")
+    for axis in axes:
         axis.grid(alpha=0.3)
         axis.legend(fontsize="small")
     figure.suptitle(f"{trajectory.info.get('model', '')} ({trajectory.info.get('method', '')})")
     return figure
+
+
+def _unit_groups(names: Sequence[str], units: Sequence[str]) -> list[tuple[str, list[str]]]:
+    """``names`` grouped by their ``units``, in the order each unit first appears."""
+    groups: dict[str, list[str]] = {}
+    for name, unit in zip(names, units):
+        groups.setdefault(unit, []).append(name)
+    return list(groups.items())
+
+
+def _bracketed(unit: str, unknown: str) -> str:
+    """`` [unit]``, or `` [unknown]`` when the unit is not known."""
+    return f" [{unit or unknown}]"
 
 
 def plot_sweep(result: "SweepResult", coordinate: str) -> plt.Figure:
