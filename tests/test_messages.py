@@ -14,6 +14,7 @@ import cmbs
 from cmbs import jit
 from cmbs.cli import main
 from cmbs.errors import CmbsError
+from cmbs.trajectory import Trajectory
 
 
 def test_force_on_an_undriven_coordinate_names_the_driven_ones():
@@ -206,3 +207,83 @@ def test_inverse_prints_and_plots_each_force_with_its_unit(tmp_path, capsys):
     figure = plot_driver_forces(ida.motion, ida.driven_coordinates, model=model)
     assert [axis.get_ylabel() for axis in figure.axes] == ["torques [N m]", "coordinates [rad]"]
     plt.close(figure)
+
+
+def test_sweep_labels_read_as_a_mass_factor_and_a_speed(capsys):
+    assert main(["sweep", "four-bar", "--undriven", "--speed", "alpha=-2,0", "--t-end", "0.01", "--dt", "1e-3",
+                 "--integrator", "rk4"]) == 0
+    out = capsys.readouterr().out
+    assert "dalpha/dt=-2 rad/s" in out and "dalpha/dt=0 rad/s" in out
+    assert main(["sweep", "slider-crank", "--mass", "crank=1.1", "--t-end", "0.01", "--dt", "1e-3",
+                 "--integrator", "rk4", "--formulation", "matrix-r", "--workers", "1"]) == 0
+    assert "mass(crank)×1.1" in capsys.readouterr().out
+
+
+def test_track_reports_nrmse_in_percent_and_takes_the_initial_error_in_degrees_or_coordinate_units(capsys):
+    """5.7296deg is 0.1 rad: the same run as --initial-error 0.1 (alpha is an angle)."""
+    common = ["track", "four-bar", "--t-end", "0.5", "--dt", "0.01"]
+    assert main([*common, "--initial-error", "0.1"]) == 0
+    in_radians = capsys.readouterr().out
+    assert main([*common, "--initial-error", f"{float(np.degrees(0.1))!r}deg"]) == 0
+    assert capsys.readouterr().out == in_radians
+    nrmse = float(re.search(r"NRMSE \(of the reference's range\) alpha (\S+) %", in_radians).group(1))
+    assert 1 < nrmse < 100                      # 0.1 rad off a 1.57 rad range: percent, not a fraction
+    assert main(["track", "four-bar", "--reference", "P1.x = 0.1 * t", "--t-end", "0.1",
+                 "--initial-error", "5deg"]) == 2
+    assert "'P1.x' is not an angle (m)" in capsys.readouterr().err
+
+
+def test_a_never_settling_error_says_how_much_of_it_remains(tmp_path, monkeypatch, capsys):
+    """A coupler 2.5 % heavier from t = 2 s leaves CTC a steady periodic error above 1 % of the
+    0.1 rad start: the run never settles, and the line says how large the error stays,
+    checked against the saved run and the reference motion."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["track", "four-bar", "--initial-error", "0.1", "--fault", "mass:coupler:1.025:2", "--t-end", "10",
+                 "--out", "never.npz"]) == 0
+    printed = re.search(r"never: \|error\| still reaches (\S+) % of the initial error", capsys.readouterr().out)
+    run = Trajectory.load("never.npz")
+    reference = cmbs.kinematic_analysis(cmbs.load("four-bar"), run.t)
+    error = np.abs(reference["alpha"] - run["alpha"])
+    assert float(printed.group(1)) == pytest.approx(100 * error[run.t >= 5].max() / 0.1, rel=1e-2)
+
+
+def _parsers(parser, path=("cmbs",)):
+    """Every command's parser, with its command path."""
+    import argparse
+
+    yield path, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, command in action.choices.items():
+                yield from _parsers(command, (*path, name))
+
+
+def test_every_option_with_a_default_shows_it_in_help():
+    import argparse
+
+    from cmbs.cli import build_parser
+
+    missing = []
+    for path, parser in _parsers(build_parser()):
+        text = " ".join(parser.format_help().split())
+        for action in parser._actions:
+            default = action.default
+            if not action.option_strings or default is None or default is False or default == [] \
+                    or default is argparse.SUPPRESS:
+                continue
+            shown = f"(default: {default})" in text or ("default" in (action.help or "") and str(default) in text)
+            if not shown:
+                missing.append(f"{' '.join(path)} {action.option_strings[0]} (default {default})")
+    assert missing == []
+
+
+def test_gait_track_takes_the_initial_error_as_track_does_and_its_step_as_dt(prepared, capsys):
+    """A plain number is in rad (as for `cmbs track`), degrees carry their unit; a plain 5 (the
+    old degrees) is refused before any work rather than run as 5 rad."""
+    common = ["gait", "track", "--controller", "ctc", "--t-end", "0.01", "--dt", "1e-3"]
+    assert main([*common, "--initial-error", f"{float(np.radians(2.0))!r}"]) == 0
+    assert "initial error 2 deg on the trunk and joint angles" in capsys.readouterr().out
+    assert main([*common, "--initial-error", "2deg"]) == 0
+    assert "initial error 2 deg on the trunk and joint angles" in capsys.readouterr().out
+    assert main([*common, "--initial-error", "5"]) == 2
+    assert "for degrees write the unit, e.g. 5deg" in capsys.readouterr().err

@@ -16,7 +16,7 @@ import numpy as np
 import cmbs
 from cmbs.errors import CmbsError
 from cmbs.files_io import checked_output
-from cmbs.units import bracketed, force_unit
+from cmbs.units import bracketed, coordinate_unit, force_unit
 
 
 class _UsageError(CmbsError):
@@ -41,6 +41,39 @@ def _parameter(text: str, option: str = "--param") -> tuple[str, object]:
         except ValueError:
             pass
     return key, raw
+
+
+class Offset(float):
+    """An offset given on the command line with an optional unit: a plain number is in the
+    coordinate's own unit (rad for an angle, m for a length), ``5deg`` is in degrees."""
+
+    unit: str = ""
+
+    @classmethod
+    def parse(cls, text: str) -> "Offset":
+        """argparse type of ``VALUE`` or ``VALUEdeg``."""
+        number, degrees = (text[:-3], "deg") if text.strip().endswith("deg") else (text, "")
+        try:
+            offset = cls(float(number))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, optionally in degrees as 5deg, got {text!r}") \
+                from None
+        offset.unit = degrees
+        return offset
+
+    def text(self) -> str:
+        """As given: ``0.1`` or ``5deg``."""
+        return f"{float(self):g}{self.unit}"
+
+    def in_unit_of(self, unit: str, option: str, coordinate: str) -> float:
+        """The offset in the coordinate's unit ``unit`` (:func:`cmbs.units.coordinate_unit`);
+        _UsageError for degrees on a coordinate that is not an angle."""
+        if self.unit != "deg":
+            return float(self)
+        if unit != "rad":
+            raise _UsageError(f"{option} {self.text()}: {coordinate!r} is not an angle "
+                              f"({unit or 'its unit is not known'}); give the offset in its own unit")
+        return math.radians(self)
 
 
 #: numeric options checked after parsing (every command that has them): what each must be
@@ -337,10 +370,12 @@ def _track(args: argparse.Namespace) -> int:
         raise _UsageError(f"model {driven.name!r} has no drivers: give the reference motion with --reference "
                           "or use a driven model")
     faults = [Fault.parse(text) for text in args.fault]
-    start_error = [Fault.parse(f"initial:{args.initial_error!r}")] if args.initial_error else []
+    coordinates = [driven.coordinate_names[c] for c in driven_columns(driven)]
+    offset = args.initial_error.in_unit_of(coordinate_unit(driven, coordinates[0]), "--initial-error",
+                                           coordinates[0])
+    start_error = [Fault.parse(f"initial:{offset!r}")] if offset else []
     motion = cmbs.kinematic_analysis(driven, times)
     plant = driven.without_drivers()
-    coordinates = [driven.coordinate_names[c] for c in driven_columns(driven)]
     reference = Reference(motion, coordinates)
     law = _controller(args, plant, reference)
     if args.sample_rate:
@@ -360,9 +395,8 @@ def _track(args: argparse.Namespace) -> int:
     run = result.run
     print(f"{plant.name}: {args.controller} tracking of {', '.join(coordinates)}, {run.info['status']} "
           f"at t = {run.t[-1]:.6g} s")
-    settling = result.settling_time
-    settled = "- (no initial error)" if np.isnan(settling) else "never" if np.isinf(settling) else f"{settling:.4g} s"
-    print(f"  NRMSE {', '.join(f'{v:.4g}' for v in result.nrmse)}; settling time (1 %) {settled}")
+    nrmse = ", ".join(f"{name} {100 * value:.4g} %" for name, value in zip(coordinates, result.nrmse))
+    print(f"  NRMSE (of the reference's range) {nrmse}; settling time (1 %) {_settling(result, motion)}")
     print(f"  actuation RMS norm {result.rms_norm:.6g}, peak norm {result.peak_norm:.6g}")
     if args.out:
         print(f"  result -> {run.save(args.out)}")
@@ -371,6 +405,23 @@ def _track(args: argparse.Namespace) -> int:
 
         print(f"  figure -> {save_figure(plot_simulation(run, model=plant), args.plot)}")
     return 0 if result.succeeded else 1
+
+
+def _settling(result, motion: cmbs.Trajectory) -> str:
+    """A tracking run's settling time to 1 % of its initial error, or why there is none: no
+    initial error, or the error that remains (its largest share of the initial error over the
+    last half of the run: a fault the controller does not know leaves a steady error)."""
+    settling = result.settling_time
+    if np.isnan(settling):
+        return "- (no initial error)"
+    if np.isfinite(settling):
+        return f"{settling:.4g} s"
+    run = result.run
+    reference = motion.q[:run.t.size, [motion.names.index(name) for name in result.coordinates]]
+    error = np.abs(reference - run.q[:, [run.names.index(name) for name in result.coordinates]])
+    late = error[run.t >= run.t[-1] / 2]
+    return (f"never: |error| still reaches {100 * late.max() / error[0].max():.3g} % of the initial error in the "
+            f"last half of the run")
 
 
 def _controller(args: argparse.Namespace, plant: cmbs.Model, reference):
@@ -419,6 +470,28 @@ def _check_output(path: str, suffixes: tuple[str, ...], option: str) -> None:
     """Check an output path before any work is done, so that a bad --plot cannot fail after the
     result file has already been written."""
     checked_output(path, suffixes, option)
+
+
+class _DefaultsFormatter(argparse.HelpFormatter):
+    """Help that ends each option's text with its default value (``(default: 0.01)``) when it has
+    one worth saying (not None, False or empty) and the text does not already give it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        worth_saying = not (default is None or default is False or default is argparse.SUPPRESS or default == [])
+        if action.option_strings and worth_saying and "default" not in text:
+            text += " (default: %(default)s)"
+        return text
+
+
+def _show_defaults(parser: argparse.ArgumentParser) -> None:
+    """Give ``parser`` and every sub-command's parser, at any depth, the :class:`_DefaultsFormatter`."""
+    parser.formatter_class = _DefaultsFormatter
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for command in action.choices.values():
+                _show_defaults(command)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -510,8 +583,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "noise:SIGMA[:SEED] or initial:DELTA")
     track.add_argument("--study", action="store_true",
                        help="robustness study: the nominal run and one run per --fault, as a table (thesis Table 7.2)")
-    track.add_argument("--initial-error", type=float, default=0.0,
-                       help="offset of the first driven coordinate at t = 0 (wrong initial state)")
+    track.add_argument("--initial-error", type=Offset.parse, default=Offset(0.0), metavar="VALUE[deg]",
+                       help="offset of the first driven coordinate at t = 0 (wrong initial state), in the "
+                            "coordinate's unit (rad for an angle, m for a length) or in degrees as 5deg")
     track.add_argument("--t-end", type=float, required=True, help="final time [s]")
     track.add_argument("--dt", type=float, default=0.01,
                        help="output interval [s]; also the step of fixed-step integrators")
@@ -535,6 +609,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_sweep_command(commands, model_command, dynamics_options)
     add_gait_commands(commands)
+    _show_defaults(parser)
     return parser
 
 

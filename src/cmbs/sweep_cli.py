@@ -97,7 +97,7 @@ def variants_from(args: argparse.Namespace, model) -> list:
     for choice in product(*(axis[2] for axis in axes)):
         parameters, masses, qd0, label = dict(fixed), {}, None, []
         for (kind, key, _), value in zip(axes, choice):
-            label.append(f"{key}={value}")
+            label.append(_label(model, kind, key, value))
             if kind == "parameter":
                 parameters[key] = value
             elif kind == "mass":
@@ -108,6 +108,19 @@ def variants_from(args: argparse.Namespace, model) -> list:
                 qd0 = velocities(model, model.q0, qd=guess, fixed=[key])
         variants.append(Variant(parameters=parameters, masses=masses, qd0=qd0, label=", ".join(label)))
     return variants
+
+
+def _label(model, kind: str, key: str, value: object) -> str:
+    """How a variant's value reads in tables and figures: ``crank_speed=2`` for a parameter,
+    ``mass(crank)×1.1`` for a mass factor, ``dalpha/dt=-2 rad/s`` for an initial speed."""
+    from cmbs.units import coordinate_unit
+
+    if kind == "mass":
+        return f"mass({key})×{value:g}"
+    if kind == "speed":
+        unit = coordinate_unit(model, key)
+        return f"d{key}/dt={value:g}" + (f" {unit}/s" if unit else "")
+    return f"{key}={value}"
 
 
 def _listing(names, shown: int = 12) -> str:
