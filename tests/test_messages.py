@@ -287,3 +287,54 @@ def test_gait_track_takes_the_initial_error_as_track_does_and_its_step_as_dt(pre
     assert "initial error 2 deg on the trunk and joint angles" in capsys.readouterr().out
     assert main([*common, "--initial-error", "5"]) == 2
     assert "for degrees write the unit, e.g. 5deg" in capsys.readouterr().err
+
+
+def test_the_summary_figure_splits_units_fills_its_grid_and_floors_rounding_noise():
+    import matplotlib.pyplot as plt
+
+    from cmbs.plotting import plot_simulation
+    from cmbs.simulate import supplied_work
+
+    free = cmbs.load("four-bar").without_drivers()
+    run = cmbs.simulate(free, t_end=1.0, formulation="projection", rtol=1e-9, project=True)
+    figure = plot_simulation(run, model=free)
+    axes = {axis.get_title().split("\n")[0]: axis for axis in figure.axes}
+    assert {line.get_label() for line in axes["coordinates [m]"].lines} == {"P1.x", "P1.z", "P2.x", "P2.z"}
+    assert {line.get_label() for line in axes["coordinates [rad]"].lines} == {"alpha"}
+    assert (axes["mechanism (x, z)"].get_xlabel(), axes["mechanism (x, z)"].get_ylabel()) == ("x [m]", "z [m]")
+    errors = axes["constraint errors (log)"]
+    rounding = np.finfo(float).eps * np.abs(run.q).max()
+    assert run["velocity_constraint_error"][1:].min() < rounding          # projected: values down to 1e-30
+    assert errors.get_ylim()[0] == pytest.approx(rounding)
+    plt.close(figure)
+
+    pendulum = cmbs.load("pendulum")                 # five panels: the last row's two share its width
+    figure = plot_simulation(cmbs.simulate(pendulum, t_end=0.2), model=pendulum)
+    boxes = [axis.get_position() for axis in figure.axes]
+    assert len(boxes) == 5 and boxes[3].x0 == pytest.approx(boxes[0].x0, abs=0.02)
+    assert boxes[4].x1 == pytest.approx(boxes[2].x1, abs=0.02)
+    plt.close(figure)
+
+    driven = cmbs.load("four-bar")                   # the driver's work is not drawn as a drift
+    run = cmbs.simulate(driven, t_end=1.0)
+    figure = plot_simulation(run, model=driven)
+    balance = next(axis for axis in figure.axes if axis.get_title().startswith("energy balance"))
+    expected = run["energy"] - run["energy"][0] - supplied_work(driven, run)
+    np.testing.assert_allclose(balance.lines[0].get_ydata(), expected)
+    plt.close(figure)
+
+
+def test_the_inverse_dynamics_example_colours_each_method_alike_in_both_panels(tmp_path, monkeypatch):
+    import runpy
+
+    import matplotlib.pyplot as plt
+
+    example = Path(__file__).resolve().parents[1] / "examples" / "four_bar_inverse_dynamics.py"
+    monkeypatch.setattr(sys, "argv", [str(example), "--t-end", "0.2", "--out-dir", str(tmp_path)])
+    runpy.run_path(str(example), run_name="__main__")
+    top, bottom = plt.gcf().axes
+    colours = {line.get_label(): line.get_color() for line in top.lines}
+    for line in bottom.lines:
+        method = line.get_label().strip("|").split(" - ")[0]
+        assert line.get_color() == colours[method], method
+    plt.close("all")

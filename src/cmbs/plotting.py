@@ -57,18 +57,25 @@ def plot_simulation(trajectory: Trajectory, *, model: Model | None = None,
     Panels, in this order, laid out at most three to a row:
 
     * **coordinates** against time: the chosen ``coordinates``, or by default all of them,
-      but at most the first :data:`MAX_DEFAULT_COORDINATES` (the title then says so);
+      but at most the first :data:`MAX_DEFAULT_COORDINATES` (the title then says so); with
+      ``model``, one panel per unit (m, rad: :func:`cmbs.units.coordinate_unit`);
     * **energy** T + V against time (extra ``energy``), and **energy drift** E(t) - E(0)
-      in its own panel, titled with max |E - E(0)|;
+      in its own panel, titled with max |E - E(0)|; with ``model``, when moving drivers or
+      inputs do work W (:func:`cmbs.simulate.supplied_work`), the **energy balance**
+      E(t) - E(0) - W(t) instead;
     * **constraint errors** max|Φ| and max|Φ̇| against time on a log scale (extras
       ``constraint_error`` and ``velocity_constraint_error``).  Samples that are exactly zero
       cannot be drawn on a log scale: they are left out and the legend counts them; a
       quantity that is zero throughout is not drawn and the title says so (if nothing is
-      positive the panel falls back to a linear scale and draws the zeros);
-    * with ``model``, the **mechanism** at ``snapshots`` instants (:func:`draw_snapshots`).
+      positive the panel falls back to a linear scale and draws the zeros).  The scale stops
+      at the rounding level eps max(|q|, 1) (a projected run reaches 1e-30); an adaptive run
+      draws its ``atol`` as a dashed line;
+    * with ``model``, the **mechanism** at ``snapshots`` instants (:func:`draw_snapshots`), x
+      and z in m.
 
     Panels whose extras the trajectory lacks (e.g. a kinematic analysis has no energy) are
-    left out, so ``len(figure.axes)`` is the number of panels shown.  A failed run
+    left out, so ``len(figure.axes)`` is the number of panels shown; the panels of a shorter
+    last row share its width (no empty cell).  A failed run
     (``info["status"] == "failed"``) says so in the figure title.
     """
     if len(trajectory.t) == 0:
@@ -87,13 +94,18 @@ def plot_simulation(trajectory: Trajectory, *, model: Model | None = None,
         note = f" (first {len(names)} of {len(trajectory.names)}; choose with coordinates=)" if hidden > 0 else ""
 
     panels = []
-    if names:
-        panels.append(lambda axis: _draw_coordinates(axis, trajectory, names, note))
+    units = _coordinate_units(model, names)
+    for unit, group in _unit_groups(names, units):
+        panels.append(lambda axis, unit=unit, group=group: _draw_coordinates(axis, trajectory, group, note, unit))
     if "energy" in trajectory.extras:
         energy = np.asarray(trajectory.extras["energy"], dtype=float).reshape(len(trajectory.t), -1)[:, 0]
         panels.append(lambda axis: _draw_energy(axis, trajectory.t, energy))
-        panels.append(lambda axis: _draw_energy_drift(axis, trajectory.t, energy,
-                                                      trajectory.info.get("energy_drift")))
+        work = None if "energy_drift" in trajectory.info else _supplied_work(model, trajectory)
+        if work is None or not np.any(work != 0):
+            panels.append(lambda axis: _draw_energy_drift(axis, trajectory.t, energy,
+                                                          trajectory.info.get("energy_drift")))
+        else:
+            panels.append(lambda axis: _draw_energy_balance(axis, trajectory.t, energy, work))
     errors = [(label, key) for label, key in ((r"position $\max|\Phi|$", "constraint_error"),
                                               (r"velocity $\max|\dot\Phi|$", "velocity_constraint_error"))
               if key in trajectory.extras]
@@ -102,15 +114,9 @@ def plot_simulation(trajectory: Trajectory, *, model: Model | None = None,
     if model is not None:
         panels.append(lambda axis: draw_snapshots(axis, model, trajectory, snapshots))
 
-    columns = min(3, len(panels))
-    rows = -(-len(panels) // columns)
-    figure, grid = plt.subplots(rows, columns, figsize=(4.4 * columns, 3.6 * rows), constrained_layout=True,
-                                squeeze=False)
-    cells = list(grid.flat)
+    figure, cells = _panel_grid(len(panels))
     for draw, axis in zip(panels, cells):
         draw(axis)
-    for axis in cells[len(panels):]:
-        figure.delaxes(axis)
     title = trajectory.info.get("model", "")
     how = ", ".join(str(trajectory.info[key]) for key in ("analysis", "formulation", "integrator")
                     if trajectory.info.get(key))
@@ -122,11 +128,48 @@ def plot_simulation(trajectory: Trajectory, *, model: Model | None = None,
     return figure
 
 
-def _draw_coordinates(axis: plt.Axes, trajectory: Trajectory, names: list[str], note: str) -> None:
+def _panel_grid(count: int) -> tuple[plt.Figure, list[plt.Axes]]:
+    """A figure of ``count`` panels, at most three to a row, with no empty cell: the panels of a
+    shorter last row share its width."""
+    columns = min(3, count)
+    rows = -(-count // columns)
+    figure = plt.figure(figsize=(4.4 * columns, 3.6 * rows), layout="constrained")
+    width = 6                                   # a multiple of every row length (1, 2 or 3 panels)
+    grid = figure.add_gridspec(rows, width)
+    cells = []
+    for row in range(rows):
+        in_row = min(columns, count - row * columns)
+        span = width // in_row
+        cells += [figure.add_subplot(grid[row, k * span:(k + 1) * span]) for k in range(in_row)]
+    return figure, cells
+
+
+def _coordinate_units(model: Model | None, names: Sequence[str]) -> list[str]:
+    """The unit of each coordinate (:func:`cmbs.units.coordinate_unit`); "" without a model."""
+    if model is None:
+        return [""] * len(names)
+    from cmbs.units import coordinate_unit
+
+    return [coordinate_unit(model, name) for name in names]
+
+
+def _supplied_work(model: Model | None, trajectory: Trajectory) -> np.ndarray | None:
+    """The work of the drivers and inputs of a simulation (:func:`cmbs.simulate.supplied_work`),
+    None without a model or when other forces do work."""
+    if model is None or not {"constraint_force", "u"} <= set(trajectory.extras):
+        return None
+    from cmbs.simulate import supplied_work
+
+    return supplied_work(model, trajectory)
+
+
+def _draw_coordinates(axis: plt.Axes, trajectory: Trajectory, names: list[str], note: str, unit: str = "") -> None:
     for name in names:
         axis.plot(trajectory.t, trajectory.q[:, trajectory.names.index(name)], label=name)
     axis.set_xlabel("t [s]")
-    axis.set_title("coordinates" + note, fontsize="medium")
+    if unit:
+        axis.set_ylabel(f"[{unit}]")
+    axis.set_title(("coordinates" if not unit else f"coordinates [{unit}]") + note, fontsize="medium")
     axis.legend(fontsize="small")
     axis.grid(alpha=0.3)
 
@@ -155,6 +198,35 @@ def _draw_energy_drift(axis: plt.Axes, t: np.ndarray, energy: np.ndarray, relati
     axis.grid(alpha=0.3)
 
 
+def _draw_energy_balance(axis: plt.Axes, t: np.ndarray, energy: np.ndarray, work: np.ndarray) -> None:
+    """E(t) - E(0) - W(t), W the work of the drivers and inputs: zero for the exact motion."""
+    balance = energy - energy[0] - work
+    axis.plot(t, balance, color="C3")
+    axis.axhline(0.0, color="0.5", linewidth=0.8)
+    axis.set_xlabel("t [s]")
+    axis.set_ylabel("E(t) - E(0) - W(t) [J]")
+    axis.set_title(f"energy balance, max |E - E(0) - W| = {np.nanmax(np.abs(balance)):.3g} J\n"
+                   f"(W: work of the drivers and inputs, up to {np.nanmax(np.abs(work)):.3g} J)", fontsize="medium",
+                   pad=14)
+    axis.grid(alpha=0.3)
+
+
+def _error_floor(trajectory: Trajectory) -> float:
+    """The smallest constraint error worth drawing: the rounding level of the run's coordinates,
+    eps max(|q|, 1); a smaller |Φ| is rounding noise (a projected run reaches 1e-30)."""
+    scale = float(np.nanmax(np.abs(trajectory.q), initial=1.0))
+    return float(np.finfo(float).eps * max(scale, 1.0))
+
+
+def _tolerance(trajectory: Trajectory) -> float | None:
+    """The absolute tolerance of an adaptive run (``info["atol"]``), else None."""
+    from cmbs.integrate.tableaus import NAMES as EXPLICIT
+
+    info = trajectory.info
+    adaptive = info.get("integrator") in EXPLICIT and info.get("integrator") != "rk4"
+    return float(info["atol"]) if adaptive and "atol" in info else None
+
+
 def _draw_constraint_errors(axis: plt.Axes, trajectory: Trajectory, errors: list[tuple[str, str]]) -> None:
     series = []
     for (label, key), color in zip(errors, ("C0", "C1")):
@@ -181,6 +253,13 @@ def _draw_constraint_errors(axis: plt.Axes, trajectory: Trajectory, errors: list
         axis.plot(trajectory.t, shown, "-", marker=".", markersize=2, linewidth=1, color=color, label=label)
     if any_positive:
         axis.set_yscale("log")
+        floor = _error_floor(trajectory)
+        if any(np.any((v > 0) & (v < floor)) for _, v, _ in series):
+            axis.set_ylim(bottom=floor)
+            notes.append(f"floor {floor:.0e}: rounding")
+        tolerance = _tolerance(trajectory)
+        if tolerance is not None:
+            axis.axhline(tolerance, color="0.4", linestyle="--", linewidth=0.8, label=f"atol {tolerance:.0e}")
     axis.set_xlabel("t [s]")
     axis.set_title("constraint errors" + (" (log)" if any_positive else "") + ("\n" + "; ".join(notes) if notes
                                                                               else ""), fontsize="medium")
@@ -197,6 +276,8 @@ def draw_snapshots(axis: plt.Axes, model: Model, trajectory: Trajectory, count: 
         for i, j in model.lines:
             axis.plot(points[[i, j], 0], points[[i, j], 1], "-o", color=plt.cm.Blues(shade), markersize=3)
     axis.set_aspect("equal", adjustable="datalim")
+    metres = any(kind != "generic" for kind in model.coordinate_kinds)   # a user's own equations: unknown
+    axis.set(xlabel="x [m]" if metres else "x", ylabel="z [m]" if metres else "z")
     axis.set_title("mechanism (x, z)")
     axis.grid(alpha=0.3)
 
