@@ -338,3 +338,23 @@ def test_the_inverse_dynamics_example_colours_each_method_alike_in_both_panels(t
         method = line.get_label().strip("|").split(" - ")[0]
         assert line.get_color() == colours[method], method
     plt.close("all")
+
+
+def test_a_python_loop_runs_blas_on_one_thread_and_gives_the_setting_back():
+    """Multi-threaded OpenBLAS made Udwadia-Kalaba 60× slower on the four-bar's 5×5 matrices."""
+    import scipy.linalg  # noqa: F401 -- its BLAS loaded, so that threadpoolctl sees both
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    seen = []
+
+    def no_extra_work(t, q, qd):            # a non-ideal term of zero, to look inside the loop
+        if not seen:
+            seen.extend(pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas")
+        return np.zeros(q.size)
+
+    free = cmbs.load("four-bar").without_drivers()
+    with threadpool_limits(limits=2, user_api="blas"):
+        cmbs.simulate(free, t_end=0.01, formulation=cmbs.UdwadiaKalaba(nonideal=no_extra_work))
+        after = [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
+    assert seen and set(seen) == {1}
+    assert set(after) == {2}

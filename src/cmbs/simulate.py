@@ -22,6 +22,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
+from cmbs.blas import small_matrix_loop
 from cmbs.dynamics import Formulation, formulation as make_formulation
 from cmbs.dynamics.matrix_r import MatrixRSolver, rounding_note
 from cmbs.dynamics.projection import pseudo_inverse
@@ -239,8 +240,10 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         trajectory = _run_compiled_matrix_r(model, solver, chosen, inputs, q_start, qd_start, steps, dt, started,
                                             run_options)
     else:
-        trajectory = _run_python(model, solver, chosen, inputs, q_start, qd_start, times, integrator, u, dt, rtol,
-                                 atol, project, projection_tolerance, newton_tolerance, compiled, progress, started)
+        with small_matrix_loop(model.n):         # one BLAS thread for small matrices (cmbs.blas)
+            trajectory = _run_python(model, solver, chosen, inputs, q_start, qd_start, times, integrator, u, dt,
+                                     rtol, atol, project, projection_tolerance, newton_tolerance, compiled, progress,
+                                     started)
     trajectory.info["compile_time"] = compile_seconds() - compiled_before
     _explain_failure(model, trajectory, times)
     return trajectory
