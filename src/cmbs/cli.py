@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
@@ -17,6 +17,9 @@ import cmbs
 from cmbs.errors import CmbsError
 from cmbs.files_io import checked_output
 from cmbs.units import bracketed, coordinate_unit, force_unit
+
+if TYPE_CHECKING:
+    from cmbs.control.study import TrackingRun
 
 
 class _UsageError(CmbsError):
@@ -206,7 +209,7 @@ def _simulate(args: argparse.Namespace) -> int:
     run = simulate(model, formulation=formulation, formulation_options=_formulation_options(args),
                    progress=True, **_simulation_settings(args))
     info = run.info
-    energy, error = run["energy"], run["constraint_error"]
+    error = run["constraint_error"]
     print(f"{model.name}: {info['formulation']} + {info['integrator']}, {info['status']} at t = {run.t[-1]:.6g} s "
           f"({info['steps']} steps, {timing(info)})")
     print(f"  max constraint error {error.max(initial=0.0):.3g}, max velocity constraint error "
@@ -230,8 +233,8 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _energy_balance(model: cmbs.Model, run: cmbs.Trajectory) -> str:
-    """max |E - E0 - W| of a run (W the work of its drivers and inputs, 0 for a conservative model
-    at rest inputs), or "-" when the model has other sources of work."""
+    """max |E - E0 - W| of a run (W the work of its drivers and inputs; 0 for a conservative model
+    with zero inputs), or "-" when the model has other sources of work."""
     from cmbs.simulate import supplied_work
 
     work = supplied_work(model, run)
@@ -407,7 +410,7 @@ def _track(args: argparse.Namespace) -> int:
     return 0 if result.succeeded else 1
 
 
-def _settling(result, motion: cmbs.Trajectory) -> str:
+def _settling(result: TrackingRun, motion: cmbs.Trajectory) -> str:
     """A tracking run's settling time to 1 % of its initial error, or why there is none: no
     initial error, or the error that remains (its largest share of the initial error over the
     last half of the run: a fault the controller does not know leaves a steady error)."""

@@ -184,8 +184,8 @@ def _draw_energy(axis: plt.Axes, t: np.ndarray, energy: np.ndarray) -> None:
 
 
 def _draw_energy_drift(axis: plt.Axes, t: np.ndarray, energy: np.ndarray, relative: float | None) -> None:
-    """E(t) - E(0); the title adds the run's relative drift max |E - E0| / max T when it was
-    judged (a conservative model: ``info["energy_drift"]``)."""
+    """E(t) - E(0); titled a drift, with the run's relative drift max |E - E0| / max T, when it
+    was judged (a conservative model: ``info["energy_drift"]``), else a change."""
     drift = energy - energy[0]
     axis.plot(t, drift, color="C3")
     axis.axhline(0.0, color="0.5", linewidth=0.8)
@@ -194,7 +194,8 @@ def _draw_energy_drift(axis: plt.Axes, t: np.ndarray, energy: np.ndarray, relati
     worst = np.nanmax(np.abs(drift)) if np.any(np.isfinite(drift)) else float("nan")
     # raised above the axis' power-of-ten label (e.g. "1e-6"), which matplotlib puts at its top left
     share = "" if relative is None else f"\n= {relative:.2g} of the largest kinetic energy"
-    axis.set_title(f"energy drift, max |E - E(0)| = {worst:.3g} J{share}", fontsize="medium", pad=14)
+    what = "energy drift" if relative is not None else "energy change"     # a drift only where E is conserved
+    axis.set_title(f"{what}, max |E - E(0)| = {worst:.3g} J{share}", fontsize="medium", pad=14)
     axis.grid(alpha=0.3)
 
 
@@ -297,10 +298,10 @@ def plot_driver_forces(trajectory: Trajectory, driven: Sequence[str], *, model: 
     """Inverse dynamics: the generalized force on each driven coordinate against time, and the
     prescribed coordinates themselves; with ``model``, one panel per unit (torques in N m on
     angles, forces in N on lengths; coordinates in rad and m, :mod:`cmbs.units`)."""
-    from cmbs.units import FORCE, coordinate_unit
+    from cmbs.units import FORCE
 
     forces = np.asarray(trajectory.extras["driver_forces"])
-    units = [coordinate_unit(model, name) if model is not None else "" for name in driven]
+    units = _coordinate_units(model, driven)
     force_groups = _unit_groups(driven, [FORCE.get(unit, "") for unit in units])
     motion_groups = _unit_groups(driven, units)
     panels = len(force_groups) + len(motion_groups)
