@@ -358,3 +358,13 @@ def test_a_python_loop_runs_blas_on_one_thread_and_gives_the_setting_back():
         after = [pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"]
     assert seen and set(seen) == {1}
     assert set(after) == {2}
+
+
+def test_the_work_of_a_diverged_run_is_nan_from_its_first_non_finite_power_not_an_exception():
+    from cmbs.simulate import supplied_work
+
+    model = cmbs.load("four-bar")
+    run = cmbs.simulate(model, t_end=0.1, dt=0.01)
+    run.extras["constraint_force"][5:] = np.nan
+    work = supplied_work(model, run)
+    assert np.all(np.isfinite(work[:5])) and np.all(np.isnan(work[6:]))

@@ -555,7 +555,8 @@ def supplied_work(model: Model, trajectory: Trajectory) -> np.ndarray | None:
     share; workless constraints add f_cᵀ q̇ ≈ 0) and the forces B u of the inputs, integrated
     over the outputs as the not-a-knot cubic spline through P (error O(dt⁴) for a smooth power
     and outputs dt apart; the trapezoidal rule's O(dt²) showed as a balance of 4e-4 of the
-    work on the driven four-bar at dt = 10 ms), by the trapezoidal rule below 4 outputs."""
+    work on the driven four-bar at dt = 10 ms), by the trapezoidal rule below 4 outputs or when
+    the power is not finite."""
     sources = model.work_sources
     if sources is None or not all(source.startswith("driver ") for source in sources):
         return None
@@ -569,7 +570,7 @@ def supplied_work(model: Model, trajectory: Trajectory) -> np.ndarray | None:
             model.evaluate(q[i], qd[i], t[i], inputs[i], out=with_inputs)
             model.evaluate(q[i], qd[i], t[i], zeros, out=without)
             power[i] += (with_inputs.Q - without.Q) @ qd[i]
-    if t.size < 4:
+    if t.size < 4 or not np.all(np.isfinite(power)):     # a diverged run's NaN stays NaN, no spline error
         return np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(t))])
     from scipy.interpolate import CubicSpline
 
