@@ -368,3 +368,10 @@ def test_the_work_of_a_diverged_run_is_nan_from_its_first_non_finite_power_not_a
     run.extras["constraint_force"][5:] = np.nan
     work = supplied_work(model, run)
     assert np.all(np.isfinite(work[:5])) and np.all(np.isnan(work[6:]))
+
+
+def test_a_sweep_of_a_driven_model_says_its_energy_change_is_the_drivers_work(capsys):
+    assert main(["sweep", "four-bar", "--mass", "coupler=1,1.1", "--t-end", "0.05", "--dt", "1e-3",
+                 "--integrator", "rk4", "--workers", "1"]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if "mass(coupler)" in line]
+    assert len(rows) == 2 and all("(E - E0: work of driver 'crank', not an error)" in row for row in rows)

@@ -123,6 +123,15 @@ def _label(model, kind: str, key: str, value: object) -> str:
     return f"{key}={value}"
 
 
+def _work_done_by(model) -> str:
+    """What changes the energy of a variant whose drift is not judged: the model's work sources,
+    else its inputs."""
+    sources = model.work_sources
+    if sources is None:
+        return "work of forces its equations do not name"
+    return "work of " + (", ".join(sources) if sources else "the inputs")
+
+
 def _listing(names, shown: int = 12) -> str:
     """The first ``shown`` names, and how many there are in all when more."""
     names = list(names)
@@ -177,11 +186,14 @@ def _sweep(args: argparse.Namespace) -> int:
     compiled_elsewhere = "" if workers_compiled is None else f" (the workers compiled for {workers_compiled:.3g} s)"
     print(f"{nominal.name}: {len(result)} variants, {mode} ({where}), {timing(result.info)}{compiled_elsewhere}, "
           f"{failed} failed")
+    work = _work_done_by(nominal)
     for v, variant in enumerate(result.variants):
         energy = result.energy[v, :result.recorded[v]]
         change = float(np.abs(energy - energy[0]).max()) if energy.size else float("nan")
-        drift = "-" if np.isnan(result.energy_drift[v]) else f"{result.energy_drift[v]:.2g}"
-        note = "" if result.status[v] == "success" else f"  FAILED: {result.message[v]}"
+        judged = not np.isnan(result.energy_drift[v])
+        drift = f"{result.energy_drift[v]:.2g}" if judged else "-"
+        note = "" if judged else f"  (E - E0: {work}, not an error)"
+        note += "" if result.status[v] == "success" else f"  FAILED: {result.message[v]}"
         print(f"  {variant['label']:<40} max|Φ| {np.nanmax(result.constraint_error[v]):9.2e}  max|E - E0| "
               f"{change:9.3g} J  drift {drift:>7}{note}")
     drifting = np.flatnonzero(result.energy_drift > ENERGY_NOTE)
