@@ -378,3 +378,16 @@ def test_a_sweep_of_a_driven_model_says_its_energy_change_is_the_drivers_work(ca
                  "--integrator", "rk4", "--workers", "1"]) == 0
     rows = [line for line in capsys.readouterr().out.splitlines() if "mass(coupler)" in line]
     assert len(rows) == 2 and all("(E - E0: work of driver 'crank', not an error)" in row for row in rows)
+
+
+def test_the_kinematics_figure_puts_lengths_and_angles_on_their_own_axes():
+    import matplotlib.pyplot as plt
+
+    from cmbs.plotting import plot_trajectory
+
+    model = cmbs.load("four-bar")
+    figure = plot_trajectory(cmbs.kinematic_analysis(model, np.linspace(0.0, 0.5, 11)), model=model)
+    lines = {axis.get_title(): {line.get_label() for line in axis.lines} for axis in figure.axes[:6]}
+    assert lines["position [m]"] == {"P1.x", "P1.z", "P2.x", "P2.z"} and lines["velocity [rad/s]"] == {"alpha"}
+    assert "acceleration [m/s²]" in lines and "acceleration [rad/s²]" in lines
+    plt.close(figure)

@@ -113,7 +113,7 @@ def test_kinematics_without_energy_still_plots(four_bar, tmp_path):
     assert titles(figure) == ["coordinates [m]", "coordinates [rad]", "mechanism (x, z)"]
     assert save_figure(figure, tmp_path / "kin.png").read_bytes()[:8] == PNG_SIGNATURE
     old = plot_trajectory(motion, model=model)  # the kinematics CLI's figure
-    assert len(old.axes) == 4
+    assert len(old.axes) == 7          # position, velocity, acceleration in m and in rad; the mechanism
     assert save_figure(old, tmp_path / "old.svg").read_text().lstrip().startswith("<?xml")
 
 

@@ -23,25 +23,33 @@ if TYPE_CHECKING:
 
 def plot_trajectory(trajectory: Trajectory, *, model: Model | None = None,
                     coordinates: Sequence[str] | None = None, snapshots: int = 8) -> plt.Figure:
-    """Coordinates, velocities and accelerations against time; with ``model``, also the
-    mechanism drawn at ``snapshots`` instants (lighter = earlier)."""
+    """Coordinates, velocities and accelerations against time, one row per unit of the
+    coordinates with ``model`` (m, rad: :func:`cmbs.units.coordinate_unit`; a single row
+    without); with ``model``, also the mechanism drawn at ``snapshots`` instants (lighter =
+    earlier) beside them."""
     names = list(coordinates) if coordinates else list(trajectory.names)
     unknown = [name for name in names if name not in trajectory.names]
     if unknown:
         raise CmbsError(f"no coordinate(s) {', '.join(unknown)}; coordinates: {', '.join(trajectory.names)}")
-    index = [trajectory.names.index(name) for name in names]
-    panels = 3 + (model is not None)
-    figure, axes = plt.subplots(1, panels, figsize=(4.2 * panels, 3.8), constrained_layout=True)
-    for axis, data, label in zip(axes, (trajectory.q, trajectory.qd, trajectory.qdd),
-                                 ("position", "velocity", "acceleration")):
-        for k, name in zip(index, names):
-            axis.plot(trajectory.t, data[:, k], label=name)
-        axis.set_xlabel("t [s]")
-        axis.set_title(label)
-        axis.grid(alpha=0.3)
-    axes[0].legend(fontsize="small")
+    groups = _unit_groups(names, _coordinate_units(model, names))
+    columns = 3 + (model is not None)
+    figure = plt.figure(figsize=(4.2 * columns, 3.8 * len(groups)), layout="constrained")
+    grid = figure.add_gridspec(len(groups), columns)
+    for row, (unit, group) in enumerate(groups):
+        index = [trajectory.names.index(name) for name in group]
+        for column, (data, label, per) in enumerate(zip((trajectory.q, trajectory.qd, trajectory.qdd),
+                                                        ("position", "velocity", "acceleration"),
+                                                        ("", "/s", "/s²"))):
+            axis = figure.add_subplot(grid[row, column])
+            for k, name in zip(index, group):
+                axis.plot(trajectory.t, data[:, k], label=name)
+            axis.set_xlabel("t [s]")
+            axis.set_title(label + (f" [{unit}{per}]" if unit else ""))
+            axis.grid(alpha=0.3)
+            if column == 0:
+                axis.legend(fontsize="small")
     if model is not None:
-        draw_snapshots(axes[-1], model, trajectory, snapshots)
+        draw_snapshots(figure.add_subplot(grid[:, -1]), model, trajectory, snapshots)
     figure.suptitle(trajectory.info.get("model", ""))
     return figure
 
