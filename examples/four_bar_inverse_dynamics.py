@@ -28,10 +28,12 @@ torques = {name: cmbs.inverse_dynamics(model, motion, method=name, **options).fo
            for name, options in methods.items()}
 
 figure, (top, bottom) = plt.subplots(2, 1, figsize=(8, 7), sharex=True, constrained_layout=True)
+colours = {name: f"C{k}" for k, name in enumerate(torques)}       # one colour per method in both panels
 for name, torque in torques.items():
-    top.plot(times, torque, label=name)
+    top.plot(times, torque, color=colours[name], label=name)
     if name != "lagrange":
-        bottom.semilogy(times, np.maximum(np.abs(torque - torques["lagrange"]), 1e-16), label=f"|{name} - lagrange|")
+        bottom.semilogy(times, np.maximum(np.abs(torque - torques["lagrange"]), 1e-16), color=colours[name],
+                        label=f"|{name} - lagrange|")
     print(f"{name:<10} torque range [{torque.min():9.3f}, {torque.max():9.3f}] N m, "
           f"max |difference to lagrange| {np.abs(torque - torques['lagrange']).max():.3g} N m")
 top.set(title="crank torque driving α(t) (thesis Fig. 4.3)", ylabel="τ [N m]")

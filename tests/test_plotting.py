@@ -45,14 +45,14 @@ def test_simulation_figure_saved_as_png(pendulum, tmp_path):
     model, run = pendulum
     figure = plot_simulation(run, model=model)
     names = titles(figure)
-    assert len(figure.axes) == 5  # coordinates, energy, energy drift, constraint errors, mechanism
-    assert names[0] == "coordinates"
-    assert names[1].startswith("total energy") and names[2].startswith("energy drift")
-    assert names[2].endswith(f"J\n= {run.info['energy_drift']:.2g} of the largest kinetic energy")  # conservative
-    assert names[3].startswith("constraint errors (log)") and figure.axes[3].get_yscale() == "log"
-    assert names[4] == "mechanism (x, z)"
-    assert len(figure.axes[0].lines) == model.n
-    drift = figure.axes[2].lines[0].get_ydata()
+    assert len(figure.axes) == 6  # coordinates in m, in rad, energy, energy drift, constraint errors, mechanism
+    assert names[:2] == ["coordinates [m]", "coordinates [rad]"]
+    assert names[2].startswith("total energy") and names[3].startswith("energy drift")
+    assert names[3].endswith(f"J\n= {run.info['energy_drift']:.2g} of the largest kinetic energy")  # conservative
+    assert names[4].startswith("constraint errors (log)") and figure.axes[4].get_yscale() == "log"
+    assert names[5] == "mechanism (x, z)"
+    assert len(figure.axes[0].lines) + len(figure.axes[1].lines) == model.n
+    drift = figure.axes[3].lines[0].get_ydata()
     np.testing.assert_allclose(drift, run.extras["energy"] - run.extras["energy"][0])
     path = save_figure(figure, tmp_path / "run.png")
     assert path.read_bytes()[:8] == PNG_SIGNATURE
@@ -64,7 +64,7 @@ def test_simulation_figure_saved_as_png(pendulum, tmp_path):
 def test_exact_zeros_are_left_out_and_counted(pendulum):
     model, run = pendulum
     assert run.extras["velocity_constraint_error"][0] == 0.0  # consistent initial velocities
-    axis = plot_simulation(run).axes[3]
+    axis = plot_simulation(run).axes[3]           # without a model: one panel of coordinates
     labels = [line.get_label() for line in axis.lines]
     assert any("velocity" in label and "(1 exact zero not shown)" in label for label in labels)
     velocity = next(line for line in axis.lines if "velocity" in line.get_label())
@@ -110,10 +110,10 @@ def test_kinematics_without_energy_still_plots(four_bar, tmp_path):
     model, motion = four_bar
     assert "energy" not in motion.extras
     figure = plot_simulation(motion, model=model)
-    assert titles(figure) == ["coordinates", "mechanism (x, z)"]
+    assert titles(figure) == ["coordinates [m]", "coordinates [rad]", "mechanism (x, z)"]
     assert save_figure(figure, tmp_path / "kin.png").read_bytes()[:8] == PNG_SIGNATURE
     old = plot_trajectory(motion, model=model)  # the kinematics CLI's figure
-    assert len(old.axes) == 4
+    assert len(old.axes) == 7          # position, velocity, acceleration in m and in rad; the mechanism
     assert save_figure(old, tmp_path / "old.svg").read_text().lstrip().startswith("<?xml")
 
 

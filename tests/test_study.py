@@ -1,6 +1,8 @@
 """Tracking runs and robustness studies (cmbs.control.study): measures against the closed-form
 error of computed-torque control, fault parsing, and the study table from the CLI."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -90,7 +92,8 @@ def _track_nrmse(capsys, *options):
                    *options])
     text = capsys.readouterr().out
     assert status == 0, text
-    return [float(v) for v in text.split("NRMSE ")[1].split(";")[0].split(",")]
+    line = text.split("NRMSE (of the reference's range) ")[1].split(";")[0]
+    return [float(value) / 100 for value in re.findall(r"(\S+) %", line)]     # printed in % of the range
 
 
 def test_cli_controllers_on_the_redundantly_actuated_arm(capsys):

@@ -216,7 +216,7 @@ def test_sweep_command_runs_the_grid_and_writes_result_and_figure(tmp_path, caps
                  "--dt", "1e-3", "--integrator", "rk4", "--formulation", "matrix-r", "--every", "10",
                  "--workers", "1", "--out", str(out), "--plot", str(figure), "--coordinate", "theta1"]) == 0
     printed = capsys.readouterr().out
-    assert "4 variants, processes" in printed and "crank_speed=2, crank=1.2" in printed
+    assert "4 variants, processes" in printed and "crank_speed=2, mass(crank)×1.2" in printed
     result = SweepResult.load(out)
     assert result.q.shape == (4, 21, 6) and figure.stat().st_size > 0
     expected = simulate(cmbs.load("slider-crank", crank_speed=2), t_end=0.2, dt=1e-3, integrator="rk4",

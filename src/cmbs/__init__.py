@@ -36,12 +36,15 @@ _ON_FIRST_USE = {"InverseDynamics": "cmbs.inverse", "inverse_dynamics": "cmbs.in
 
 def __getattr__(name: str) -> object:
     """Names whose modules are imported on first use (PEP 562), so that a simulation does not
-    import what it never calls."""
+    import what it never calls: the names of ``_ON_FIRST_USE`` and every submodule
+    (``cmbs.inverse``, ``cmbs.control``, ...)."""
     if name in _ON_FIRST_USE:
         import importlib
 
         return getattr(importlib.import_module(_ON_FIRST_USE[name]), name)
-    raise AttributeError(f"module 'cmbs' has no attribute {name!r}")
+    from cmbs.lazy import submodule
+
+    return submodule(__name__, name)
 
 
 def load(name_or_path: str | _Path, **parameters: object) -> Model:

@@ -9,13 +9,17 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 import cmbs
 from cmbs.errors import CmbsError
 from cmbs.files_io import checked_output
+from cmbs.units import bracketed, coordinate_unit, force_unit
+
+if TYPE_CHECKING:
+    from cmbs.control.study import TrackingRun
 
 
 class _UsageError(CmbsError):
@@ -40,6 +44,39 @@ def _parameter(text: str, option: str = "--param") -> tuple[str, object]:
         except ValueError:
             pass
     return key, raw
+
+
+class Offset(float):
+    """An offset given on the command line with an optional unit: a plain number is in the
+    coordinate's own unit (rad for an angle, m for a length), ``5deg`` is in degrees."""
+
+    unit: str = ""
+
+    @classmethod
+    def parse(cls, text: str) -> "Offset":
+        """argparse type of ``VALUE`` or ``VALUEdeg``."""
+        number, degrees = (text[:-3], "deg") if text.strip().endswith("deg") else (text, "")
+        try:
+            offset = cls(float(number))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, optionally in degrees as 5deg, got {text!r}") \
+                from None
+        offset.unit = degrees
+        return offset
+
+    def text(self) -> str:
+        """As given: ``0.1`` or ``5deg``."""
+        return f"{float(self):g}{self.unit}"
+
+    def in_unit_of(self, unit: str, option: str, coordinate: str) -> float:
+        """The offset in the coordinate's unit ``unit`` (:func:`cmbs.units.coordinate_unit`);
+        _UsageError for degrees on a coordinate that is not an angle."""
+        if self.unit != "deg":
+            return float(self)
+        if unit != "rad":
+            raise _UsageError(f"{option} {self.text()}: {coordinate!r} is not an angle "
+                              f"({unit or 'its unit is not known'}); give the offset in its own unit")
+        return math.radians(self)
 
 
 #: numeric options checked after parsing (every command that has them): what each must be
@@ -79,6 +116,17 @@ def _formulation_options(args: argparse.Namespace) -> dict[str, object]:
 def _simulation_settings(args: argparse.Namespace) -> dict[str, object]:
     return {"t_end": args.t_end, "integrator": args.integrator, "dt": args.dt, "rtol": args.rtol, "atol": args.atol,
             "project": args.project}
+
+
+def run_seconds(info: dict) -> float:
+    """A run's time without the time it spent compiling kernels (``wall_time - compile_time``)."""
+    return info["wall_time"] - info.get("compile_time", 0.0)
+
+
+def timing(info: dict) -> str:
+    """``run R s, compile C s`` of a run's (or a sweep's) ``info``: the compile time, which only
+    a first use pays, apart from the run's own time."""
+    return f"run {run_seconds(info):.3g} s, compile {info.get('compile_time', 0.0):.3g} s"
 
 
 def _models(args: argparse.Namespace) -> int:
@@ -161,13 +209,11 @@ def _simulate(args: argparse.Namespace) -> int:
     run = simulate(model, formulation=formulation, formulation_options=_formulation_options(args),
                    progress=True, **_simulation_settings(args))
     info = run.info
-    energy, error = run["energy"], run["constraint_error"]
+    error = run["constraint_error"]
     print(f"{model.name}: {info['formulation']} + {info['integrator']}, {info['status']} at t = {run.t[-1]:.6g} s "
-          f"({info['steps']} steps, {info['wall_time']:.3g} s wall)")
-    drift = f" ({info['energy_drift']:.2g} of the largest kinetic energy)" if "energy_drift" in info else ""
+          f"({info['steps']} steps, {timing(info)})")
     print(f"  max constraint error {error.max(initial=0.0):.3g}, max velocity constraint error "
-          f"{run['velocity_constraint_error'].max(initial=0.0):.3g}, max |E - E0| "
-          f"{np.abs(energy - energy[0]).max(initial=0.0):.3g} J{drift}")
+          f"{run['velocity_constraint_error'].max(initial=0.0):.3g}, {energy_statement(model, run)}")
     if info.get("note"):
         print(f"  note: {info['note']}")
     if args.out:
@@ -186,6 +232,41 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _energy_balance(model: cmbs.Model, run: cmbs.Trajectory) -> str:
+    """max |E - E0 - W| of a run (W the work of its drivers and inputs; 0 for a conservative model
+    with zero inputs), or "-" when the model has other sources of work."""
+    from cmbs.simulate import supplied_work
+
+    work = supplied_work(model, run)
+    if work is None:
+        return "-"
+    energy = run["energy"]
+    return f"{np.abs(energy - energy[0] - work).max(initial=0.0):.3g}"
+
+
+def energy_statement(model: cmbs.Model, run: cmbs.Trajectory) -> str:
+    """What a run's energy says: for a conservative model its change max |E - E0| (an error of
+    the run); when drivers and inputs do work W (:func:`cmbs.simulate.supplied_work`) the energy
+    balance max |E - E0 - W| (an error) beside W; else the change E - E0 with what did the work
+    (not an error)."""
+    from cmbs.simulate import supplied_work
+
+    energy = run["energy"]
+    change = energy - energy[0]
+    if "energy_drift" in run.info:
+        return (f"max |E - E0| {np.abs(change).max(initial=0.0):.3g} J ({run.info['energy_drift']:.2g} of the "
+                f"largest kinetic energy)")
+    work = supplied_work(model, run)
+    if work is not None and np.any(work != 0):
+        return (f"energy balance max |E - E0 - W| {np.abs(change - work).max(initial=0.0):.3g} J (W, the work of "
+                f"the drivers and inputs, reaches {np.abs(work).max():.4g} J)")
+    if work is not None:
+        return f"max |E - E0| {np.abs(change).max(initial=0.0):.3g} J"
+    sources = model.work_sources
+    doers = ", ".join(sources) if sources else "forces these equations do not name"
+    return f"E - E0 {change[-1]:.6g} J at the end (work of {doers}; not an error)"
+
+
 def _compare(args: argparse.Namespace) -> int:
     from cmbs.dynamics import FORMULATIONS
     from cmbs.simulate import EXPLICIT, simulate
@@ -201,16 +282,16 @@ def _compare(args: argparse.Namespace) -> int:
     runs = {name: simulate(model, formulation=name, **_simulation_settings(args)) for name in names}
     reference = runs[names[0]]
     print(f"{model.name}: {args.integrator}, t_end = {args.t_end:g} s; deviation against {names[0]}")
-    print(f"{'formulation':<16}{'status':<9}{'max |dq|':>11}{'max |phi|':>12}{'max |dE| J':>12}{'drift':>10}"
-          f"{'wall s':>9}")
+    print(f"{'formulation':<16}{'status':<9}{'max |dq|':>11}{'max |phi|':>12}{'max|E-E0-W| J':>15}{'drift':>10}"
+          f"{'run s':>9}{'compile s':>11}")
     failed = False
     for name, run in runs.items():
         common = min(len(run.t), len(reference.t))
         deviation = np.abs(run.q[:common] - reference.q[:common]).max(initial=0.0)
-        energy = run["energy"]
         drift = f"{run.info['energy_drift']:.3g}" if "energy_drift" in run.info else "-"
         print(f"{name:<16}{run.info['status']:<9}{deviation:>11.3g}{run['constraint_error'].max(initial=0.0):>12.3g}"
-              f"{np.abs(energy - energy[0]).max(initial=0.0):>12.3g}{drift:>10}{run.info['wall_time']:>9.3g}")
+              f"{_energy_balance(model, run):>15}{drift:>10}{run_seconds(run.info):>9.3g}"
+              f"{run.info['compile_time']:>11.3g}")
         failed |= run.info["status"] != "success"
         if run.info["status"] != "success":
             print(f"  {name}: {run.info['message']}")
@@ -228,14 +309,14 @@ def _inverse(args: argparse.Namespace) -> int:
     print(f"{model.name}: inverse dynamics ({args.method}) over {len(times)} instants")
     for name in result.driven_coordinates:
         force = result.force(name)
-        print(f"  force on {name:<14} min {force.min(): .6g}  max {force.max(): .6g}  "
-              f"RMS {np.sqrt(np.mean(force**2)):.6g}")
+        print(f"  force on {name + bracketed(force_unit(model, name)):<20} min {force.min(): .6g}  "
+              f"max {force.max(): .6g}  RMS {np.sqrt(np.mean(force**2)):.6g}")
     motion = result.motion
     if args.reactions:
         from cmbs.inverse import joint_reaction_history
 
         extras = dict(motion.extras)
-        for label, value, unit in _reaction_series(joint_reaction_history(model, motion)):
+        for label, value, unit in _reaction_series(model, joint_reaction_history(model, motion)):
             extras[label] = value
             size = np.hypot(*value.T) if value.ndim == 2 else np.abs(value)
             print(f"  {label:<32} max {size.max():.6g} {unit}")
@@ -245,7 +326,8 @@ def _inverse(args: argparse.Namespace) -> int:
     if args.plot:
         from cmbs.plotting import plot_driver_forces, save_figure
 
-        print(f"  figure -> {save_figure(plot_driver_forces(result.motion, result.driven_coordinates), args.plot)}")
+        figure = plot_driver_forces(result.motion, result.driven_coordinates, model=model)
+        print(f"  figure -> {save_figure(figure, args.plot)}")
     return 0
 
 
@@ -263,12 +345,14 @@ def _prescribed(model: cmbs.Model, args: argparse.Namespace) -> cmbs.Model:
     return prescribe(model, functions)
 
 
-def _reaction_series(reactions: dict) -> list[tuple[str, np.ndarray, str]]:
+def _reaction_series(model: cmbs.Model, reactions: dict) -> list[tuple[str, np.ndarray, str]]:
     """(label, history, unit) of every joint reaction, for printing and saving; natural-coordinate
-    models report forces per segment end, joint-coordinate models per joint."""
+    models report forces per segment end, joint-coordinate models per joint (a torque in N m at a
+    revolute joint, a force in N along a prismatic one)."""
     if "joint_forces" in reactions:
         return ([(f"reaction on {link}", force, "N") for link, force in reactions["forces"].items()]
-                + [(f"joint force {name}", force, "N or N m") for name, force in reactions["joint_forces"].items()]
+                + [(f"joint force {name}", force, force_unit(model, name))
+                   for name, force in reactions["joint_forces"].items()]
                 + [(f"closure force {name}", force, "N") for name, force in reactions["closures"].items()])
     return ([(f"reaction {segment}@{point}", force, "N") for (segment, point), force in reactions["forces"].items()]
             + [(f"joint torque {angle}", torque, "N m") for angle, torque in reactions["torques"].items()]
@@ -289,10 +373,12 @@ def _track(args: argparse.Namespace) -> int:
         raise _UsageError(f"model {driven.name!r} has no drivers: give the reference motion with --reference "
                           "or use a driven model")
     faults = [Fault.parse(text) for text in args.fault]
-    start_error = [Fault.parse(f"initial:{args.initial_error!r}")] if args.initial_error else []
+    coordinates = [driven.coordinate_names[c] for c in driven_columns(driven)]
+    offset = args.initial_error.in_unit_of(coordinate_unit(driven, coordinates[0]), "--initial-error",
+                                           coordinates[0])
+    start_error = [Fault.parse(f"initial:{offset!r}")] if offset else []
     motion = cmbs.kinematic_analysis(driven, times)
     plant = driven.without_drivers()
-    coordinates = [driven.coordinate_names[c] for c in driven_columns(driven)]
     reference = Reference(motion, coordinates)
     law = _controller(args, plant, reference)
     if args.sample_rate:
@@ -312,9 +398,8 @@ def _track(args: argparse.Namespace) -> int:
     run = result.run
     print(f"{plant.name}: {args.controller} tracking of {', '.join(coordinates)}, {run.info['status']} "
           f"at t = {run.t[-1]:.6g} s")
-    settling = result.settling_time
-    settled = "- (no initial error)" if np.isnan(settling) else "never" if np.isinf(settling) else f"{settling:.4g} s"
-    print(f"  NRMSE {', '.join(f'{v:.4g}' for v in result.nrmse)}; settling time (1 %) {settled}")
+    nrmse = ", ".join(f"{name} {100 * value:.4g} %" for name, value in zip(coordinates, result.nrmse))
+    print(f"  NRMSE (of the reference's range) {nrmse}; settling time (1 %) {_settling(result, motion)}")
     print(f"  actuation RMS norm {result.rms_norm:.6g}, peak norm {result.peak_norm:.6g}")
     if args.out:
         print(f"  result -> {run.save(args.out)}")
@@ -323,6 +408,23 @@ def _track(args: argparse.Namespace) -> int:
 
         print(f"  figure -> {save_figure(plot_simulation(run, model=plant), args.plot)}")
     return 0 if result.succeeded else 1
+
+
+def _settling(result: TrackingRun, motion: cmbs.Trajectory) -> str:
+    """A tracking run's settling time to 1 % of its initial error, or why there is none: no
+    initial error, or the error that remains (its largest share of the initial error over the
+    last half of the run: a fault the controller does not know leaves a steady error)."""
+    settling = result.settling_time
+    if np.isnan(settling):
+        return "- (no initial error)"
+    if np.isfinite(settling):
+        return f"{settling:.4g} s"
+    run = result.run
+    reference = motion.q[:run.t.size, [motion.names.index(name) for name in result.coordinates]]
+    error = np.abs(reference - run.q[:, [run.names.index(name) for name in result.coordinates]])
+    late = error[run.t >= run.t[-1] / 2]
+    return (f"never: |error| still reaches {100 * late.max() / error[0].max():.3g} % of the initial error in the "
+            f"last half of the run")
 
 
 def _controller(args: argparse.Namespace, plant: cmbs.Model, reference):
@@ -371,6 +473,28 @@ def _check_output(path: str, suffixes: tuple[str, ...], option: str) -> None:
     """Check an output path before any work is done, so that a bad --plot cannot fail after the
     result file has already been written."""
     checked_output(path, suffixes, option)
+
+
+class _DefaultsFormatter(argparse.HelpFormatter):
+    """Help that ends each option's text with its default value (``(default: 0.01)``) when it has
+    one worth saying (not None, False or empty) and the text does not already give it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        worth_saying = not (default is None or default is False or default is argparse.SUPPRESS or default == [])
+        if action.option_strings and worth_saying and "default" not in text:
+            text += " (default: %(default)s)"
+        return text
+
+
+def _show_defaults(parser: argparse.ArgumentParser) -> None:
+    """Give ``parser`` and every sub-command's parser, at any depth, the :class:`_DefaultsFormatter`."""
+    parser.formatter_class = _DefaultsFormatter
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for command in action.choices.values():
+                _show_defaults(command)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -462,8 +586,9 @@ def build_parser() -> argparse.ArgumentParser:
                             "noise:SIGMA[:SEED] or initial:DELTA")
     track.add_argument("--study", action="store_true",
                        help="robustness study: the nominal run and one run per --fault, as a table (thesis Table 7.2)")
-    track.add_argument("--initial-error", type=float, default=0.0,
-                       help="offset of the first driven coordinate at t = 0 (wrong initial state)")
+    track.add_argument("--initial-error", type=Offset.parse, default=Offset(0.0), metavar="VALUE[deg]",
+                       help="offset of the first driven coordinate at t = 0 (wrong initial state), in the "
+                            "coordinate's unit (rad for an angle, m for a length) or in degrees as 5deg")
     track.add_argument("--t-end", type=float, required=True, help="final time [s]")
     track.add_argument("--dt", type=float, default=0.01,
                        help="output interval [s]; also the step of fixed-step integrators")
@@ -487,6 +612,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_sweep_command(commands, model_command, dynamics_options)
     add_gait_commands(commands)
+    _show_defaults(parser)
     return parser
 
 

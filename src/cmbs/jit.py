@@ -106,3 +106,35 @@ def announce_compilation(write: Callable[[str], object]) -> None:
             pass
 
     event.register("numba:compile", Announcement())
+
+
+
+class _CompileClock:
+    """Seconds spent in numba's ``numba:compile`` events (:mod:`numba.core.event`) since it was
+    registered, from each outermost start to its end, so that a kernel compiling its callees counts
+    once."""
+
+    def __init__(self) -> None:
+        from numba.core import event
+
+        self.listener = event.TimingListener()
+        event.register("numba:compile", self.listener)
+
+    def seconds(self) -> float:
+        return self.listener.duration if self.listener.done else 0.0
+
+
+_clock: _CompileClock | None = None
+
+
+def compile_seconds() -> float:
+    """Seconds this process has spent compiling kernels since its first call of this function (0
+    without numba).  The difference of two calls is the compile time between them: 0 when every
+    kernel used was already compiled in this process or loaded from the disk cache.  A run
+    reports it as ``info["compile_time"]``, included in its ``wall_time``."""
+    global _clock
+    if _numba is None:
+        return 0.0
+    if _clock is None:
+        _clock = _CompileClock()
+    return _clock.seconds()

@@ -9,6 +9,7 @@ first attribute access.
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
 import sys
 from types import ModuleType
@@ -32,3 +33,13 @@ def lazy_module(name: str) -> ModuleType:
     if parent:      # bound to its package, as the import system binds a submodule it imports
         setattr(sys.modules[parent], child, module)
     return module
+
+
+def submodule(package: str, name: str) -> ModuleType:
+    """The submodule ``package.name``, imported now: a package's module ``__getattr__`` (PEP 562)
+    returns it, so that ``cmbs.model.joints`` works after a plain ``import cmbs`` as it does after
+    ``import cmbs.model.joints``, and ``import cmbs`` imports neither.  AttributeError, as for any
+    missing attribute, when the package has no such submodule."""
+    if not name.startswith("__") and importlib.util.find_spec(f"{package}.{name}") is not None:
+        return importlib.import_module(f"{package}.{name}")
+    raise AttributeError(f"module {package!r} has no attribute {name!r}")

@@ -23,25 +23,33 @@ if TYPE_CHECKING:
 
 def plot_trajectory(trajectory: Trajectory, *, model: Model | None = None,
                     coordinates: Sequence[str] | None = None, snapshots: int = 8) -> plt.Figure:
-    """Coordinates, velocities and accelerations against time; with ``model``, also the
-    mechanism drawn at ``snapshots`` instants (lighter = earlier)."""
+    """Coordinates, velocities and accelerations against time, one row per unit of the
+    coordinates with ``model`` (m, rad: :func:`cmbs.units.coordinate_unit`; a single row
+    without); with ``model``, also the mechanism drawn at ``snapshots`` instants (lighter =
+    earlier) beside them."""
     names = list(coordinates) if coordinates else list(trajectory.names)
     unknown = [name for name in names if name not in trajectory.names]
     if unknown:
         raise CmbsError(f"no coordinate(s) {', '.join(unknown)}; coordinates: {', '.join(trajectory.names)}")
-    index = [trajectory.names.index(name) for name in names]
-    panels = 3 + (model is not None)
-    figure, axes = plt.subplots(1, panels, figsize=(4.2 * panels, 3.8), constrained_layout=True)
-    for axis, data, label in zip(axes, (trajectory.q, trajectory.qd, trajectory.qdd),
-                                 ("position", "velocity", "acceleration")):
-        for k, name in zip(index, names):
-            axis.plot(trajectory.t, data[:, k], label=name)
-        axis.set_xlabel("t [s]")
-        axis.set_title(label)
-        axis.grid(alpha=0.3)
-    axes[0].legend(fontsize="small")
+    groups = _unit_groups(names, _coordinate_units(model, names))
+    columns = 3 + (model is not None)
+    figure = plt.figure(figsize=(4.2 * columns, 3.8 * len(groups)), layout="constrained")
+    grid = figure.add_gridspec(len(groups), columns)
+    for row, (unit, group) in enumerate(groups):
+        index = [trajectory.names.index(name) for name in group]
+        for column, (data, label, per) in enumerate(zip((trajectory.q, trajectory.qd, trajectory.qdd),
+                                                        ("position", "velocity", "acceleration"),
+                                                        ("", "/s", "/s²"))):
+            axis = figure.add_subplot(grid[row, column])
+            for k, name in zip(index, group):
+                axis.plot(trajectory.t, data[:, k], label=name)
+            axis.set_xlabel("t [s]")
+            axis.set_title(label + (f" [{unit}{per}]" if unit else ""))
+            axis.grid(alpha=0.3)
+            if column == 0:
+                axis.legend(fontsize="small")
     if model is not None:
-        draw_snapshots(axes[-1], model, trajectory, snapshots)
+        draw_snapshots(figure.add_subplot(grid[:, -1]), model, trajectory, snapshots)
     figure.suptitle(trajectory.info.get("model", ""))
     return figure
 
@@ -57,18 +65,25 @@ def plot_simulation(trajectory: Trajectory, *, model: Model | None = None,
     Panels, in this order, laid out at most three to a row:
 
     * **coordinates** against time: the chosen ``coordinates``, or by default all of them,
-      but at most the first :data:`MAX_DEFAULT_COORDINATES` (the title then says so);
+      but at most the first :data:`MAX_DEFAULT_COORDINATES` (the title then says so); with
+      ``model``, one panel per unit (m, rad: :func:`cmbs.units.coordinate_unit`);
     * **energy** T + V against time (extra ``energy``), and **energy drift** E(t) - E(0)
-      in its own panel, titled with max |E - E(0)|;
+      in its own panel, titled with max |E - E(0)|; with ``model``, when moving drivers or
+      inputs do work W (:func:`cmbs.simulate.supplied_work`), the **energy balance**
+      E(t) - E(0) - W(t) instead;
     * **constraint errors** max|Φ| and max|Φ̇| against time on a log scale (extras
       ``constraint_error`` and ``velocity_constraint_error``).  Samples that are exactly zero
       cannot be drawn on a log scale: they are left out and the legend counts them; a
       quantity that is zero throughout is not drawn and the title says so (if nothing is
-      positive the panel falls back to a linear scale and draws the zeros);
-    * with ``model``, the **mechanism** at ``snapshots`` instants (:func:`draw_snapshots`).
+      positive the panel falls back to a linear scale and draws the zeros).  The scale stops
+      at the rounding level eps max(|q|, 1) (a projected run reaches 1e-30); an adaptive run
+      draws its ``atol`` as a dashed line;
+    * with ``model``, the **mechanism** at ``snapshots`` instants (:func:`draw_snapshots`), x
+      and z in m.
 
     Panels whose extras the trajectory lacks (e.g. a kinematic analysis has no energy) are
-    left out, so ``len(figure.axes)`` is the number of panels shown.  A failed run
+    left out, so ``len(figure.axes)`` is the number of panels shown; the panels of a shorter
+    last row share its width (no empty cell).  A failed run
     (``info["status"] == "failed"``) says so in the figure title.
     """
     if len(trajectory.t) == 0:
@@ -87,13 +102,18 @@ def plot_simulation(trajectory: Trajectory, *, model: Model | None = None,
         note = f" (first {len(names)} of {len(trajectory.names)}; choose with coordinates=)" if hidden > 0 else ""
 
     panels = []
-    if names:
-        panels.append(lambda axis: _draw_coordinates(axis, trajectory, names, note))
+    units = _coordinate_units(model, names)
+    for unit, group in _unit_groups(names, units):
+        panels.append(lambda axis, unit=unit, group=group: _draw_coordinates(axis, trajectory, group, note, unit))
     if "energy" in trajectory.extras:
         energy = np.asarray(trajectory.extras["energy"], dtype=float).reshape(len(trajectory.t), -1)[:, 0]
         panels.append(lambda axis: _draw_energy(axis, trajectory.t, energy))
-        panels.append(lambda axis: _draw_energy_drift(axis, trajectory.t, energy,
-                                                      trajectory.info.get("energy_drift")))
+        work = None if "energy_drift" in trajectory.info else _supplied_work(model, trajectory)
+        if work is None or not np.any(work != 0):
+            panels.append(lambda axis: _draw_energy_drift(axis, trajectory.t, energy,
+                                                          trajectory.info.get("energy_drift")))
+        else:
+            panels.append(lambda axis: _draw_energy_balance(axis, trajectory.t, energy, work))
     errors = [(label, key) for label, key in ((r"position $\max|\Phi|$", "constraint_error"),
                                               (r"velocity $\max|\dot\Phi|$", "velocity_constraint_error"))
               if key in trajectory.extras]
@@ -102,15 +122,9 @@ def plot_simulation(trajectory: Trajectory, *, model: Model | None = None,
     if model is not None:
         panels.append(lambda axis: draw_snapshots(axis, model, trajectory, snapshots))
 
-    columns = min(3, len(panels))
-    rows = -(-len(panels) // columns)
-    figure, grid = plt.subplots(rows, columns, figsize=(4.4 * columns, 3.6 * rows), constrained_layout=True,
-                                squeeze=False)
-    cells = list(grid.flat)
+    figure, cells = _panel_grid(len(panels))
     for draw, axis in zip(panels, cells):
         draw(axis)
-    for axis in cells[len(panels):]:
-        figure.delaxes(axis)
     title = trajectory.info.get("model", "")
     how = ", ".join(str(trajectory.info[key]) for key in ("analysis", "formulation", "integrator")
                     if trajectory.info.get(key))
@@ -122,11 +136,48 @@ def plot_simulation(trajectory: Trajectory, *, model: Model | None = None,
     return figure
 
 
-def _draw_coordinates(axis: plt.Axes, trajectory: Trajectory, names: list[str], note: str) -> None:
+def _panel_grid(count: int) -> tuple[plt.Figure, list[plt.Axes]]:
+    """A figure of ``count`` panels, at most three to a row, with no empty cell: the panels of a
+    shorter last row share its width."""
+    columns = min(3, count)
+    rows = -(-count // columns)
+    figure = plt.figure(figsize=(4.4 * columns, 3.6 * rows), layout="constrained")
+    width = 6                                   # a multiple of every row length (1, 2 or 3 panels)
+    grid = figure.add_gridspec(rows, width)
+    cells = []
+    for row in range(rows):
+        in_row = min(columns, count - row * columns)
+        span = width // in_row
+        cells += [figure.add_subplot(grid[row, k * span:(k + 1) * span]) for k in range(in_row)]
+    return figure, cells
+
+
+def _coordinate_units(model: Model | None, names: Sequence[str]) -> list[str]:
+    """The unit of each coordinate (:func:`cmbs.units.coordinate_unit`); "" without a model."""
+    if model is None:
+        return [""] * len(names)
+    from cmbs.units import coordinate_unit
+
+    return [coordinate_unit(model, name) for name in names]
+
+
+def _supplied_work(model: Model | None, trajectory: Trajectory) -> np.ndarray | None:
+    """The work of the drivers and inputs of a simulation (:func:`cmbs.simulate.supplied_work`),
+    None without a model or when other forces do work."""
+    if model is None or not {"constraint_force", "u"} <= set(trajectory.extras):
+        return None
+    from cmbs.simulate import supplied_work
+
+    return supplied_work(model, trajectory)
+
+
+def _draw_coordinates(axis: plt.Axes, trajectory: Trajectory, names: list[str], note: str, unit: str = "") -> None:
     for name in names:
         axis.plot(trajectory.t, trajectory.q[:, trajectory.names.index(name)], label=name)
     axis.set_xlabel("t [s]")
-    axis.set_title("coordinates" + note, fontsize="medium")
+    if unit:
+        axis.set_ylabel(f"[{unit}]")
+    axis.set_title(("coordinates" if not unit else f"coordinates [{unit}]") + note, fontsize="medium")
     axis.legend(fontsize="small")
     axis.grid(alpha=0.3)
 
@@ -141,8 +192,8 @@ def _draw_energy(axis: plt.Axes, t: np.ndarray, energy: np.ndarray) -> None:
 
 
 def _draw_energy_drift(axis: plt.Axes, t: np.ndarray, energy: np.ndarray, relative: float | None) -> None:
-    """E(t) - E(0); the title adds the run's relative drift max |E - E0| / max T when it was
-    judged (a conservative model: ``info["energy_drift"]``)."""
+    """E(t) - E(0); titled a drift, with the run's relative drift max |E - E0| / max T, when it
+    was judged (a conservative model: ``info["energy_drift"]``), else a change."""
     drift = energy - energy[0]
     axis.plot(t, drift, color="C3")
     axis.axhline(0.0, color="0.5", linewidth=0.8)
@@ -151,8 +202,38 @@ def _draw_energy_drift(axis: plt.Axes, t: np.ndarray, energy: np.ndarray, relati
     worst = np.nanmax(np.abs(drift)) if np.any(np.isfinite(drift)) else float("nan")
     # raised above the axis' power-of-ten label (e.g. "1e-6"), which matplotlib puts at its top left
     share = "" if relative is None else f"\n= {relative:.2g} of the largest kinetic energy"
-    axis.set_title(f"energy drift, max |E - E(0)| = {worst:.3g} J{share}", fontsize="medium", pad=14)
+    what = "energy drift" if relative is not None else "energy change"     # a drift only where E is conserved
+    axis.set_title(f"{what}, max |E - E(0)| = {worst:.3g} J{share}", fontsize="medium", pad=14)
     axis.grid(alpha=0.3)
+
+
+def _draw_energy_balance(axis: plt.Axes, t: np.ndarray, energy: np.ndarray, work: np.ndarray) -> None:
+    """E(t) - E(0) - W(t), W the work of the drivers and inputs: zero for the exact motion."""
+    balance = energy - energy[0] - work
+    axis.plot(t, balance, color="C3")
+    axis.axhline(0.0, color="0.5", linewidth=0.8)
+    axis.set_xlabel("t [s]")
+    axis.set_ylabel("E(t) - E(0) - W(t) [J]")
+    axis.set_title(f"energy balance, max |E - E(0) - W| = {np.nanmax(np.abs(balance)):.3g} J\n"
+                   f"(W: work of the drivers and inputs, up to {np.nanmax(np.abs(work)):.3g} J)", fontsize="medium",
+                   pad=14)
+    axis.grid(alpha=0.3)
+
+
+def _error_floor(trajectory: Trajectory) -> float:
+    """The smallest constraint error worth drawing: the rounding level of the run's coordinates,
+    eps max(|q|, 1); a smaller |Φ| is rounding noise (a projected run reaches 1e-30)."""
+    scale = float(np.nanmax(np.abs(trajectory.q), initial=1.0))
+    return float(np.finfo(float).eps * max(scale, 1.0))
+
+
+def _tolerance(trajectory: Trajectory) -> float | None:
+    """The absolute tolerance of an adaptive run (``info["atol"]``), else None."""
+    from cmbs.integrate.tableaus import NAMES as EXPLICIT
+
+    info = trajectory.info
+    adaptive = info.get("integrator") in EXPLICIT and info.get("integrator") != "rk4"
+    return float(info["atol"]) if adaptive and "atol" in info else None
 
 
 def _draw_constraint_errors(axis: plt.Axes, trajectory: Trajectory, errors: list[tuple[str, str]]) -> None:
@@ -181,6 +262,13 @@ def _draw_constraint_errors(axis: plt.Axes, trajectory: Trajectory, errors: list
         axis.plot(trajectory.t, shown, "-", marker=".", markersize=2, linewidth=1, color=color, label=label)
     if any_positive:
         axis.set_yscale("log")
+        floor = _error_floor(trajectory)
+        if any(np.any((v > 0) & (v < floor)) for _, v, _ in series):
+            axis.set_ylim(bottom=floor)
+            notes.append(f"floor {floor:.0e}: rounding")
+        tolerance = _tolerance(trajectory)
+        if tolerance is not None:
+            axis.axhline(tolerance, color="0.4", linestyle="--", linewidth=0.8, label=f"atol {tolerance:.0e}")
     axis.set_xlabel("t [s]")
     axis.set_title("constraint errors" + (" (log)" if any_positive else "") + ("\n" + "; ".join(notes) if notes
                                                                               else ""), fontsize="medium")
@@ -197,6 +285,8 @@ def draw_snapshots(axis: plt.Axes, model: Model, trajectory: Trajectory, count: 
         for i, j in model.lines:
             axis.plot(points[[i, j], 0], points[[i, j], 1], "-o", color=plt.cm.Blues(shade), markersize=3)
     axis.set_aspect("equal", adjustable="datalim")
+    metres = any(kind != "generic" for kind in model.coordinate_kinds)   # a user's own equations: unknown
+    axis.set(xlabel="x [m]" if metres else "x", ylabel="z [m]" if metres else "z")
     axis.set_title("mechanism (x, z)")
     axis.grid(alpha=0.3)
 
@@ -212,21 +302,48 @@ def save_figure(figure: plt.Figure, path: str | os.PathLike) -> Path:
     return path
 
 
-def plot_driver_forces(trajectory: Trajectory, driven: Sequence[str]) -> plt.Figure:
+def plot_driver_forces(trajectory: Trajectory, driven: Sequence[str], *, model: Model | None = None) -> plt.Figure:
     """Inverse dynamics: the generalized force on each driven coordinate against time, and the
-    prescribed coordinates themselves."""
+    prescribed coordinates themselves; with ``model``, one panel per unit (torques in N m on
+    angles, forces in N on lengths; coordinates in rad and m, :mod:`cmbs.units`)."""
+    from cmbs.units import FORCE
+
     forces = np.asarray(trajectory.extras["driver_forces"])
-    figure, (top, bottom) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, constrained_layout=True)
-    for k, name in enumerate(driven):
-        top.plot(trajectory.t, forces[:, k], label=f"on {name}")
-        bottom.plot(trajectory.t, trajectory[name], label=name)
-    top.set(title="driving forces / torques (inverse dynamics)", ylabel="N or N m")
-    bottom.set(title="prescribed motion", xlabel="t [s]")
-    for axis in (top, bottom):
+    units = _coordinate_units(model, driven)
+    force_groups = _unit_groups(driven, [FORCE.get(unit, "") for unit in units])
+    motion_groups = _unit_groups(driven, units)
+    panels = len(force_groups) + len(motion_groups)
+    figure, axes = plt.subplots(panels, 1, figsize=(8, 3 * panels), sharex=True, constrained_layout=True,
+                                squeeze=False)
+    axes = list(axes[:, 0])
+    for axis, (unit, names) in zip(axes, force_groups):
+        for name in names:
+            axis.plot(trajectory.t, forces[:, list(driven).index(name)], label=f"on {name}")
+        kind = {"N m": "torques", "N": "forces"}.get(unit, "forces / torques")
+        axis.set(title=f"driving {kind} (inverse dynamics)", ylabel=f"{kind}{_bracketed(unit, 'N or N m')}")
+    for axis, (unit, names) in zip(axes[len(force_groups):], motion_groups):
+        for name in names:
+            axis.plot(trajectory.t, trajectory[name], label=name)
+        axis.set(title="prescribed motion", ylabel=f"coordinates{_bracketed(unit, 'm or rad')}")
+    axes[-1].set_xlabel("t [s]")
+    for axis in axes:
         axis.grid(alpha=0.3)
         axis.legend(fontsize="small")
     figure.suptitle(f"{trajectory.info.get('model', '')} ({trajectory.info.get('method', '')})")
     return figure
+
+
+def _unit_groups(names: Sequence[str], units: Sequence[str]) -> list[tuple[str, list[str]]]:
+    """``names`` grouped by their ``units``, in the order each unit first appears."""
+    groups: dict[str, list[str]] = {}
+    for name, unit in zip(names, units):
+        groups.setdefault(unit, []).append(name)
+    return list(groups.items())
+
+
+def _bracketed(unit: str, unknown: str) -> str:
+    """`` [unit]``, or `` [unknown]`` when the unit is not known."""
+    return f" [{unit or unknown}]"
 
 
 def plot_sweep(result: "SweepResult", coordinate: str) -> plt.Figure:

@@ -40,6 +40,7 @@ import numpy as np
 
 from cmbs.errors import CmbsError
 from cmbs.files_io import atomic_path, checked_output
+from cmbs.jit import compile_seconds
 from cmbs.model.model import Model
 
 if TYPE_CHECKING:
@@ -149,7 +150,9 @@ class SweepResult:
     variants
         The variants (as :meth:`Variant.describe` gives them).
     info
-        Settings, the mode (batched, processes, dask), workers, wall time.
+        Settings, the mode (batched, processes, dask), workers, ``wall_time`` [s] and, of it,
+        ``compile_time`` [s] compiling kernels in this process; a sweep in worker processes or on
+        Dask adds ``worker_compile_time``, the workers' compile seconds summed over the variants.
     """
 
     t: np.ndarray
@@ -237,7 +240,7 @@ def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, form
     nominal = _build(model, Variant())
     for variant in variants:
         _check(nominal, variant)
-    started = time.perf_counter()
+    started, compiled_before = time.perf_counter(), compile_seconds()
     plan = _batch_plan(nominal, settings, variants) if batched is not False else None
     if batched and plan is None:
         raise CmbsError("sweep: the batched path needs state-only variants (q0, qd0, u) and a run the compiled "
@@ -255,7 +258,9 @@ def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, form
             outputs, mode = _run_processes(model, settings, variants, used, bar), "processes"
     info = {"model": nominal.name, "mode": mode, "workers": used, "variants": len(variants),
             "settings": {**settings.__dict__, "formulation_options": dict(settings.formulation_options)},
-            "wall_time": time.perf_counter() - started}
+            "wall_time": time.perf_counter() - started, "compile_time": compile_seconds() - compiled_before}
+    if mode == "dask" or (mode == "processes" and used > 1 and len(variants) > 1):
+        info["worker_compile_time"] = sum(output.get("compile_time", 0.0) for output in outputs)
     return _assemble(nominal, settings, variants, outputs, info)
 
 
@@ -304,7 +309,7 @@ def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> 
                        dt=settings.dt, rtol=settings.rtol, atol=settings.atol, project=settings.project,
                        q0=None if variant.q0 is None else np.asarray(variant.q0, dtype=float),
                        qd0=None if variant.qd0 is None else np.asarray(variant.qd0, dtype=float), u=u)
-        status, message = run.info["status"], run.info.get("message", "")
+        status, message, compile_time = run.info["status"], run.info.get("message", ""), run.info["compile_time"]
     except CmbsError as error:
         empty = np.zeros((0, n))
         return {"q": empty, "qd": empty, "energy": np.zeros(0), "phi": np.zeros(0), "status": "failed",
@@ -323,7 +328,8 @@ def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> 
         kinetic, energy = kinetic + added_kinetic, energy + added_kinetic + added_potential
         sources = nominal_work_sources(built)
     return {"q": q, "qd": qd, "energy": energy, "phi": run["constraint_error"][picked], "status": status,
-            "message": message, "drift": energy_drift(sources, kinetic, energy, run["u"][picked])}
+            "message": message, "drift": energy_drift(sources, kinetic, energy, run["u"][picked]),
+            "compile_time": compile_time}
 
 
 def _run_processes(model: str | Model, settings: RunSettings, variants: list[Variant], workers: int,

@@ -32,3 +32,10 @@ def prepare_stride(stride: int = 1, *, cutoff: float = 6.0, cache: Path | None =
     lengths = subject_lengths(trial) if subject_specific else None
     model = load_library_model("human", body_mass=trial.body_mass, height=trial.height, lengths=lengths)
     return prepare(trial, curves, model, stride, cutoff=cutoff)
+
+
+def __getattr__(name: str) -> object:
+    """Submodules on first use (PEP 562): ``cmbs.gait.NAME`` works after a plain ``import cmbs``."""
+    from cmbs.lazy import submodule
+
+    return submodule(__name__, name)

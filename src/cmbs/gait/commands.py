@@ -10,7 +10,7 @@ import argparse
 import numpy as np
 
 import cmbs
-from cmbs.cli import _check_output
+from cmbs.cli import Offset, _check_output, _UsageError
 
 
 def add_gait_commands(commands) -> None:
@@ -55,12 +55,13 @@ def add_gait_commands(commands) -> None:
                              "scale:FACTOR[:T0], noise:SIGMA[:SEED], initial:DELTA")
     follow.add_argument("--stride", type=int, default=1, help="right stride, 1 = first heel strike to the second")
     follow.add_argument("--cutoff", type=float, default=6.0, help="smoothing-spline cut-off frequency [Hz]")
-    follow.add_argument("--initial-error", type=float, default=5.0,
-                        help="initial error on the trunk and the 11 joint angles [deg] (0: recorded state)")
+    follow.add_argument("--initial-error", type=Offset.parse, default="5deg", metavar="VALUE[deg]",
+                        help="initial error on the trunk and the 11 joint angles, in rad or in degrees as 5deg "
+                             "(0: the recorded state)")
     follow.add_argument("--omega", type=float, default=20.0, help="closed-loop natural frequency [rad/s]")
     follow.add_argument("--no-feed-forward", action="store_true", help="PD without the IDA feed-forward")
     follow.add_argument("--t-end", type=float, help="simulated time [s] (default: the stride)")
-    follow.add_argument("--step", type=float, default=1e-3, help="RK4 step [s]")
+    follow.add_argument("--dt", type=float, default=1e-3, help="RK4 step [s]")
     follow.add_argument("--out", help="nominal run (.npz or .csv)")
     follow.add_argument("--plot", help="figure of the tracking errors (.png, .pdf or .svg)")
     follow.add_argument("--animate", help="stick-figure animation of the nominal run over the reference (.gif or "
@@ -174,19 +175,36 @@ def _gait_inverse(args: argparse.Namespace) -> int:
     return 0
 
 
+#: the largest initial error on the joint angles (rad) ``cmbs gait track`` takes
+LARGEST_JOINT_OFFSET = 0.5
+
+
+def _joint_offset_degrees(offset: Offset) -> float:
+    """``--initial-error`` in degrees (its library unit); a plain number is in rad and must not
+    exceed LARGEST_JOINT_OFFSET (29°: every joint that far off is no start for tracking a
+    stride), which also catches a number meant as degrees."""
+    radians = offset.in_unit_of("rad", "--initial-error", "joint angles")
+    if abs(radians) > LARGEST_JOINT_OFFSET:
+        raise _UsageError(f"--initial-error {offset.text()}: {radians:.3g} rad on every joint angle is more than "
+                          f"{LARGEST_JOINT_OFFSET:g} rad ({np.degrees(LARGEST_JOINT_OFFSET):.0f} deg); for degrees "
+                          f"write the unit, e.g. 5deg")
+    return float(np.degrees(radians))
+
+
 def _gait_track(args: argparse.Namespace) -> int:
     from cmbs.control.study import format_table
     from cmbs.gait import INDEPENDENT
     from cmbs.gait.track import open_loop, tracking_study
 
+    degrees = _joint_offset_degrees(args.initial_error)     # checked before any work
     prepared = _prepared_stride(args)
     model, reference = prepared.model, prepared.motion
     contact = {"grf": "measured GRF at the CoPs, residual actuators at the hip",
                "hip": "no ground: the hip/trunk actuators carry the contact wrench"}[args.contact]
     print(f"gait tracking: right stride {args.stride} ({reference.t[-1]:.3f} s), human model with residual "
-          f"actuators, contact {args.contact} ({contact}); RK4, h = {args.step:g} s")
+          f"actuators, contact {args.contact} ({contact}); RK4, h = {args.dt:g} s")
     if args.controller == "open":
-        result = open_loop(model, reference, args.contact, t_end=args.t_end, step=args.step)
+        result = open_loop(model, reference, args.contact, t_end=args.t_end, step=args.dt)
         run, runs = result.run, {"open loop": result.run}
         peak = np.abs(result.error).max(axis=0)
         print(f"  open loop (IDA forces, spline inputs): status {run.info['status']} at t = {run.t[-1]:.3f} s")
@@ -199,13 +217,13 @@ def _gait_track(args: argparse.Namespace) -> int:
         succeeded = True
     else:
         runs_list = tracking_study(model, reference, args.controller, contact=args.contact, faults=args.fault,
-                                   initial_error=args.initial_error, t_end=args.t_end, omega=args.omega,
-                                   feed_forward=not args.no_feed_forward, step=args.step)
+                                   initial_error=degrees, t_end=args.t_end, omega=args.omega,
+                                   feed_forward=not args.no_feed_forward, step=args.dt)
         gains = (f"K_p = {args.omega ** 2:g} s^-2, K_d = {2 * args.omega:g} s^-1" if args.controller == "ctc" else
                  f"K_p = omega^2 m_z + m g l_leg, K_d = 2 sqrt(K_p m_z), omega = {args.omega:g} rad/s"
                  + ("" if args.no_feed_forward else ", IDA feed-forward"))
         print(format_table(runs_list, f"  {args.controller.upper()} ({gains}), initial error "
-                                      f"{args.initial_error:g} deg on the trunk and joint angles"))
+                                      f"{degrees:g} deg on the trunk and joint angles"))
         print("  (hip NRMSE over the hip's range of motion; inputs: N m on angles, N on hip.x, hip.z)")
         run, runs = runs_list[0].run, {r.label: r.run for r in runs_list}
         succeeded = all(r.succeeded for r in runs_list)

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cmbs.dynamics import formulation as make_formulation
-from cmbs.errors import CmbsError, SingularSystemError
+from cmbs.errors import CmbsError, SingularSystemError, did_you_mean
 from cmbs.kinematics import accelerations, kinematic_analysis
 from cmbs.model.model import Model
 from cmbs.trajectory import Trajectory
@@ -63,7 +63,11 @@ class InverseDynamics:
         return self.motion.extras["driver_forces"]
 
     def force(self, coordinate: str) -> np.ndarray:
-        """The force history on one driven coordinate."""
+        """The force history on one driven coordinate (CmbsError naming the driven coordinates for
+        any other name)."""
+        if coordinate not in self.driven_coordinates:
+            raise CmbsError(f"no driver force on {coordinate!r}{did_you_mean(coordinate, self.driven_coordinates)}; "
+                            f"the driven coordinates are {', '.join(self.driven_coordinates)}")
         return self.forces[:, self.driven_coordinates.index(coordinate)]
 
 

@@ -141,3 +141,10 @@ def _check_parameter(model: str, key: str, value: object, default: object) -> ob
     if not ok:
         raise ModelError(f"model {model!r}: parameter {key} must be {kind}, got {value!r}")
     return python(value)
+
+
+def __getattr__(name: str) -> object:
+    """Submodules on first use (PEP 562): ``cmbs.library.NAME`` works after a plain ``import cmbs``."""
+    from cmbs.lazy import submodule
+
+    return submodule(__name__, name)

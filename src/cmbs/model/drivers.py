@@ -120,10 +120,17 @@ class Table(TimeFunction):
 
 @dataclass(frozen=True)
 class PythonFunction(TimeFunction):
-    """A Python callable ``f(t)``; ``first`` and ``second`` derivatives optional.
+    """A Python callable ``f(t)`` as a function of time (a driver, a load, a prescribed motion);
+    ``first`` and ``second`` derivatives optional.
 
     Without derivative callables they come from central differences with step ``h``
-    (truncation error O(h²), about 1e-8 relative for smooth f and the default h).
+    (truncation error O(h²), about 1e-8 relative for smooth f and the default h):
+    f' ≈ (f(t+h) - f(t-h)) / 2h, f'' ≈ (f(t+h) - 2 f(t) + f(t-h)) / h² (or the central
+    difference of ``first`` when only it is given).  It is called from Python, so a run that
+    uses one takes the Python loop, not a compiled one (docs/control.md, "Prescribed motions")::
+
+        crank = cmbs.PythonFunction(lambda t: 0.93 + math.sin(t), first=math.cos)
+        driven = cmbs.motion.prescribe(cmbs.load("four-bar"), {"alpha": crank})
     """
 
     function: Callable[[float], float]
