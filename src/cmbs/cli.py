@@ -308,7 +308,7 @@ def _inverse(args: argparse.Namespace) -> int:
     result = inverse_dynamics(model, times, method=args.method, **_formulation_options(args))
     print(f"{model.name}: inverse dynamics ({args.method}) over {len(times)} instants")
     for name in result.driven_coordinates:
-        force = result.force(name)
+        force = result.force(name) + 0.0         # + 0.0: no "-0" for a zero force
         print(f"  force on {name + bracketed(force_unit(model, name)):<20} min {force.min(): .6g}  "
               f"max {force.max(): .6g}  RMS {np.sqrt(np.mean(force**2)):.6g}")
     motion = result.motion
