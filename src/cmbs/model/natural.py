@@ -72,6 +72,8 @@ from cmbs.model.packing import int_section, pack, real_section
 # real sections
 (_CONSTANTS, _LENGTH2, _Q_CONSTANT, _SPRING_PARAMETERS, _ACTUATOR_GAIN, _TF_REALS, _BODY_POINT_LOCAL,
  _SEGMENT_FORCE_AT) = range(8)
+#: the kind of entry ("segment" or "body") of each builder section holding rigid bodies
+_KIND = {"segments": "segment", "bodies": "body"}
 #: frames of a segment force: components in the ground frame, or along (x̄, z̄) of the segment
 FRAMES = ("ground", "body")
 
@@ -203,7 +205,7 @@ class NaturalModelBuilder:
         if i == j:
             raise ModelError(f"both ends are point {i!r}", entry=entry)
         if mass > 0 and (com is None or inertia is None):
-            raise ModelError(f"a {_section[:-1]} with mass needs 'com' (along, across) and 'inertia' (about the COM)",
+            raise ModelError(f"a {_KIND[_section]} with mass needs 'com' (along, across) and 'inertia' (about the COM)",
                              entry=entry)
         com = (0.0, 0.0) if com is None else _pair(com, entry, "com")
         inertia = 0.0 if inertia is None else _finite(inertia, entry, "inertia")
@@ -227,7 +229,7 @@ class NaturalModelBuilder:
         """
         entry = f"bodies.{name}"
         if isinstance(name, str) and name in self._segments:
-            raise ModelError(f"name {name!r} is already a {self._segments[name].section[:-1]}", entry=entry)
+            raise ModelError(f"name {name!r} is already a {_KIND[self._segments[name].section]}", entry=entry)
         if isinstance(points, str) or not isinstance(points, (list, tuple)) or not all(
                 isinstance(p, str) for p in points):
             raise ModelError(f"points must be a list of point names, got {points!r}", entry=entry)
@@ -668,7 +670,7 @@ class _Assembler:
             segment_data.append(SegmentData(
                 name=segment.name, points=(segment.i, segment.j), indices=idx, mass_matrix=element,
                 gravity=element_gravity, rigid_row=k, mass=segment.mass, length=segment.length,
-                com=segment.com, inertia=segment.inertia, kind=segment.section[:-1],
+                com=segment.com, inertia=segment.inertia, kind=_KIND[segment.section],
                 attached=tuple(BodyPoint(p.point, p.local, p.row) for p in body_points if p.body is segment)))
         for point in body_points:
             idx = self._resolve(point.indices, n)
