@@ -608,13 +608,14 @@ class _Assembler:
             functions.extend([fx, fz])
             labels.extend([f"force {name} (fx)", f"force {name} (fz)"])
 
-        segment_force_rows, segment_force_at = [], []
+        segment_force_rows, segment_force_at, load_segments = [], [], []
         for name, (segment_name, at, frame, fx, fz) in b._segment_forces.items():
             entry = f"forces.{name}"
             segment = self._segment(segment_name, entry)
             segment_force_rows.append(self._xz(segment.i, entry) + self._xz(segment.j, entry)
                                       + [len(functions), len(functions) + 1, FRAMES.index(frame)])
             segment_force_at.append((at[0] / segment.length, at[1] / segment.length))
+            load_segments.append(list(b._segments).index(segment.name))
             functions.extend([fx, fz])
             labels.extend([f"force {name} (fx)", f"force {name} (fz)"])
 
@@ -623,6 +624,7 @@ class _Assembler:
             entry = f"moments.{name}"
             segment = self._segment(segment_name, entry)
             moment_rows.append(self._xz(segment.i, entry) + self._xz(segment.j, entry) + [len(functions)])
+            load_segments.append(list(b._segments).index(segment.name))
             functions.append(moment)
             labels.append(f"moment {name}")
 
@@ -710,7 +712,8 @@ class _Assembler:
             constants=np.array(self.constants), gravity_ext=gravity_ext,
             springs=(resolve(spring_rows, 4), np.array(spring_parameters).reshape(-1, 3)),
             point_xz=point_xz, segments=tuple(segment_data), work_sources=self._work_sources(),
-            steady_drivers=frozenset(name for name, (_, function) in b._drivers.items() if is_constant(function)))
+            steady_drivers=frozenset(name for name, (_, function) in b._drivers.items() if is_constant(function)),
+            load_segments=tuple(load_segments))
         return Model(
             name=b.name, coordinate_names=tuple(self.names), coordinate_kinds=tuple(self.kinds),
             constraint_names=tuple(constraint_names), drivers=drivers, actuator_names=tuple(b._actuators),
@@ -849,6 +852,8 @@ class NaturalEquations:
     work_sources: tuple[str, ...] = ()
     #: the drivers of a constant, which hold their coordinate and do no work
     steady_drivers: frozenset[str] = frozenset()
+    #: the index in ``segments`` of the segment each segment force, then each moment, acts on
+    load_segments: tuple[int, ...] = ()
 
     @property
     def _scratch_size(self) -> int:
@@ -884,6 +889,26 @@ class NaturalEquations:
 
     def _extended(self, q: np.ndarray) -> np.ndarray:
         return np.concatenate([q, self.constants])
+
+    def segment_loads(self, q: np.ndarray, t: float) -> np.ndarray:
+        """(len(segments), 4): the generalized forces on each segment's (x_i, z_i, x_j, z_j) of the
+        segment forces and moments it carries at (q, t) (module docstring: C(ξ, η)ᵀ F and
+        τ/|d|² (d_z, -d_x, -d_z, d_x)), e.g. to tell them from the forces at its points."""
+        x = self._extended(np.asarray(q, dtype=float))
+        ints, reals = self.ints, self.reals
+        forces = int_section(ints, _SEGMENT_FORCE).reshape(-1, 7)
+        moments = int_section(ints, _MOMENT).reshape(-1, 5)
+        at = real_section(ints, reals, _SEGMENT_FORCE_AT).reshape(-1, 2)
+        loads = np.zeros((len(self.segments), 4))
+        value = [function(t)[0] for function in self.time_functions.functions]
+        for segment, row, (xi, eta) in zip(self.load_segments, forces, at):
+            force = np.array(_segment_force(x, *row[:4], value[row[4]], value[row[5]], row[6]))
+            length = self.segments[segment].length
+            loads[segment] += point_map(length, (xi * length, eta * length)).T @ force
+        for segment, row in zip(self.load_segments[len(forces):], moments):
+            d = x[row[2:4]] - x[row[0:2]]
+            loads[segment] += value[row[4]] / (d @ d) * np.array([d[1], -d[0], -d[1], d[0]])
+        return loads
 
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
         return 0.5 * float(qd @ self.mass @ qd)
