@@ -429,3 +429,25 @@ def test_assembly_failure_in_a_body_names_the_body(tmp_path):
     path.write_text(text)
     with pytest.raises(ModelError, match=r"plate\.toml: bodies\.plate: cannot be assembled"):
         cmbs.load(path)
+
+
+def test_undriven_model_still_evaluates_segment_forces_and_moments():
+    """Model.without_drivers drops the time functions only the drivers used, not those of the
+    segment forces and moments: its Q equals that of the same model built without the driver."""
+    def build(driven):
+        b = NaturalModelBuilder("loaded", gravity=(0.0, 0.0))
+        for name, x, z in (("I", 0.1, 0.2), ("J", 0.6, 0.5), ("K", 0.2, 0.8)):
+            b.add_point(name, x, z)
+        b.add_body("plate", ["I", "J", "K"], mass=2.0, com=(0.25, 0.1), inertia=0.06)
+        b.add_force("push", segment="plate", at=(0.4, -0.3), frame="body", fx="1 + 0.5*t", fz=-2.0)
+        b.add_moment("twist", segment="plate", moment="0.7*cos(t)")
+        if driven:
+            b.add_driver("K.x", "0.2 + 0.1*sin(t)")
+        return b.build()
+
+    undriven, plain = build(True).without_drivers(), build(False)
+    q = plain.q0 + 0.01
+    for t in (0.0, 0.7):
+        Q = undriven.evaluate(q, np.zeros(plain.n), t).Q
+        np.testing.assert_array_equal(Q, plain.evaluate(q, np.zeros(plain.n), t).Q)
+        assert np.abs(Q).max() > 0.5

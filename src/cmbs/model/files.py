@@ -226,8 +226,9 @@ def _body(builder: NaturalModelBuilder, name: str, table: object) -> None:
                    ("points", "mass"))
     given = entry.get("local", {})
     local = _Entry(f"{entry.label}.local", given, tuple(given) if isinstance(given, dict) else ())
-    builder.add_body(name, entry.get("points"), mass=entry.number("mass"), com=entry.pair("com"), inertia=entry.number("inertia"),
-                     length=entry.number("length"), local={point: local.pair(point) for point in local.table})
+    builder.add_body(name, entry.get("points"), mass=entry.number("mass"), com=entry.pair("com"),
+                     inertia=entry.number("inertia"), length=entry.number("length"),
+                     local={point: local.pair(point) for point in local.table})
 
 
 def _distance(builder: NaturalModelBuilder, name: str, table: object) -> None:

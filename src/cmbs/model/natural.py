@@ -31,8 +31,9 @@ c = I_i/L² (thesis eq. 3.30)::
 
 Derivation (thesis eq. 3.26-3.28, after García de Jalón & Bayo 1994): a material point at
 (x̄, z̄) in the segment frame is at r = r_i + (x̄/L) d + (z̄/L) R90 d, so
-ṙ = ṙ_i + (x̄/L) ḋ + (z̄/L) R90 ḋ and, since R90 ḋ ⊥ ḋ and |R90 ḋ| = |ḋ|, T = ½∫ṙ·ṙ dm = ½[m ṙ_i·ṙ_i + 2a ṙ_i·ḋ + 2b ṙ_i·R90 ḋ + c ḋ·ḋ]; with
-ḋ = ṙ_j - ṙ_i that is the matrix above (the ±b entries come from ṙ_i·R90 ṙ_j = ż_i ẋ_j - ẋ_i ż_j).
+ṙ = ṙ_i + (x̄/L) ḋ + (z̄/L) R90 ḋ and, since R90 ḋ ⊥ ḋ and |R90 ḋ| = |ḋ|,
+T = ½∫ṙ·ṙ dm = ½[m ṙ_i·ṙ_i + 2a ṙ_i·ḋ + 2b ṙ_i·R90 ḋ + c ḋ·ḋ]; with ḋ = ṙ_j - ṙ_i that is the
+matrix above (the ±b entries come from ṙ_i·R90 ṙ_j = ż_i ẋ_j - ẋ_i ż_j).
 
 **Bodies** with more points (:meth:`NaturalModelBuilder.add_body`, points i, j, k, ...) are a
 segment i→j (frame, rigidity row, element mass matrix) whose further points k have constant
@@ -676,7 +677,7 @@ class _Assembler:
                 attached=tuple(BodyPoint(p.point, p.local, p.row) for p in body_points if p.body is segment)))
         for point in body_points:
             idx = self._resolve(point.indices, n)
-            mass_ext[np.ix_(idx, idx)] += point.body.mass * body_point_penalty(point.body.length, point.local)
+            mass_ext[np.ix_(idx, idx)] += further_point_mass(point.body.mass, point.body.length, point.local)
         for point in b._points.values():
             if point.mass:
                 idx = self._resolve(self.point_index[point.name], n)
@@ -776,12 +777,12 @@ def _force_rows(rows: list, n: int, assembler: _Assembler) -> np.ndarray:
     return array
 
 
-def body_point_penalty(length: float, local: tuple[float, float]) -> np.ndarray:
-    """BᵀB (6×6) for the body point rows B = [-C(ξ, η), I₂] of a point at ``local`` (along,
-    across) of a body of ``length``, in (x_i, z_i, x_j, z_j, x_k, z_k): the body's mass times it
-    keeps M positive definite without changing any rigid motion (module docstring)."""
+def further_point_mass(mass: float, length: float, local: tuple[float, float]) -> np.ndarray:
+    """μ BᵀB (6×6, μ = ``mass``) in (x_i, z_i, x_j, z_j, x_k, z_k) for the body point rows
+    B = [-C(ξ, η), I₂] of the point at ``local`` (along, across) of a body of ``length``: it keeps
+    M positive definite without acting on any rigid motion (module docstring)."""
     B = np.hstack([-point_map(length, local), np.eye(2)])
-    return B.T @ B
+    return mass * (B.T @ B)
 
 
 @dataclass
