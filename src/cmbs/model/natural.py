@@ -896,10 +896,10 @@ class NaturalEquations:
         segment forces and moments it carries at (q, t) (module docstring: C(ξ, η)ᵀ F and
         τ/|d|² (d_z, -d_x, -d_z, d_x)), e.g. to tell them from the forces at its points."""
         x = self._extended(np.asarray(q, dtype=float))
-        ints, reals = self.ints, self.reals
-        forces = int_section(ints, _SEGMENT_FORCE).reshape(-1, 7)
-        moments = int_section(ints, _MOMENT).reshape(-1, 5)
-        at = real_section(ints, reals, _SEGMENT_FORCE_AT).reshape(-1, 2)
+        ints, real_base = self.ints, int(self.ints[0]) + 2
+        forces = ints[ints[1 + _SEGMENT_FORCE]:ints[2 + _SEGMENT_FORCE]].reshape(-1, 7)
+        moments = ints[ints[1 + _MOMENT]:ints[2 + _MOMENT]].reshape(-1, 5)
+        at = self.reals[ints[real_base + 1 + _SEGMENT_FORCE_AT]:ints[real_base + 2 + _SEGMENT_FORCE_AT]].reshape(-1, 2)
         loads = np.zeros((len(self.segments), 4))
         value = [function(t)[0] for function in self.time_functions.functions]
         for segment, row, (xi, eta) in zip(self.load_segments, forces, at):
