@@ -305,6 +305,9 @@ def test_local_positions_given_place_the_further_points():
      r"forces.f: frame must be one of 'ground', 'body', got 'local'"),
     (lambda b: b.add_force("f", point="A", segment="rod", at=(0.1, 0.0)),
      r"forces.f: give either 'point' \(a basic point, ground frame\) or 'segment' and 'at', not both"),
+    (lambda b: b.add_force("f", point="B", frame="body"),
+     r"forces.f: a force at a basic point is in the ground frame, got frame='body'; for the frame of a segment "
+     r"give 'segment' and 'at' instead of 'point'"),
     (lambda b: b.add_force("f", segment="rod"),
      r"forces.f: a force on a segment needs 'segment' \(a name\) and 'at'"),
     (lambda b: b.add_force("f", fx=1.0),

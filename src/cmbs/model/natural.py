@@ -361,6 +361,9 @@ class NaturalModelBuilder:
         if name in self._point_forces:
             raise ModelError(f"duplicate name {name!r}", entry=entry)
         self._new_name(self._segment_forces, "forces", name)
+        if point is not None and segment is None and at is None:
+            raise ModelError(f"a force at a basic point is in the ground frame, got frame={frame!r}; for the "
+                             "frame of a segment give 'segment' and 'at' instead of 'point'", entry=entry)
         if point is not None:
             raise ModelError("give either 'point' (a basic point, ground frame) or 'segment' and 'at', not both",
                              entry=entry)
