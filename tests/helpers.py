@@ -73,8 +73,9 @@ def check_constraint_derivatives(model, rng: np.random.Generator, *, samples: in
 def kitchen_sink(*, drivers: bool = True, loads: bool = True, python_driver: bool = True):
     """A natural-coordinate model using every entry kind (the same model as
     tests/data/kitchen-sink.toml): crank-rod-block on a ground slider with rotation lock, a
-    distance coordinate, absolute/relative/point-pair angles, a pendulum sliding on the rod,
-    a point sliding on the crank line, a spring-damper, a time-varying point force, a torque,
+    distance coordinate, absolute/relative/point-pair angles, a pendulum sliding on the rod (a
+    body with a third point H), a point sliding on the crank line, a spring-damper, a
+    time-varying point force, a follower force on the rod, a torque, a moment on the crank,
     an actuator and drivers from an expression, a table and a Python callable.
 
     ``python_driver=False`` gives the F.x driver as the expression ``0.4 + 0.05*sin(t)`` instead
@@ -92,10 +93,11 @@ def kitchen_sink(*, drivers: bool = True, loads: bool = True, python_driver: boo
     b.add_point("D", 1.4, 0.55)
     b.add_point("E", 1.45, -0.3)
     b.add_point("F", 0.4, 0.3, mass=0.5)
+    b.add_point("H", 1.7, -0.2)
     b.add_segment("crank", "O", "A", mass=1.0, com=(0.5, 0.05), inertia=0.1)
     b.add_segment("rod", "A", "B", mass=2.0, com=(0.6, -0.02), inertia=0.2)
     b.add_segment("block", "B", "Bb", mass=0.7, com=(0.15, 0.0), inertia=0.01)
-    b.add_segment("hanger", "D", "E", mass=0.4, com=(0.3, 0.1), inertia=0.02)
+    b.add_body("hanger", ["D", "E", "H"], mass=0.4, com=(0.3, 0.1), inertia=0.02)
     b.add_slider("ground", point="B", through=(0.0, 0.5), direction=(1.0, 0.0), lock="block")
     b.add_slider("on-rod", point="D", segment="rod")
     b.add_slider("on-crank", point="F", line=("O", "A"))
@@ -107,6 +109,8 @@ def kitchen_sink(*, drivers: bool = True, loads: bool = True, python_driver: boo
         b.add_spring("spring", "A", "E", stiffness=50.0, damping=2.0, rest_length=0.9)
         b.add_force("push", point="E", fx="0.5*cos(t)", fz=-1.0)
         b.add_torque("motor", angle="psi", torque="2*sin(3*t)")
+        b.add_force("follower", segment="rod", at=(0.9, 0.05), frame="body", fx="0.3*sin(t)", fz="0.2*sin(2*t)")
+        b.add_moment("twist", segment="crank", moment="0.4*sin(t)")
     b.add_actuator("tau", coordinate="phi", gain=1.5)
     b.add_actuator("f", coordinate="s")
     if drivers:

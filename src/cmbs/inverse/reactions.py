@@ -24,10 +24,19 @@ mass matrix M_e, element gravity force Q_e = C_Gᵀ(m g) and rigidity row ρ_s
   the guide, as its equivalent at the guide's two points), distance coordinates, springs,
   dampers, applied point forces and point masses at those points.  Torques applied on angle
   coordinates and driver forces on angles reach the segments through the angle rows, i.e. in C_s.
+  Forces at other points of the segment and moments on it (``[forces]`` with ``segment``,
+  ``[moments]``) are applied loads, not reactions: they join Q_e (their generalized force,
+  :meth:`~cmbs.model.natural.NaturalEquations.segment_loads`).
 
 Hence (the result of :func:`joint_reactions`)
 
     F_s = M_e q̈_e - Q_e + A_ρᵀ λ_ρ - C_s                                           (2)
+
+Bodies with further points K (tied to the frame by the rows Φ_K = r_K - C_K q_e, C_K the 2×4
+map of K's local position): the rows' force on the body is ``-(∂Φ_K/∂q_e)ᵀ λ_K = C_Kᵀ λ_K``, the
+generalized force of the point force ``λ_K`` at K.  So the force the rest of the mechanism
+applies to the body at K is F(s, K) = λ_K, and F_s above, less Σ_K C_Kᵀ λ_K, is the force at I
+and J.
 
 Checks that hold for this split (tests/test_reactions.py): Newton's third law at a pin shared by
 two segments and nothing else, ``F(a, P) + F(b, P) = 0``; for each segment
@@ -56,7 +65,7 @@ import numpy as np
 
 from cmbs.errors import CmbsError
 from cmbs.model.model import Model, base_equations, base_multipliers
-from cmbs.model.natural import _ANGLE, _DISTANCE, _PARALLEL, NaturalEquations
+from cmbs.model.natural import _ANGLE, _DISTANCE, _PARALLEL, NaturalEquations, point_map
 from cmbs.trajectory import Trajectory
 
 
@@ -105,15 +114,16 @@ def joint_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
 
     ``q``, ``qdd`` and ``lam`` (multipliers of all m rows, convention ``M q̈ + Aᵀλ = Q``, e.g.
     ``extras['lam']`` of :func:`~cmbs.inverse.inverse_dynamics` or of a Lagrange simulation) must
-    be consistent; ``qd`` and ``t`` are accepted for a uniform signature but the reactions do not
-    depend on them (velocity terms are inside q̈ and λ).  See the module docstring for the
+    be consistent; ``qd`` is accepted for a uniform signature but the reactions do not depend on
+    it (velocity terms are inside q̈ and λ); ``t`` is the time of the applied segment forces and
+    moments.  See the module docstring for the
     equations and signs.
 
     Returns
     -------
     dict with
         ``forces``: {(segment, point): (2,) array (F_x, F_z)} — the force the rest of the
-        mechanism applies to the segment at that point, eq. (2);
+        mechanism applies to the segment at that point, eq. (2) (every point of a body);
         ``couples``: {segment: float} — total couple (counter-clockwise) transmitted to it by
         angle and slider-lock rows (C_s);
         ``torques``: {angle: float} — τ_φ = A[row, φ] λ_row, the couple on the angle's "to"
@@ -167,11 +177,16 @@ def joint_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
                 slider_couples[name] = moment
 
     forces = {}
+    loads = equations.segment_loads(q, t)
     for k, segment in enumerate(equations.segments):
         idx = segment.indices
         d = x[idx[2:4]] - x[idx[0:2]]
         rigid = np.concatenate([-2.0 * d, 2.0 * d]) * lam[segment.rigid_row]
-        F = segment.mass_matrix @ a[idx] - segment.gravity + rigid - generalized[k]
+        F = segment.mass_matrix @ a[idx] - segment.gravity - loads[k] + rigid - generalized[k]
+        for point in segment.attached:
+            at_point = lam[point.row:point.row + 2]
+            forces[(segment.name, point.name)] = at_point
+            F = F - point_map(segment.length, point.local).T @ at_point
         forces[(segment.name, segment.points[0])] = F[0:2]
         forces[(segment.name, segment.points[1])] = F[2:4]
     return {"forces": forces, "couples": {s.name: float(c) for s, c in zip(equations.segments, couples)},

@@ -21,8 +21,8 @@ from cmbs.model.drivers import Table, TimeFunction, as_time_function
 from cmbs.model.model import Model
 from cmbs.model.natural import NaturalModelBuilder
 
-_SECTIONS = ("model", "points", "segments", "angles", "distances", "sliders", "drivers", "forces", "torques",
-             "springs", "actuators")
+_SECTIONS = ("model", "points", "segments", "bodies", "angles", "distances", "sliders", "drivers", "forces",
+             "torques", "moments", "springs", "actuators")
 
 
 class _Entry:
@@ -186,12 +186,14 @@ def _read_builder(document: dict, base: Path, default_name: str) -> NaturalModel
     handlers: dict[str, Callable[[str, object], None]] = {
         "points": lambda name, t: _point(builder, name, t),
         "segments": lambda name, t: _segment(builder, name, t),
+        "bodies": lambda name, t: _body(builder, name, t),
         "distances": lambda name, t: _distance(builder, name, t),
         "angles": lambda name, t: _angle(builder, name, t),
         "sliders": lambda name, t: _slider(builder, name, t),
         "drivers": lambda name, t: _driver(builder, name, t, base),
         "forces": lambda name, t: _force(builder, name, t, base),
         "torques": lambda name, t: _torque(builder, name, t, base),
+        "moments": lambda name, t: _moment(builder, name, t, base),
         "springs": lambda name, t: _spring(builder, name, t),
         "actuators": lambda name, t: _actuator(builder, name, t),
     }
@@ -219,6 +221,16 @@ def _segment(builder: NaturalModelBuilder, name: str, table: object) -> None:
                         inertia=entry.number("inertia"), length=entry.number("length"))
 
 
+def _body(builder: NaturalModelBuilder, name: str, table: object) -> None:
+    entry = _Entry(f"bodies.{name}", table, ("points", "mass", "com", "inertia", "length", "local"),
+                   ("points", "mass"))
+    given = entry.get("local", {})
+    local = _Entry(f"{entry.label}.local", given, tuple(given) if isinstance(given, dict) else ())
+    builder.add_body(name, entry.get("points"), mass=entry.number("mass"), com=entry.pair("com"),
+                     inertia=entry.number("inertia"), length=entry.number("length"),
+                     local={point: local.pair(point) for point in local.table})
+
+
 def _distance(builder: NaturalModelBuilder, name: str, table: object) -> None:
     entry = _Entry(f"distances.{name}", table, ("points", "initial"), ("points",))
     i, j = entry.pair("points", str)
@@ -240,14 +252,20 @@ def _slider(builder: NaturalModelBuilder, name: str, table: object) -> None:
 
 
 def _force(builder: NaturalModelBuilder, name: str, table: object, base: Path) -> None:
-    entry = _Entry(f"forces.{name}", table, ("point", "fx", "fz"), ("point",))
+    entry = _Entry(f"forces.{name}", table, ("point", "segment", "at", "frame", "fx", "fz"))
     builder.add_force(name, point=entry.string("point"), fx=entry.time_function("fx", base),
-                      fz=entry.time_function("fz", base))
+                      fz=entry.time_function("fz", base), segment=entry.string("segment"), at=entry.pair("at"),
+                      frame=entry.get("frame", "ground"))
 
 
 def _torque(builder: NaturalModelBuilder, name: str, table: object, base: Path) -> None:
     entry = _Entry(f"torques.{name}", table, ("angle", "torque"), ("angle", "torque"))
     builder.add_torque(name, angle=entry.string("angle"), torque=entry.time_function("torque", base))
+
+
+def _moment(builder: NaturalModelBuilder, name: str, table: object, base: Path) -> None:
+    entry = _Entry(f"moments.{name}", table, ("segment", "moment"), ("segment", "moment"))
+    builder.add_moment(name, segment=entry.string("segment"), moment=entry.time_function("moment", base))
 
 
 def _spring(builder: NaturalModelBuilder, name: str, table: object) -> None:
@@ -263,9 +281,14 @@ def _actuator(builder: NaturalModelBuilder, name: str, table: object) -> None:
     builder.add_actuator(name, coordinate=entry.string("coordinate"), gain=entry.number("gain", 1.0))
 
 
-def _entry_of_constraint(constraint: str) -> str:
-    """'rigid crank' -> 'segments.crank' (the file entry behind a constraint name)."""
+def _entry_of_constraint(constraint: str, bodies: frozenset[str] = frozenset()) -> str:
+    """'rigid crank' -> 'segments.crank' (the file entry behind a constraint name); the rigid row
+    of a body in ``bodies`` and its rows 'body NAME: K.x' -> 'bodies.NAME'."""
     kind, _, name = constraint.partition(" ")
+    if kind == "body":
+        return f"bodies.{name.rpartition(': ')[0]}"
+    if kind == "rigid" and name in bodies:
+        return f"bodies.{name}"
     section = {"rigid": "segments", "distance": "distances", "angle": "angles", "slider": "sliders"}.get(kind)
     if section is None:
         return f"drivers.{constraint}"
@@ -282,9 +305,16 @@ def assembled(model: Model, source: str) -> Model:
         q0 = assemble(model, model.q0, 0.0)
     except ConvergenceError as error:
         raise ModelError(f"cannot be assembled: {error}", source=source,
-                         entry=_entry_of_constraint(getattr(error, "constraint", ""))) from None
+                         entry=_entry_of_constraint(getattr(error, "constraint", ""), _body_names(model))) from None
     qd0 = velocities(model, q0, 0.0, qd=model.qd0)
     return model.replace(q0=q0, qd0=qd0)
+
+
+def _body_names(model: Model) -> frozenset[str]:
+    from cmbs.model.natural import NaturalEquations
+
+    segments = model.equations.segments if isinstance(model.equations, NaturalEquations) else ()
+    return frozenset(segment.name for segment in segments if segment.kind == "body")
 
 
 def load_model_file(path: str | Path) -> Model:

@@ -2,7 +2,7 @@
 
 Coordinates are the Cartesian positions (x, z) of the moving basic points, plus optional angle
 and distance coordinates.  Fixed points are constants, not coordinates.  Every constraint is one
-of five kinds, each evaluated for all its rows at once by one compiled kernel:
+of six kinds, each evaluated for all its rows at once by one compiled kernel:
 
 ============  ==============================================  =================================
 kind          Φ                                               γ = -(Ȧq̇) - Φ_tt
@@ -11,6 +11,7 @@ rigid         d·d - L²,  d = r_j - r_i                        -2 ḋ·ḋ
 distance      d·d - s²                                        -2 ḋ·ḋ + 2 ṡ²
 angle         cos φ (u×v) - sin φ (u·v)                       see :func:`_angle_rows`
 parallel      u×v  (point on a line, rotation lock)           -2 u̇×v̇
+body point    r_k - r_i - ξ d - η R90 d,  d = r_j - r_i       0   (linear in q: constant A)
 driver        q_c - f(t)                                      f''(t)   (Φ_t = -f'(t))
 ============  ==============================================  =================================
 
@@ -27,6 +28,28 @@ c = I_i/L² (thesis eq. 3.30)::
     [ 0         m-2a+c  b        a-c]
     [ a-c       b       c        0  ]
     [ -b        a-c     0        c  ]
+
+Derivation (thesis eq. 3.26-3.28, after García de Jalón & Bayo 1994): a material point at
+(x̄, z̄) in the segment frame is at r = r_i + (x̄/L) d + (z̄/L) R90 d, so
+ṙ = ṙ_i + (x̄/L) ḋ + (z̄/L) R90 ḋ and, since R90 ḋ ⊥ ḋ and |R90 ḋ| = |ḋ|,
+T = ½∫ṙ·ṙ dm = ½[m ṙ_i·ṙ_i + 2a ṙ_i·ḋ + 2b ṙ_i·R90 ḋ + c ḋ·ḋ]; with ḋ = ṙ_j - ṙ_i that is the
+matrix above (the ±b entries come from ṙ_i·R90 ṙ_j = ż_i ẋ_j - ẋ_i ż_j).
+
+**Bodies** with more points (:meth:`NaturalModelBuilder.add_body`, points i, j, k, ...) are a
+segment i→j (frame, rigidity row, element mass matrix) whose further points k have constant
+local coordinates (ξ, η) = (along, across)/L: two *body point* rows each,
+r_k = r_i + ξ d + η R90 d = C(ξ, η) (r_i, r_j) with C of :func:`point_map`.  The points k carry
+no mass of their own; so that M stays positive definite (the projection and Udwadia-Kalaba
+formulations need M⁻¹), the body adds μ |ṙ_k - C ṙ_e|² (μ = the body's mass) per point k:
+the term B_kᵀ μ B_k with B_k the Jacobian of k's body point rows.  It vanishes on every motion
+that keeps the body rigid (B_k q̇ = 0), so T is unchanged there, and it changes no solution of
+M q̈ + Aᵀλ = Q, A q̈ = γ: its force μ B_kᵀ B_k q̈ is zero because B_k q̈ = γ_k = 0.
+
+**Loads on segments and bodies.**  A force F at the point (x̄, z̄) of a segment adds Cᵀ F to
+(x_i, z_i, x_j, z_j) (thesis eq. 3.32-3.35); in the segment frame ('body') its ground components
+are F = F_x̄ e + F_z̄ R90 e, e = d/|d| (a follower force).  A moment τ on a segment is the
+generalized force of its virtual work τ δθ with θ = atan2(d_z, d_x):
+δθ = (d_x δd_z - d_z δd_x)/|d|², so Q = τ/|d|² (d_z, -d_x, -d_z, d_x).
 """
 
 from __future__ import annotations
@@ -34,6 +57,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from typing import Mapping, Sequence
 
 from cmbs.jit import njit_borrowing
 import numpy as np
@@ -45,9 +69,14 @@ from cmbs.model.packing import int_section, pack, real_section
 
 # int sections of the packed kernel data, in this order
 (_RIGID, _DISTANCE, _ANGLE, _PARALLEL, _DRIVER, _POINT_FORCE, _TORQUE, _SPRING, _ACTUATOR,
- _TF_TABLE, _TF_OPS) = range(11)
+ _TF_TABLE, _TF_OPS, _BODY_POINT, _SEGMENT_FORCE, _MOMENT) = range(14)
 # real sections
-_CONSTANTS, _LENGTH2, _Q_CONSTANT, _SPRING_PARAMETERS, _ACTUATOR_GAIN, _TF_REALS = range(6)
+(_CONSTANTS, _LENGTH2, _Q_CONSTANT, _SPRING_PARAMETERS, _ACTUATOR_GAIN, _TF_REALS, _BODY_POINT_LOCAL,
+ _SEGMENT_FORCE_AT) = range(8)
+#: the kind of entry ("segment" or "body") of each builder section holding rigid bodies
+_KIND = {"segments": "segment", "bodies": "body"}
+#: frames of a segment force: components in the ground frame, or along (x̄, z̄) of the segment
+FRAMES = ("ground", "body")
 
 
 def element_mass_matrix(mass: float, length: float, com: tuple[float, float], inertia_com: float) -> np.ndarray:
@@ -99,6 +128,10 @@ class _Segment:
     length: float | None
     com: tuple[float, float]
     inertia: float
+    #: a body's further points (rigidly attached) and the local positions given for some of them
+    extra: tuple[str, ...] = ()
+    local: dict[str, tuple[float, float]] = field(default_factory=dict)
+    section: str = "segments"
 
 
 @dataclass
@@ -130,6 +163,8 @@ class NaturalModelBuilder:
     _drivers: dict[str, tuple[str, TimeFunction]] = field(default_factory=dict)
     _point_forces: dict[str, tuple] = field(default_factory=dict)
     _torques: dict[str, tuple[str, TimeFunction]] = field(default_factory=dict)
+    _segment_forces: dict[str, tuple] = field(default_factory=dict)
+    _moments: dict[str, tuple[str, TimeFunction]] = field(default_factory=dict)
     _springs: dict[str, tuple] = field(default_factory=dict)
     _actuators: dict[str, tuple[str, float]] = field(default_factory=dict)
 
@@ -157,21 +192,21 @@ class NaturalModelBuilder:
         self._points[name] = _Point(name, x, z, bool(fixed), float(mass))
 
     def add_segment(self, name: str, i: str, j: str, *, mass: float, com: tuple[float, float] | None = None,
-                    inertia: float | None = None, length: float | None = None) -> None:
+                    inertia: float | None = None, length: float | None = None, _section: str = "segments") -> None:
         """A rigid segment from point ``i`` to point ``j`` (adds Φ = |r_j - r_i|² - L² = 0).
 
         ``com`` (along, across) in the segment frame and ``inertia`` about the COM are required
         when ``mass > 0``.  ``length`` defaults to the distance between the initial points.
         """
-        self._new_name(self._segments, "segments", name)
-        entry = f"segments.{name}"
+        self._new_name(self._segments, _section, name)
+        entry = f"{_section}.{name}"
         mass = _finite(mass, entry, "mass")
         if mass < 0:
             raise ModelError(f"mass must be >= 0, got {mass}", entry=entry)
         if i == j:
             raise ModelError(f"both ends are point {i!r}", entry=entry)
         if mass > 0 and (com is None or inertia is None):
-            raise ModelError("a segment with mass needs 'com' (along, across) and 'inertia' (about the COM)",
+            raise ModelError(f"a {_KIND[_section]} with mass needs 'com' (along, across) and 'inertia' (about the COM)",
                              entry=entry)
         com = (0.0, 0.0) if com is None else _pair(com, entry, "com")
         inertia = 0.0 if inertia is None else _finite(inertia, entry, "inertia")
@@ -179,7 +214,42 @@ class NaturalModelBuilder:
             raise ModelError(f"inertia must be >= 0, got {inertia}", entry=entry)
         if length is not None and _finite(length, entry, "length") <= 0:
             raise ModelError(f"length must be > 0, got {length}", entry=entry)
-        self._segments[name] = _Segment(name, i, j, mass, None if length is None else float(length), com, inertia)
+        self._segments[name] = _Segment(name, i, j, mass, None if length is None else float(length), com, inertia,
+                                        section=_section)
+
+    def add_body(self, name: str, points: Sequence[str], *, mass: float, com: tuple[float, float] | None = None,
+                 inertia: float | None = None, length: float | None = None,
+                 local: Mapping[str, tuple[float, float]] | None = None) -> None:
+        """A rigid body through two or more points: one mass, centre of mass and inertia.
+
+        The first two points I, J define the body frame and the rigidity row, as for a segment
+        (``com``, ``inertia``, ``length`` as in :meth:`add_segment`); every further point K keeps
+        the local position (along, across) it has in that frame: given in ``local`` ({K: (along,
+        across)} in metres), else that of the initial positions.  A body is named like a
+        segment, so angles, sliders, forces and moments take its name wherever a segment's.
+        """
+        entry = f"bodies.{name}"
+        if isinstance(name, str) and name in self._segments:
+            raise ModelError(f"name {name!r} is already a {_KIND[self._segments[name].section]}", entry=entry)
+        if isinstance(points, str) or not isinstance(points, (list, tuple)) or not all(
+                isinstance(p, str) for p in points):
+            raise ModelError(f"points must be a list of point names, got {points!r}", entry=entry)
+        if len(points) < 2:
+            raise ModelError(f"a body needs at least two points (its frame), got {list(points)!r}", entry=entry)
+        repeated = sorted({p for p in points if list(points).count(p) > 1})
+        if repeated:
+            raise ModelError(f"point(s) {', '.join(map(repr, repeated))} listed twice in {list(points)!r}",
+                             entry=entry)
+        given = {} if local is None else dict(local)
+        misplaced = sorted(set(given) - set(points[2:]))
+        if misplaced:
+            raise ModelError(f"local is for the body's further points ({', '.join(points[2:]) or 'none'}), "
+                             f"not {', '.join(map(repr, misplaced))}", entry=entry)
+        given = {point: _pair(value, entry, f"local.{point}") for point, value in given.items()}
+        self.add_segment(name, points[0], points[1], mass=mass, com=com, inertia=inertia, length=length,
+                         _section="bodies")
+        body = self._segments[name]
+        body.extra, body.local = tuple(points[2:]), given
 
     def add_angle(self, name: str, *, segment: str | tuple[str, str] | None = None,
                   from_segment: str | tuple[str, str] | None = None,
@@ -253,8 +323,22 @@ class NaturalModelBuilder:
         except ModelError as error:
             raise error.located(entry=f"drivers.{name}") from None
 
-    def add_force(self, name: str, *, point: str, fx: object = 0.0, fz: object = 0.0) -> None:
-        """A force (fx, fz) in the ground frame at a basic point; components may vary with t."""
+    def add_force(self, name: str, *, point: str | None = None, fx: object = 0.0, fz: object = 0.0,
+                  segment: str | None = None, at: tuple[float, float] | None = None, frame: str = "ground") -> None:
+        """A force (fx, fz) at a basic point ``point``, or at the point ``at`` = (along, across) of
+        a segment or body ``segment``; components may vary with t.
+
+        ``frame``: "ground" (fx, fz along the ground x, z axes) or, on a segment, "body" (along
+        its x̄ axis from its first point to its second and its z̄ axis, a follower force).
+        """
+        if segment is not None or at is not None or frame != "ground":
+            self._add_segment_force(name, point, segment, at, frame, fx, fz)
+            return
+        if name in self._segment_forces:
+            raise ModelError(f"duplicate name {name!r}", entry=f"forces.{name}")
+        if point is None:
+            raise ModelError("give 'point' (a basic point), or 'segment' and 'at' (a point of a segment or body)",
+                             entry=f"forces.{name}")
         self._new_name(self._point_forces, "forces", name)
         try:
             self._point_forces[name] = (point, as_time_function(fx), as_time_function(fz))
@@ -269,6 +353,41 @@ class NaturalModelBuilder:
             self._torques[name] = (angle, as_time_function(torque))
         except ModelError as error:
             raise error.located(entry=f"torques.{name}") from None
+
+    def _add_segment_force(self, name: str, point: str | None, segment: str | None,
+                           at: tuple[float, float] | None, frame: str, fx: object, fz: object) -> None:
+        """:meth:`add_force` at a point of a segment or body (checks the combination of keys)."""
+        entry = f"forces.{name}"
+        if name in self._point_forces:
+            raise ModelError(f"duplicate name {name!r}", entry=entry)
+        self._new_name(self._segment_forces, "forces", name)
+        if point is not None and segment is None and at is None:
+            raise ModelError(f"a force at a basic point is in the ground frame, got frame={frame!r}; for the "
+                             "frame of a segment give 'segment' and 'at' instead of 'point'", entry=entry)
+        if point is not None:
+            raise ModelError("give either 'point' (a basic point, ground frame) or 'segment' and 'at', not both",
+                             entry=entry)
+        if not isinstance(segment, str) or at is None:
+            raise ModelError(f"a force on a segment needs 'segment' (a name) and 'at' (along, across), got "
+                             f"segment={segment!r}, at={at!r}", entry=entry)
+        if frame not in FRAMES:
+            raise ModelError(f"frame must be one of {', '.join(map(repr, FRAMES))}, got {frame!r}", entry=entry)
+        at = _pair(at, entry, "at")
+        try:
+            self._segment_forces[name] = (segment, at, frame, as_time_function(fx), as_time_function(fz))
+        except ModelError as error:
+            raise error.located(entry=entry) from None
+
+    def add_moment(self, name: str, *, segment: str, moment: object) -> None:
+        """A moment (counter-clockwise positive) on segment or body ``segment``, from the ground:
+        virtual work ``moment``·δθ, θ the direction of the segment (module docstring)."""
+        self._new_name(self._moments, "moments", name)
+        if not isinstance(segment, str):
+            raise ModelError(f"segment must be a segment or body name, got {segment!r}", entry=f"moments.{name}")
+        try:
+            self._moments[name] = (segment, as_time_function(moment))
+        except ModelError as error:
+            raise error.located(entry=f"moments.{name}") from None
 
     def add_spring(self, name: str, i: str, j: str, *, stiffness: float, damping: float = 0.0,
                    rest_length: float | None = None) -> None:
@@ -371,6 +490,9 @@ class _Assembler:
         b = self.b
         return (tuple(f"force {name!r}" for name, (_, fx, fz) in b._point_forces.items() if nonzero(fx) or nonzero(fz))
                 + tuple(f"torque {name!r}" for name, (_, torque) in b._torques.items() if nonzero(torque))
+                + tuple(f"force {name!r}" for name, (*_, fx, fz) in b._segment_forces.items()
+                        if nonzero(fx) or nonzero(fz))
+                + tuple(f"moment {name!r}" for name, (_, moment) in b._moments.items() if nonzero(moment))
                 + tuple(f"damper {name!r}" for name, spring in b._springs.items() if spring[3] > 0))
 
     def _direction(self, spec: str | tuple[str, str] | None, entry: str) -> tuple[list[int], np.ndarray]:
@@ -429,7 +551,7 @@ class _Assembler:
         rigid, lengths2, lines = [], [], []
         point_order = list(b._points)
         for segment in b._segments.values():
-            entry = f"segments.{segment.name}"
+            entry = f"{segment.section}.{segment.name}"
             start, end = self._position(segment.i, entry), self._position(segment.j, entry)
             length = segment.length if segment.length is not None else float(np.hypot(*(end - start)))
             if length <= 0:
@@ -438,7 +560,7 @@ class _Assembler:
             rigid.append(self._xz(segment.i, entry) + self._xz(segment.j, entry))
             lengths2.append(length**2)
             constraint_names.append(f"rigid {segment.name}")
-            lines.append((point_order.index(segment.i), point_order.index(segment.j)))
+            lines.extend(self._outline(segment, point_order, entry))
 
         distance_rows = []
         for name, (i, j, _) in b._distances.items():
@@ -474,6 +596,8 @@ class _Assembler:
                 parallel_rows.append(line_points + self._xz(s.i, entry) + self._xz(s.j, entry))
                 constraint_names.append(f"slider {name} lock")
 
+        body_points = self._body_points(constraint_names)
+
         driver_rows, functions, labels = [], [], []
         for name, (coordinate, function) in b._drivers.items():
             driver_rows.append([self._coordinate(coordinate, f"drivers.{name}"), len(functions)])
@@ -487,6 +611,26 @@ class _Assembler:
             force_rows.append(xz + [len(functions), len(functions) + 1])
             functions.extend([fx, fz])
             labels.extend([f"force {name} (fx)", f"force {name} (fz)"])
+
+        segment_force_rows, segment_force_at, load_segments = [], [], []
+        for name, (segment_name, at, frame, fx, fz) in b._segment_forces.items():
+            entry = f"forces.{name}"
+            segment = self._segment(segment_name, entry)
+            segment_force_rows.append(self._xz(segment.i, entry) + self._xz(segment.j, entry)
+                                      + [len(functions), len(functions) + 1, FRAMES.index(frame)])
+            segment_force_at.append((at[0] / segment.length, at[1] / segment.length))
+            load_segments.append(list(b._segments).index(segment.name))
+            functions.extend([fx, fz])
+            labels.extend([f"force {name} (fx)", f"force {name} (fz)"])
+
+        moment_rows = []
+        for name, (segment_name, moment) in b._moments.items():
+            entry = f"moments.{name}"
+            segment = self._segment(segment_name, entry)
+            moment_rows.append(self._xz(segment.i, entry) + self._xz(segment.j, entry) + [len(functions)])
+            load_segments.append(list(b._segments).index(segment.name))
+            functions.append(moment)
+            labels.append(f"moment {name}")
 
         torque_rows = []
         for name, (angle, torque) in b._torques.items():
@@ -532,7 +676,11 @@ class _Assembler:
             segment_data.append(SegmentData(
                 name=segment.name, points=(segment.i, segment.j), indices=idx, mass_matrix=element,
                 gravity=element_gravity, rigid_row=k, mass=segment.mass, length=segment.length,
-                com=segment.com, inertia=segment.inertia))
+                com=segment.com, inertia=segment.inertia, kind=_KIND[segment.section],
+                attached=tuple(BodyPoint(p.point, p.local, p.row) for p in body_points if p.body is segment)))
+        for point in body_points:
+            idx = self._resolve(point.indices, n)
+            mass_ext[np.ix_(idx, idx)] += further_point_mass(point.body.mass, point.body.length, point.local)
         for point in b._points.values():
             if point.mass:
                 idx = self._resolve(self.point_index[point.name], n)
@@ -552,9 +700,12 @@ class _Assembler:
              np.array(driver_rows, dtype=np.int64).reshape(-1, 2), _force_rows(force_rows, n, self),
              np.array(torque_rows, dtype=np.int64).reshape(-1, 2),
              resolve(spring_rows, 4), np.array(actuator_rows, dtype=np.int64).reshape(-1),
-             tf.table, tf.ops],
+             tf.table, tf.ops, resolve([p.indices for p in body_points], 6), resolve(segment_force_rows, 7),
+             resolve(moment_rows, 5)],
             [np.array(self.constants), np.array(lengths2), gravity_ext[:n].copy(),
-             np.array(spring_parameters).reshape(-1, 3), np.array(gains), tf.reals])
+             np.array(spring_parameters).reshape(-1, 3), np.array(gains), tf.reals,
+             np.array([(p.local[0] / p.body.length, p.local[1] / p.body.length) for p in body_points]).reshape(-1, 2),
+             np.array(segment_force_at).reshape(-1, 2)])
 
         m = len(constraint_names)
         drivers = np.zeros(m, dtype=bool)
@@ -565,7 +716,8 @@ class _Assembler:
             constants=np.array(self.constants), gravity_ext=gravity_ext,
             springs=(resolve(spring_rows, 4), np.array(spring_parameters).reshape(-1, 3)),
             point_xz=point_xz, segments=tuple(segment_data), work_sources=self._work_sources(),
-            steady_drivers=frozenset(name for name, (_, function) in b._drivers.items() if is_constant(function)))
+            steady_drivers=frozenset(name for name, (_, function) in b._drivers.items() if is_constant(function)),
+            load_segments=tuple(load_segments))
         return Model(
             name=b.name, coordinate_names=tuple(self.names), coordinate_kinds=tuple(self.kinds),
             constraint_names=tuple(constraint_names), drivers=drivers, actuator_names=tuple(b._actuators),
@@ -573,6 +725,35 @@ class _Assembler:
             equations=equations, description=b.description, source=b.source,
             parameters={"gravity": tuple(b.gravity)}, constant_mass=True,
             segment_masses=tuple(segment_masses))
+
+    def _outline(self, segment: _Segment, point_order: list[str], entry: str) -> list[tuple[int, int]]:
+        """The drawn edges: I-J of a segment, the closed polygon I, J, K, ... of a larger body."""
+        corners = [point_order.index(self._point(p, entry).name) for p in (segment.i, segment.j, *segment.extra)]
+        return list(zip(corners, corners[1:] + corners[:1])) if segment.extra else [(corners[0], corners[1])]
+
+    def _body_points(self, constraint_names: list[str]) -> list[_BodyPointRows]:
+        """The further points of every body, each with its two rows 'body NAME: K.x', 'body NAME:
+        K.z' appended to ``constraint_names``.  A point's local position is the given one, else
+        that of the initial positions in the frame of the body's first two points."""
+        rows = []
+        for body in self.b._segments.values():
+            entry = f"{body.section}.{body.name}"
+            start = self._position(body.i, entry)
+            d = self._position(body.j, entry) - start
+            drawn = float(np.hypot(*d))
+            for point in body.extra:
+                indices = self._xz(body.i, entry) + self._xz(body.j, entry) + self._xz(point, entry)
+                if point in body.local:
+                    local = body.local[point]
+                elif drawn == 0:
+                    raise ModelError(f"its points {body.i!r} and {body.j!r} are at the same initial position, so "
+                                     f"the frame that places {point!r} is undefined: give local.{point}", entry=entry)
+                else:
+                    offset = self._position(point, entry) - start
+                    local = (float(offset @ d) / drawn, float(d[0] * offset[1] - d[1] * offset[0]) / drawn)
+                rows.append(_BodyPointRows(body, point, indices, local, len(constraint_names)))
+                constraint_names.extend([f"body {body.name}: {point}.x", f"body {body.name}: {point}.z"])
+        return rows
 
     def _check_mass(self, mass: np.ndarray) -> None:
         """M restricted to point coordinates must be positive definite (every point carries mass)."""
@@ -599,6 +780,37 @@ def _force_rows(rows: list, n: int, assembler: _Assembler) -> np.ndarray:
     return array
 
 
+def further_point_mass(mass: float, length: float, local: tuple[float, float]) -> np.ndarray:
+    """μ BᵀB (6×6, μ = ``mass``) in (x_i, z_i, x_j, z_j, x_k, z_k) for the body point rows
+    B = [-C(ξ, η), I₂] of the point at ``local`` (along, across) of a body of ``length``: it keeps
+    M positive definite without acting on any rigid motion (module docstring)."""
+    B = np.hstack([-point_map(length, local), np.eye(2)])
+    return mass * (B.T @ B)
+
+
+@dataclass
+class _BodyPointRows:
+    """A further point of a body while assembling: extended indices (x_i, z_i, x_j, z_j, x_k,
+    z_k, constants still as placeholders), local position (along, across) and its first row."""
+
+    body: _Segment
+    point: str
+    indices: list[int]
+    local: tuple[float, float]
+    row: int
+
+
+@dataclass(frozen=True)
+class BodyPoint:
+    """A further point of a body: its name, local position (along, across) in metres in the
+    body frame, and ``row``, the first of its two body point rows (x, then z), whose multipliers
+    λ are the force (x, z) that the rest of the mechanism applies to the body at the point."""
+
+    name: str
+    local: tuple[float, float]
+    row: int
+
+
 @dataclass(frozen=True)
 class SegmentData:
     """One rigid segment as assembled (used e.g. by :mod:`cmbs.inverse.reactions`).
@@ -607,7 +819,8 @@ class SegmentData:
     constants, so fixed points have indices ≥ n); ``mass_matrix``: its 4×4 element mass matrix
     (module docstring); ``gravity``: its element gravity generalized force C_Gᵀ (m g), (4,);
     ``rigid_row``: the row of its rigidity constraint 'rigid NAME' (segments come first, in
-    order); ``com`` (along, across) in the segment frame and ``inertia`` about the COM.
+    order); ``com`` (along, across) in the segment frame and ``inertia`` about the COM;
+    ``kind`` "segment" or "body"; ``attached``: a body's further points (:class:`BodyPoint`).
     """
 
     name: str
@@ -620,6 +833,8 @@ class SegmentData:
     length: float
     com: tuple[float, float]
     inertia: float
+    kind: str = "segment"
+    attached: tuple[BodyPoint, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -641,6 +856,8 @@ class NaturalEquations:
     work_sources: tuple[str, ...] = ()
     #: the drivers of a constant, which hold their coordinate and do no work
     steady_drivers: frozenset[str] = frozenset()
+    #: the index in ``segments`` of the segment each segment force, then each moment, acts on
+    load_segments: tuple[int, ...] = ()
 
     @property
     def _scratch_size(self) -> int:
@@ -661,6 +878,8 @@ class NaturalEquations:
         int_sections[_DRIVER] = np.zeros(0, dtype=np.int64)
         used = set(int_sections[_POINT_FORCE].reshape(-1, 4)[:, 2:].ravel().tolist())
         used |= set(int_sections[_TORQUE][1::2].tolist())
+        used |= set(int_sections[_SEGMENT_FORCE].reshape(-1, 7)[:, 4:6].ravel().tolist())
+        used |= set(int_sections[_MOMENT].reshape(-1, 5)[:, 4].tolist())
         time_functions = self.time_functions.keeping(used)
         int_sections[_TF_TABLE] = time_functions.table.ravel() if used else np.zeros(0, dtype=np.int64)
         new_ints, new_reals = pack(int_sections, real_sections)
@@ -674,6 +893,26 @@ class NaturalEquations:
 
     def _extended(self, q: np.ndarray) -> np.ndarray:
         return np.concatenate([q, self.constants])
+
+    def segment_loads(self, q: np.ndarray, t: float) -> np.ndarray:
+        """(len(segments), 4): the generalized forces on each segment's (x_i, z_i, x_j, z_j) of the
+        segment forces and moments it carries at (q, t) (module docstring: C(ξ, η)ᵀ F and
+        τ/|d|² (d_z, -d_x, -d_z, d_x)), e.g. to tell them from the forces at its points."""
+        x = self._extended(np.asarray(q, dtype=float))
+        ints, real_base = self.ints, int(self.ints[0]) + 2
+        forces = ints[ints[1 + _SEGMENT_FORCE]:ints[2 + _SEGMENT_FORCE]].reshape(-1, 7)
+        moments = ints[ints[1 + _MOMENT]:ints[2 + _MOMENT]].reshape(-1, 5)
+        at = self.reals[ints[real_base + 1 + _SEGMENT_FORCE_AT]:ints[real_base + 2 + _SEGMENT_FORCE_AT]].reshape(-1, 2)
+        loads = np.zeros((len(self.segments), 4))
+        value = [function(t)[0] for function in self.time_functions.functions]
+        for segment, row, (xi, eta) in zip(self.load_segments, forces, at):
+            force = np.array(_segment_force(x, *row[:4], value[row[4]], value[row[5]], row[6]))
+            length = self.segments[segment].length
+            loads[segment] += point_map(length, (xi * length, eta * length)).T @ force
+        for segment, row in zip(self.load_segments[len(forces):], moments):
+            d = x[row[2:4]] - x[row[0:2]]
+            loads[segment] += value[row[4]] / (d @ d) * np.array([d[1], -d[0], -d[1], d[0]])
+        return loads
 
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
         return 0.5 * float(qd @ self.mass @ qd)
@@ -734,7 +973,7 @@ def layout(ints, n, size):
     n_ext = n + c1 - c0
     m = ((ints[2 + _RIGID] - ints[1 + _RIGID]) // 4 + (ints[2 + _DISTANCE] - ints[1 + _DISTANCE]) // 5
          + (ints[2 + _ANGLE] - ints[1 + _ANGLE]) // 9 + (ints[2 + _PARALLEL] - ints[1 + _PARALLEL]) // 8
-         + (ints[2 + _DRIVER] - ints[1 + _DRIVER]) // 2)
+         + (ints[2 + _BODY_POINT] - ints[1 + _BODY_POINT]) // 3 + (ints[2 + _DRIVER] - ints[1 + _DRIVER]) // 2)
     a0 = n + m
     g0 = a0 + m * n
     t0 = g0 + m
@@ -849,6 +1088,29 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
         buffer[g0 + row] = -2.0 * (dux * dwz - duz * dwx)
         row += 1
 
+    i0 = ints[1 + _BODY_POINT]
+    p0 = ints[real_base + 1 + _BODY_POINT_LOCAL]
+    for k in range((ints[2 + _BODY_POINT] - i0) // 6):
+        r = i0 + 6 * k
+        xi, zi, xj, zj, xk, zk = ints[r], ints[r + 1], ints[r + 2], ints[r + 3], ints[r + 4], ints[r + 5]
+        s, e = reals[p0 + 2 * k], reals[p0 + 2 * k + 1]
+        dx, dz = x[xj] - x[xi], x[zj] - x[zi]
+        buffer[n + row] = x[xk] - x[xi] - s * dx + e * dz
+        _add(buffer, a0, row, xi, s - 1.0, n)
+        _add(buffer, a0, row, zi, -e, n)
+        _add(buffer, a0, row, xj, -s, n)
+        _add(buffer, a0, row, zj, e, n)
+        _add(buffer, a0, row, xk, 1.0, n)
+        buffer[g0 + row] = 0.0
+        buffer[n + row + 1] = x[zk] - x[zi] - s * dz - e * dx
+        _add(buffer, a0, row + 1, xi, e, n)
+        _add(buffer, a0, row + 1, zi, s - 1.0, n)
+        _add(buffer, a0, row + 1, xj, -e, n)
+        _add(buffer, a0, row + 1, zj, -s, n)
+        _add(buffer, a0, row + 1, zk, 1.0, n)
+        buffer[g0 + row + 1] = 0.0
+        row += 2
+
     i0 = ints[1 + _DRIVER]
     for k in range((ints[2 + _DRIVER] - i0) // 2):
         c, f = ints[i0 + 2 * k], ints[i0 + 2 * k + 1]
@@ -872,6 +1134,28 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     i0 = ints[1 + _TORQUE]
     for k in range((ints[2 + _TORQUE] - i0) // 2):
         buffer[ints[i0 + 2 * k]] += buffer[s0 + 3 * ints[i0 + 2 * k + 1]]
+    i0 = ints[1 + _SEGMENT_FORCE]
+    p0 = ints[real_base + 1 + _SEGMENT_FORCE_AT]
+    for k in range((ints[2 + _SEGMENT_FORCE] - i0) // 7):
+        r = i0 + 7 * k
+        xi, zi, xj, zj = ints[r], ints[r + 1], ints[r + 2], ints[r + 3]
+        fx, fz = _segment_force(x, xi, zi, xj, zj, buffer[s0 + 3 * ints[r + 4]], buffer[s0 + 3 * ints[r + 5]],
+                                ints[r + 6])
+        s, e = reals[p0 + 2 * k], reals[p0 + 2 * k + 1]
+        _add_force(buffer, xi, (1.0 - s) * fx - e * fz, n)
+        _add_force(buffer, zi, e * fx + (1.0 - s) * fz, n)
+        _add_force(buffer, xj, s * fx + e * fz, n)
+        _add_force(buffer, zj, s * fz - e * fx, n)
+    i0 = ints[1 + _MOMENT]
+    for k in range((ints[2 + _MOMENT] - i0) // 5):
+        r = i0 + 5 * k
+        xi, zi, xj, zj = ints[r], ints[r + 1], ints[r + 2], ints[r + 3]
+        dx, dz = x[xj] - x[xi], x[zj] - x[zi]
+        scale = buffer[s0 + 3 * ints[r + 4]] / (dx * dx + dz * dz)
+        _add_force(buffer, xi, scale * dz, n)
+        _add_force(buffer, zi, -scale * dx, n)
+        _add_force(buffer, xj, -scale * dz, n)
+        _add_force(buffer, zj, scale * dx, n)
     i0 = ints[1 + _SPRING]
     r0 = ints[real_base + 1 + _SPRING_PARAMETERS]
     for k in range((ints[2 + _SPRING] - i0) // 4):
@@ -889,6 +1173,18 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     r0 = ints[real_base + 1 + _ACTUATOR_GAIN]
     for k in range(ints[2 + _ACTUATOR] - i0):
         buffer[ints[i0 + k]] += reals[r0 + k] * u[k]
+
+
+@njit_borrowing(cache=True, inline="always")
+def _segment_force(x, xi, zi, xj, zj, first, second, frame):
+    """Ground components of a segment force given as (first, second): (fx, fz) in the ground
+    frame (frame 0), or (along, across) the segment from i to j (frame 1): F = f_a e + f_b R90 e."""
+    if frame == 0:
+        return first, second
+    dx, dz = x[xj] - x[xi], x[zj] - x[zi]
+    length = math.sqrt(dx * dx + dz * dz)
+    ex, ez = dx / length, dz / length
+    return first * ex - second * ez, first * ez + second * ex
 
 
 @njit_borrowing(cache=True, inline="always")

@@ -2,7 +2,8 @@
 
 :func:`evaluate_lanes` computes what :func:`cmbs.model.natural._evaluate` computes (Q, Φ, A, γ,
 Φ_t of the thesis's natural-coordinate formulation, chapter 2: rigid-segment, distance, angle,
-parallel and driver rows; constant, point, torque, spring and actuator forces) for LANES states
+parallel, body point and driver rows; constant, point, segment, torque, moment, spring and
+actuator forces) for LANES states
 of one model, with the same operations in the same order: each lane's terms are bit for bit
 the one-state kernel's (tests/test_natural_lanes.py).  The lane index is innermost, so each
 row's indices are read once for the block and its arithmetic runs on contiguous lanes.  Time
@@ -15,9 +16,10 @@ import math
 
 from cmbs.jit import njit_borrowing
 from cmbs.model.drivers import evaluate_time_functions
-from cmbs.model.natural import (_ACTUATOR, _ACTUATOR_GAIN, _ANGLE, _DISTANCE, _DRIVER, _LENGTH2, _PARALLEL,
-                                _POINT_FORCE, _Q_CONSTANT, _RIGID, _SPRING, _SPRING_PARAMETERS, _TF_OPS, _TF_REALS,
-                                _TF_TABLE, _TORQUE, layout)
+from cmbs.model.natural import (_ACTUATOR, _ACTUATOR_GAIN, _ANGLE, _BODY_POINT, _BODY_POINT_LOCAL, _DISTANCE,
+                                _DRIVER, _LENGTH2, _MOMENT, _PARALLEL, _POINT_FORCE, _Q_CONSTANT, _RIGID,
+                                _SEGMENT_FORCE, _SEGMENT_FORCE_AT, _SPRING, _SPRING_PARAMETERS, _TF_OPS, _TF_REALS,
+                                _TF_TABLE, _TORQUE, _segment_force, layout)
 from cmbs.model.packing import int_section, real_section
 
 #: States per block (eight float64 fill an AVX-512 register).
@@ -29,6 +31,13 @@ def _add(terms, a0, row, column, n, w, value):
     """A[row, column] += value in lane ``w`` (columns of constants skipped)."""
     if column < n:
         terms[a0 + row * n + column, w] += value
+
+
+@njit_borrowing(cache=True, error_model="numpy", inline="always")
+def _add_force(terms, index, w, value, n):
+    """Q[index] += value in lane ``w`` (constants skipped)."""
+    if index < n:
+        terms[index, w] += value
 
 
 @njit_borrowing(cache=True, error_model="numpy", inline="always")
@@ -157,6 +166,30 @@ def evaluate_lanes(q, qd, t, U, ints, reals, buffer, x, v, terms):
             terms[g0 + row, w] = -2.0 * (dux * dwz - duz * dwx)
         row += 1
 
+    i0 = ints[1 + _BODY_POINT]
+    p0 = ints[real_base + 1 + _BODY_POINT_LOCAL]
+    for k in range((ints[2 + _BODY_POINT] - i0) // 6):
+        r = i0 + 6 * k
+        xi, zi, xj, zj, xk, zk = ints[r], ints[r + 1], ints[r + 2], ints[r + 3], ints[r + 4], ints[r + 5]
+        s, e = reals[p0 + 2 * k], reals[p0 + 2 * k + 1]
+        for w in range(LANES):
+            dx, dz = x[xj, w] - x[xi, w], x[zj, w] - x[zi, w]
+            terms[n + row, w] = x[xk, w] - x[xi, w] - s * dx + e * dz
+            _add(terms, a0, row, xi, n, w, s - 1.0)
+            _add(terms, a0, row, zi, n, w, -e)
+            _add(terms, a0, row, xj, n, w, -s)
+            _add(terms, a0, row, zj, n, w, e)
+            _add(terms, a0, row, xk, n, w, 1.0)
+            terms[g0 + row, w] = 0.0
+            terms[n + row + 1, w] = x[zk, w] - x[zi, w] - s * dz - e * dx
+            _add(terms, a0, row + 1, xi, n, w, e)
+            _add(terms, a0, row + 1, zi, n, w, s - 1.0)
+            _add(terms, a0, row + 1, xj, n, w, -e)
+            _add(terms, a0, row + 1, zj, n, w, -s)
+            _add(terms, a0, row + 1, zk, n, w, 1.0)
+            terms[g0 + row + 1, w] = 0.0
+        row += 2
+
     i0 = ints[1 + _DRIVER]
     for k in range((ints[2 + _DRIVER] - i0) // 2):
         c, f = ints[i0 + 2 * k], ints[i0 + 2 * k + 1]
@@ -183,6 +216,31 @@ def evaluate_lanes(q, qd, t, U, ints, reals, buffer, x, v, terms):
     for k in range((ints[2 + _TORQUE] - i0) // 2):
         for w in range(LANES):
             terms[ints[i0 + 2 * k], w] += buffer[s0 + 3 * ints[i0 + 2 * k + 1]]
+    i0 = ints[1 + _SEGMENT_FORCE]
+    p0 = ints[real_base + 1 + _SEGMENT_FORCE_AT]
+    for k in range((ints[2 + _SEGMENT_FORCE] - i0) // 7):
+        r = i0 + 7 * k
+        xi, zi, xj, zj = ints[r], ints[r + 1], ints[r + 2], ints[r + 3]
+        first, second, frame = buffer[s0 + 3 * ints[r + 4]], buffer[s0 + 3 * ints[r + 5]], ints[r + 6]
+        s, e = reals[p0 + 2 * k], reals[p0 + 2 * k + 1]
+        for w in range(LANES):
+            fx, fz = _segment_force(x[:, w], xi, zi, xj, zj, first, second, frame)
+            _add_force(terms, xi, w, (1.0 - s) * fx - e * fz, n)
+            _add_force(terms, zi, w, e * fx + (1.0 - s) * fz, n)
+            _add_force(terms, xj, w, s * fx + e * fz, n)
+            _add_force(terms, zj, w, s * fz - e * fx, n)
+    i0 = ints[1 + _MOMENT]
+    for k in range((ints[2 + _MOMENT] - i0) // 5):
+        r = i0 + 5 * k
+        xi, zi, xj, zj = ints[r], ints[r + 1], ints[r + 2], ints[r + 3]
+        moment = buffer[s0 + 3 * ints[r + 4]]
+        for w in range(LANES):
+            dx, dz = x[xj, w] - x[xi, w], x[zj, w] - x[zi, w]
+            scale = moment / (dx * dx + dz * dz)
+            _add_force(terms, xi, w, scale * dz, n)
+            _add_force(terms, zi, w, -scale * dx, n)
+            _add_force(terms, xj, w, -scale * dz, n)
+            _add_force(terms, zj, w, scale * dx, n)
     i0 = ints[1 + _SPRING]
     r0 = ints[real_base + 1 + _SPRING_PARAMETERS]
     for k in range((ints[2 + _SPRING] - i0) // 4):
