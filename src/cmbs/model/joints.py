@@ -656,7 +656,8 @@ class JointModelBuilder:
     """Build a planar :class:`~cmbs.model.model.Model` in joint coordinates.
 
     Add links (each with one revolute or prismatic joint to its parent or to the ground), named
-    points on links, loop closures, drivers and actuators, then call :meth:`build`.  Links may
+    points on links, loop closures, drivers, actuators and force elements (springs and dampers,
+    point forces, joint torques), then call :meth:`build`.  Links may
     be added in any order (a parent after its child is fine); names are resolved by
     :meth:`build`.  See the module docstring for the kinematics and the equations.
 
