@@ -77,10 +77,10 @@ def test_a_driver_of_a_constant_does_no_work():
     assert joint.build().work_sources == ()
     x, z, t = sp.symbols("x z t")
     steady = from_sympy("steady", coordinates=[x, z], mass_matrix=sp.eye(2), forces=[0, -9.81], potential=9.81 * z,
-                        constraints=[x - 0.5, x**2 + z**2 - 1], drivers=[True, False], q0=[0.5, -0.8])
+                        constraints=[x - 0.5, x**2 + z**2 - 1], drivers=["phi[0]"], q0=[0.5, -0.8])
     assert steady.work_sources == ()
     moving = from_sympy("moving", coordinates=[x, z], mass_matrix=sp.eye(2), forces=[0, -9.81], potential=9.81 * z,
-                        constraints=[x - 0.5 * sp.cos(t), x**2 + z**2 - 1], q0=[0.5, -0.8])
+                        constraints=[x - 0.5 * sp.cos(t), x**2 + z**2 - 1], drivers=[0], q0=[0.5, -0.8])
     assert moving.work_sources == ("driver 'phi[0]'",)
 
 
@@ -113,10 +113,10 @@ def test_from_sympy_models_are_judged_by_their_power_balance():
                         potential=1.5 * 9.81 * sp.sin(p1) + 0.5 * 9.81 * sp.sin(p2), q0=[0.3, 0.2])
     assert double.work_sources == ()
     moving = from_sympy("moving", coordinates=[x, z], mass_matrix=sp.eye(2), forces=[0, 0],
-                        constraints=[x - sp.sin(t), x * z - 1], drivers=[False, False], q0=[0.0, 1.0])
+                        constraints=[x - sp.sin(t), x * z - 1], drivers=[], q0=[0.0, 1.0])
     assert moving.work_sources == ("rheonomic constraint 'phi[0]'",)
     driven = from_sympy("driven", coordinates=[x, z], mass_matrix=sp.eye(2), forces=[0, 0],
-                        constraints=[x - sp.sin(t), x * z - 1], q0=[0.0, 1.0])
+                        constraints=[x - sp.sin(t), x * z - 1], drivers=["phi[0]"], q0=[0.0, 1.0])
     assert driven.work_sources == ("driver 'phi[0]'",)
 
 

@@ -67,7 +67,7 @@ def rheonomic_phi(q, s):
 @pytest.fixture(scope="module")
 def rheonomic():
     return from_sympy("rheonomic", coordinates=[x, z], mass_matrix=sp.eye(2), forces=[0, 0],
-                      constraints=RHEONOMIC_PHI, q0=[0.0, 1.0])
+                      constraints=RHEONOMIC_PHI, drivers=["phi[0]", "phi[1]"], q0=[0.0, 1.0])
 
 
 def random_states(count, n=2, seed=RNG_SEED):
@@ -180,10 +180,10 @@ def test_rheonomic_phi_t_and_time_terms_of_gamma(rheonomic):
         # closed form of the pure driver row x - sin t: Φ_t = -cos t, γ = -Φ_tt = -sin t
         assert rheonomic.constraints_t(q, s)[0] == pytest.approx(-math.cos(s), rel=1e-14, abs=1e-15)
         assert rheonomic.gamma(q, qd, s)[0] == pytest.approx(-math.sin(s), rel=1e-14, abs=1e-15)
-    # rows that depend explicitly on t are drivers by default, the mask can be given
+    # the driver rows are the ones named (or indexed)
     assert rheonomic.drivers.tolist() == [True, True]
     explicit = from_sympy("r", coordinates=[x, z], mass_matrix=sp.eye(2), forces=[0, 0],
-                          constraints=RHEONOMIC_PHI, drivers=[True, False], q0=[0.0, 1.0])
+                          constraints=RHEONOMIC_PHI, drivers=[0], q0=[0.0, 1.0])
     assert explicit.drivers.tolist() == [True, False]
     assert explicit.driver_names == ("phi[0]",)
 
@@ -348,7 +348,8 @@ def test_compiled_expressions_match_sympy_evaluation():
 def test_numba_backend_agrees_with_python_backend(rheonomic, tmp_path, monkeypatch):
     monkeypatch.setenv("CMBS_CACHE_DIR", str(tmp_path))
     compiled = from_sympy("rheonomic", coordinates=[x, z], mass_matrix=sp.eye(2), forces=[0, 0],
-                          constraints=RHEONOMIC_PHI, q0=[0.0, 1.0], backend="numba")
+                          constraints=RHEONOMIC_PHI, drivers=["phi[0]", "phi[1]"], q0=[0.0, 1.0],
+                          backend="numba")
     for q, qd, s in random_states(3):
         a, b = rheonomic.evaluate(q, qd, s), compiled.evaluate(q, qd, s)
         np.testing.assert_allclose(b.buffer, a.buffer, rtol=1e-14, atol=1e-14)
@@ -362,7 +363,8 @@ def test_unusable_cache_directory_falls_back_to_a_temporary_folder(rheonomic, tm
     blocker.write_text("")
     monkeypatch.setenv("CMBS_CACHE_DIR", str(blocker / "sub"))
     fallback = from_sympy("rheonomic", coordinates=[x, z], mass_matrix=sp.eye(2), forces=[0, 0],
-                          constraints=RHEONOMIC_PHI, q0=[0.0, 1.0], backend="numba")
+                          constraints=RHEONOMIC_PHI, drivers=["phi[0]", "phi[1]"], q0=[0.0, 1.0],
+                          backend="numba")
     for q, qd, s in random_states(3):
         np.testing.assert_allclose(fallback.evaluate(q, qd, s).buffer, rheonomic.evaluate(q, qd, s).buffer,
                                    rtol=1e-14, atol=1e-14)
@@ -395,7 +397,9 @@ def sympy_error_cases():
         (dict(points={"P": (x, z, 0)}), "points['P'] must be a pair"),
         (dict(lines=[("O", "Q")]), "lines[0] names unknown point 'Q'"),
         (dict(lines=[(0, 2)]), "lines[0] has point 2"),
-        (dict(drivers=[True, False]), "drivers must be 1 booleans"),
+        (dict(drivers=["phi[1]"]), "drivers names unknown constraint 'phi[1]' (did you mean 'phi[0]'?)"),
+        (dict(drivers=[True]), "drivers must list constraint names or row indices, got True"),
+        (dict(drivers=[0, "phi[0]"]), "drivers names constraint 'phi[0]' twice"),
         (dict(constraint_names=["a", "b"]), "constraint_names has 2 names, expected 1"),
         (dict(q0=[1.0]), "q0 has shape (1,), expected (2,)"),
         (dict(coordinates=[x, x]), "symbol 'x' is declared twice"),
@@ -438,7 +442,8 @@ def callable_error_cases():
         (dict(potential=lambda q: np.zeros(2)), "potential returned shape (2,), expected a scalar"),
         (dict(mass_matrix="M"), "mass_matrix must be callable"),
         (dict(coordinate_names=[]), "coordinate_names is empty"),
-        (dict(drivers=[1.0]), "drivers must be 1 booleans"),
+        (dict(drivers=[1.0]), "drivers must list constraint names or row indices, got 1.0"),
+        (dict(drivers=[1]), "drivers row index 1 is out of range (the model has 1 constraints)"),
     ]
 
 
@@ -448,3 +453,21 @@ def test_from_callables_errors(changes, message):
         pendulum_callables(**changes)
     assert message in str(caught.value)
     assert "model 'pendulum-callables'" in str(caught.value)
+
+
+def test_a_rheonomic_constraint_that_is_not_a_driver_survives_without_drivers():
+    """A moving guide x = 0.2 sin t (a rheonomic constraint of the mechanism) stays when the
+    driver row, named explicitly, is removed; without ``drivers`` a row that depends on t is an
+    error naming it, not a guess."""
+    guide, drive = x - sp.Rational(1, 5) * sp.sin(t), z - sp.cos(t)
+    common = dict(coordinates=[x, z], mass_matrix=sp.eye(2), forces=[0, 0], constraints=[guide, drive],
+                  constraint_names=["guide", "drive"], q0=[0.0, 1.0])
+    model = from_sympy("moving-guide", drivers=["drive"], **common)
+    free = model.without_drivers()
+    assert free.constraint_names == ("guide",)
+    terms = free.evaluate(np.array([0.1, 0.3]), np.zeros(2), 0.7)
+    assert terms.phi[0] == pytest.approx(0.1 - 0.2 * math.sin(0.7), abs=1e-15)
+    assert terms.phi_t[0] == pytest.approx(-0.2 * math.cos(0.7), abs=1e-15)
+    with pytest.raises(ModelError, match=r"constraints 'guide', 'drive' depend on time; say which rows are drivers"):
+        from_sympy("moving-guide", **common)
+    assert from_sympy("moving-guide", drivers=[], **common).without_drivers().m == 2

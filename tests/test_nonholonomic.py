@@ -118,14 +118,14 @@ def _rheonomic_model(**extra):
     return from_sympy("rheonomic", coordinates=[x, y], velocities=[x_d, y_d], time=t,
                       mass_matrix=sympy.diag(2.0, 1.0 + x**2), forces=[-x, sympy.sin(t) - y_d],
                       constraints=[x**2 + y**2 - 1], velocity_constraints=[psi],
-                      velocity_constraint_names=["psi-rheo"], q0=[0.6, 0.8], **extra)
+                      velocity_constraint_names=["psi-rheo"], drivers=["psi-rheo"], q0=[0.6, 0.8], **extra)
 
 
 def test_rheonomic_velocity_constraint_terms_against_finite_differences():
     model = _rheonomic_model()
     assert model.constraint_names == ("phi[0]", "psi-rheo")
     assert model.nonholonomic.tolist() == [False, True]
-    assert model.drivers.tolist() == [False, True]  # rows depending on t explicitly
+    assert model.drivers.tolist() == [False, True]  # the row named a driver
 
     def psi(q, qd, t):
         x, y = q
@@ -161,8 +161,8 @@ def test_from_sympy_rejects_nonlinear_and_misplaced_velocity_constraints():
     with pytest.raises(ModelError, match="share names"):
         from_sympy("bad", constraints=[x - y], constraint_names=["c"], velocity_constraints=[x_d],
                    velocity_constraint_names=["c"], **base)
-    with pytest.raises(ModelError, match="drivers must be 2 booleans"):
-        from_sympy("bad", constraints=[x - y], velocity_constraints=[x_d], drivers=[False], **base)
+    with pytest.raises(ModelError, match=r"drivers row index 2 is out of range \(the model has 2 constraints\)"):
+        from_sympy("bad", constraints=[x - y], velocity_constraints=[x_d], drivers=[2], **base)
 
 
 def test_model_nonholonomic_mask_defaults_and_validation(sleigh):

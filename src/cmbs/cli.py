@@ -207,7 +207,7 @@ def _simulate(args: argparse.Namespace) -> int:
     formulation = None if args.formulation is None and args.integrator not in ("rk23", "rk45", "rk4") else \
         (args.formulation or "lagrange")
     run = simulate(model, formulation=formulation, formulation_options=_formulation_options(args),
-                   progress=True, **_simulation_settings(args))
+                   every=args.every, progress=True, **_simulation_settings(args))
     info = run.info
     error = run["constraint_error"]
     print(f"{model.name}: {info['formulation']} + {info['integrator']}, {info['status']} at t = {run.t[-1]:.6g} s "
@@ -543,6 +543,9 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                           help="formulation option, repeatable: " + _formulation_help())
     dynamics_options(simulate)
+    simulate.add_argument("--every", type=int, default=1, metavar="K",
+                          help="keep every K-th output instant (0, K dt, 2K dt, ..., --t-end; K divides the steps): "
+                               "fixed-step runs still step by --dt but store and write only these")
     simulate.add_argument("--out", help="result file (.npz or .csv)")
     simulate.add_argument("--plot", help="figure: coordinates, energy, constraint error (.png, .pdf, .svg)")
     simulate.add_argument("--animate", help="animation of the mechanism (.gif; .mp4 with ffmpeg)")

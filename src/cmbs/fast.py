@@ -1267,9 +1267,9 @@ def rk4(kind: int, method: int, parameters: np.ndarray, q0: np.ndarray, qd0: np.
         every: int, u0: np.ndarray, ints: np.ndarray, reals: np.ndarray, buffer_size: int, mass: np.ndarray,
         row_scale: np.ndarray, m: int, mode: int, law: tuple, schur: tuple) -> tuple:
     """Fixed-step RK4 for ``steps`` steps of size ``h`` from t = 0; records (t, q, q̇, q̈, λ, u,
-    |Φ|max, |Φ̇|max, f_c = -Aᵀλ) every ``every`` steps.  Returns the records, the number recorded and a status
-    code with the time, state and inputs it refers to (for a failed run: where the formulation
-    could not go on).
+    |Φ|max, |Φ̇|max, f_c = -Aᵀλ) every ``every`` steps (only those are stored).  Returns the records, the
+    number recorded and a status code with the time, the steps completed, the state and inputs
+    it refers to (for a failed run: where the formulation could not go on).
 
     The inputs (``mode``): CONSTANT keeps ``u0``; LAW evaluates :func:`computed_torque` (``law``
     from :func:`law_arrays`) at every stage; HELD reproduces :class:`~cmbs.control.ZeroOrderHold`
@@ -1295,10 +1295,10 @@ def rk4(kind: int, method: int, parameters: np.ndarray, q0: np.ndarray, qd0: np.
     first = _rk4_steps_small_natural if small_natural else _rk4_steps_borrowed
     recorded, status, st, step, stage = first(*arguments, 0, 0, 0)
     if status == FALLBACK:
-        recorded, status, st, _, _ = _rk4_steps(*arguments, step, stage, recorded)
+        recorded, status, st, step, _ = _rk4_steps(*arguments, step, stage, recorded)
     if status != OK:
-        return *records, recorded, status, st, sq, sv, u
-    return *records, recorded, OK, steps * h, q, qd, u
+        return *records, recorded, status, st, step, sq, sv, u
+    return *records, recorded, OK, steps * h, steps, q, qd, u
 
 
 @njit_borrowing(cache=True)

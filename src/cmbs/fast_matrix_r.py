@@ -265,12 +265,12 @@ def _condition(buffer, n, m, rows, dependent):
 
 
 @njit(cache=True)
-def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, rows, dependent, independent,
+def rk4(kind, q0, qd0, u, h, first, steps, every, ints, reals, buffer_size, mass, m, rows, dependent, independent,
         tolerance, iterations, limit, reference_condition, growth, automatic, worst, T, Qs, QDs, QDDs, LAMs, PHI, PHID,
         FORCE):
     """RK4 steps ``first`` .. ``steps`` (t = step·h) from the state (q0, q̇0) at step ``first``,
-    recording every step into the given arrays (row = step; the row of ``first`` > 0 is already
-    there), and the largest stage κ₁ and its time into ``worst``.  Returns (status, step
+    recording every ``every``-th step into the given arrays (row = step // every; the rows up to
+    ``first`` > 0 are already there), and the largest stage κ₁ and its time into ``worst``.  Returns (status, step
     reached, rows recorded, q, q̇ at the step reached): OK at
     the end; REPARTITION when κ₂ at the step reached calls for a new partition; a
     failure code where a stage of that step failed."""
@@ -283,7 +283,7 @@ def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, ro
     q, qd = q0.copy(), qd0.copy()
     k1v, k2v, k3v, k4v = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     lam, stage_lam = np.empty(m), np.empty(m)
-    recorded = first + 1 if first > 0 else 0
+    recorded = first // every + 1 if first > 0 else 0
     for step in range(first, steps + 1):
         t = step * h
         status = _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent, independent,
@@ -291,13 +291,15 @@ def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, ro
         if status != OK:
             return status, step, recorded, q, qd
         if step > first or first == 0:
-            T[step] = t
-            Qs[step] = q
-            QDs[step] = qd
-            QDDs[step] = k1v
-            LAMs[step] = lam
-            record_constraints(buffer, n, m, qd, lam, PHI, PHID, FORCE, step)
-            recorded = step + 1
+            if step % every == 0:
+                row = step // every
+                T[row] = t
+                Qs[row] = q
+                QDs[row] = qd
+                QDDs[row] = k1v
+                LAMs[row] = lam
+                record_constraints(buffer, n, m, qd, lam, PHI, PHID, FORCE, row)
+                recorded = row + 1
             limit_two = min(growth * reference_condition, SINGULAR_CONDITION) if automatic else SINGULAR_CONDITION
             # the SVD only where the bound from the recovery's LU factors cannot rule the test out
             if _condition_two_bound(buffer, n, m, rows, dependent, work[0], work[1], work[2]) > limit_two \
@@ -330,16 +332,17 @@ def rk4(kind, q0, qd0, u, h, first, steps, ints, reals, buffer_size, mass, m, ro
 
 
 def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0: np.ndarray, dt: float,
-        steps: int) -> tuple[tuple[np.ndarray, ...], int, str, int]:
+        steps: int, every: int = 1) -> tuple[tuple[np.ndarray, ...], int, int, str, int]:
     """Run :func:`rk4` over ``steps`` steps of ``dt`` from (q0, q̇0), handing every re-partition
     to ``solver`` (which chooses the new partition or raises).  Returns the records
-    (t, q, q̇, q̈, λ, |Φ|max, |Φ̇|max, f_c), the number recorded, the failure message ("" on
-    success) and the number of re-partitions; the largest stage κ₁ goes to
-    ``solver.note_condition``."""
+    (t, q, q̇, q̈, λ, |Φ|max, |Φ̇|max, f_c) of every ``every``-th step, the number recorded, the
+    steps completed, the failure message ("" on success) and the number of re-partitions; the
+    largest stage κ₁ goes to ``solver.note_condition``."""
     kind, ints, reals, buffer, mass = kernel(model)
     n, m = model.n, model.m
-    records = (np.zeros(steps + 1), np.zeros((steps + 1, n)), np.zeros((steps + 1, n)), np.zeros((steps + 1, n)),
-               np.zeros((steps + 1, m)), np.zeros(steps + 1), np.zeros(steps + 1), np.zeros((steps + 1, n)))
+    size = steps // every + 1
+    records = (np.zeros(size), np.zeros((size, n)), np.zeros((size, n)), np.zeros((size, n)),
+               np.zeros((size, m)), np.zeros(size), np.zeros(size), np.zeros((size, n)))
     parameters = solver.p
     q, qd, first = np.array(q0, dtype=float), np.array(qd0, dtype=float), 0
     repartitions = 0
@@ -350,7 +353,7 @@ def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0:
     while True:
         part = solver.partition
         status, reached, recorded, q, qd = rk4(
-            kind, q, qd, np.ascontiguousarray(u, dtype=float), dt, first, steps, ints, reals, buffer.size, mass, m,
+            kind, q, qd, np.ascontiguousarray(u, dtype=float), dt, first, steps, every, ints, reals, buffer.size, mass, m,
             part.rows.astype(np.int64), part.dependent.astype(np.int64), part.independent.astype(np.int64),
             parameters.position_tolerance, parameters.max_iterations, solver.recovery_limit,
             float(solver.reference_condition),
@@ -358,16 +361,16 @@ def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0:
         solver.note_condition(worst[0], worst[1])
         t = reached * dt
         if status == OK:
-            return records, recorded, "", repartitions
+            return records, recorded, reached, "", repartitions
         if status != REPARTITION:
-            return records, recorded, f"model {model.name!r} at t={t:.6g}: {failures[status]}", repartitions
+            return records, recorded, reached, f"model {model.name!r} at t={t:.6g}: {failures[status]}", repartitions
         before = solver.repartitions
         try:
             solver.update_partition(model.jacobian(q, t), t)
         except CmbsError as error:
-            return records, recorded, str(error), repartitions
+            return records, recorded, reached, str(error), repartitions
         if solver.repartitions == before:    # numpy's κ₂ disagrees with the loop's: cannot go on
-            return records, recorded, (f"model {model.name!r} at t={t:.6g}: the partition's condition calls for a "
-                                       "new partition but none was chosen"), repartitions
+            return records, recorded, reached, (f"model {model.name!r} at t={t:.6g}: the partition's condition calls "
+                                                "for a new partition but none was chosen"), repartitions
         repartitions += 1
         first = reached

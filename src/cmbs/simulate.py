@@ -168,14 +168,30 @@ def output_times(t_end: float, dt: float, names: tuple[str, str] = ("t_end", "dt
     return np.append(np.arange(0.0, t_end, dt), t_end)
 
 
+def kept_outputs(grid: np.ndarray, every: object) -> int:
+    """``every`` (an integer >= 1) checked against the output ``grid`` of a run: it must divide
+    the number of its intervals, so that the kept instants ``grid[::every]`` end at t_end.
+    CmbsError otherwise, naming the numbers and the divisors that would do."""
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
+        raise CmbsError(f"every must be an integer >= 1, got {every!r}")
+    intervals = grid.size - 1
+    if intervals % every:
+        divisors = [k for k in range(2, min(intervals, 10_000) + 1) if intervals % k == 0][:8]
+        raise CmbsError(f"every = {every} does not divide the {intervals} steps of dt to t_end = {grid[-1]:g} s, so "
+                        f"t_end would not be kept; choose one that does"
+                        + (f" (e.g. {', '.join(map(str, divisors))})" if divisors else " (1)"))
+    return int(every)
+
+
 def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Formulation | None = None,
-             integrator: str = "rk45", dt: float = 0.01, rtol: float = 1e-6, atol: float = 1e-9,
+             integrator: str = "rk45", dt: float = 0.01, every: int = 1, rtol: float = 1e-6, atol: float = 1e-9,
              q0: np.ndarray | None = None, qd0: np.ndarray | None = None, u: Inputs | np.ndarray | None = None,
              project: bool = False, projection_tolerance: float = 1e-10,
              formulation_options: Mapping[str, object] | None = None, newton_tolerance: float = 1e-10,
              compiled: bool | None = None, progress: bool = False) -> Trajectory:
     """Forward dynamics of ``model`` (a model, or a library name or model file for
-    :func:`cmbs.load`) from t = 0 to ``t_end``, recorded at :func:`output_times` (t_end, dt).
+    :func:`cmbs.load`) from t = 0 to ``t_end``, recorded at :func:`output_times` (t_end, dt),
+    every ``every``-th of them.
 
     Parameters
     ----------
@@ -191,6 +207,13 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         step ``dt``.
     dt
         Step of fixed-step integrators and output interval of adaptive ones.
+    every
+        Keep only every ``every``-th output instant: 0, every·dt, 2·every·dt, ..., t_end (it must
+        divide the number of dt intervals to t_end, :func:`kept_outputs`).  A fixed-step run
+        still steps by dt but stores only the kept instants (2,000,000 steps of 1 ms with
+        every=100 store 20,001 rows), and they are those of the same run keeping every step,
+        bit for bit; an adaptive run just has the output interval every·dt.  ``energy_drift``,
+        the constraint errors and the notes are those of the kept outputs.
     u
         Inputs: a constant (n_u,) array or a function u(t, q, q̇).
     project
@@ -222,7 +245,9 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         :data:`ENERGY_NOTE`.  A failed run returns the part computed before the failure with
         ``info["status"] == "failed"``.
     """
-    times = output_times(t_end, dt)
+    grid = output_times(t_end, dt)
+    every = kept_outputs(grid, every)
+    times = grid[::every]
     if isinstance(model, (str, Path)):
         from cmbs import load
 
@@ -271,7 +296,7 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
                         "constant inputs or a ComputedTorque law (alone or in a ZeroOrderHold with period dt) on "
                         "a compiled model, or matrix-r with constant inputs on a holonomic compiled model; no "
                         f"--project and no Python time functions; model {model.name!r})")
-    run_options = {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol, "project": project}
+    run_options = {"integrator": integrator, "dt": dt, "every": every, "rtol": rtol, "atol": atol, "project": project}
     if fast_plan is not None and compiled is not False and integrator != "rk4":
         trajectory = _run_compiled_adaptive(model, solver, chosen, fast_plan, inputs, q_start, qd_start, times,
                                             started, run_options)
@@ -283,35 +308,36 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
                                             run_options)
     else:
         with small_matrix_loop(model.n):         # one BLAS thread for small matrices (cmbs.blas)
-            trajectory = _run_python(model, solver, chosen, inputs, q_start, qd_start, times, integrator, u, dt,
-                                     rtol, atol, project, projection_tolerance, newton_tolerance, compiled, progress,
-                                     started)
+            trajectory = _run_python(model, solver, chosen, inputs, q_start, qd_start, grid, every, integrator, u,
+                                     dt, rtol, atol, project, projection_tolerance, newton_tolerance, compiled,
+                                     progress, started)
     trajectory.info["compile_time"] = compile_seconds() - compiled_before
-    _explain_failure(model, trajectory, times)
+    _explain_failure(model, trajectory, grid)
     return trajectory
 
 
 def _run_python(model: Model, solver, chosen: Formulation, inputs: Inputs, q_start: np.ndarray, qd_start: np.ndarray,
-                times: np.ndarray, integrator: str, u: object, dt: float, rtol: float, atol: float, project: bool,
-                projection_tolerance: float, newton_tolerance: float, compiled: bool | None, progress: bool,
-                started: float) -> Trajectory:
-    """The run on the Python loops (every integrator and formulation)."""
-    bar = _Progress(float(times[-1]), progress)
+                grid: np.ndarray, every: int, integrator: str, u: object, dt: float, rtol: float, atol: float,
+                project: bool, projection_tolerance: float, newton_tolerance: float, compiled: bool | None,
+                progress: bool, started: float) -> Trajectory:
+    """The run on the Python loops (every integrator and formulation): fixed-step ones step
+    through the output ``grid`` and keep ``grid[::every]``, adaptive ones output there."""
+    bar = _Progress(float(grid[-1]), progress)
     try:
         if integrator in EXPLICIT:
-            result = _run_explicit(model, solver, inputs, q_start, qd_start, times, integrator, dt, rtol, atol,
+            result = _run_explicit(model, solver, inputs, q_start, qd_start, grid, every, integrator, dt, rtol, atol,
                                    project, projection_tolerance, bar)
         elif integrator == "trapezoidal":
-            result = _run_reduced(model, solver, inputs, q_start, qd_start, times, TRAPEZOIDAL, dt,
+            result = _run_reduced(model, solver, inputs, q_start, qd_start, grid, every, TRAPEZOIDAL, dt,
                                   newton_tolerance, bar)
         else:
-            result = _run_index3(model, inputs, q_start, qd_start, times, INDEX3[integrator], dt, newton_tolerance,
-                                 bar)
+            result = _run_index3(model, inputs, q_start, qd_start, grid, every, INDEX3[integrator], dt,
+                                 newton_tolerance, bar)
     finally:
         bar.close()
     loop_wall = time.perf_counter() - started
     trajectory = _record(model, solver, inputs, result, chosen if integrator in EXPLICIT or integrator == "trapezoidal"
-                         else None, {"integrator": integrator, "dt": dt, "rtol": rtol, "atol": atol,
+                         else None, {"integrator": integrator, "dt": dt, "every": every, "rtol": rtol, "atol": atol,
                                      "project": project, "loop_wall_time": loop_wall})
     trajectory.info["wall_time"] = time.perf_counter() - started
     if integrator == "rk4":                 # before the energy note, which the recording may have made
@@ -377,9 +403,9 @@ def _python_loop_note(model: Model, chosen: Formulation, u: object, project: boo
     return f"Python loop: {reason}"
 
 
-def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, times: np.ndarray,
-                  integrator: str, dt: float, rtol: float, atol: float, project: bool, projection_tolerance: float,
-                  bar: _Progress) -> Integration:
+def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, grid: np.ndarray,
+                  every: int, integrator: str, dt: float, rtol: float, atol: float, project: bool,
+                  projection_tolerance: float, bar: _Progress) -> Integration:
     n = model.n
     terms = model.new_terms()
 
@@ -395,10 +421,11 @@ def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.
         return np.concatenate([q, qd])
 
     tableau = explicit_method(integrator)
-    result = integrate_explicit(field, np.concatenate([q0, qd0]), times, tableau=tableau, rtol=rtol, atol=atol,
-                                step=dt if tableau.b_error is None else None,
+    fixed = tableau.b_error is None
+    result = integrate_explicit(field, np.concatenate([q0, qd0]), grid if fixed else grid[::every], tableau=tableau,
+                                rtol=rtol, atol=atol, step=dt if fixed else None,
                                 after_step=after_step if project or solver.adjusts_state else None, progress=bar,
-                                stop_on=(CmbsError,))
+                                stop_on=(CmbsError,), keep_every=every if fixed else 1)
     if project and tableau.b_error is not None:     # adaptive: outputs between steps are interpolated
         for row, t in zip(result.y, result.t):
             q, qd = project_state(model, row[:n], row[n:], float(t), tolerance=projection_tolerance)
@@ -441,8 +468,8 @@ def _force_derivatives(model: Model, inputs: Inputs, q: np.ndarray, qd: np.ndarr
     return C, K
 
 
-def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, times: np.ndarray, scheme: Scheme,
-                dt: float, tolerance: float, bar: _Progress) -> Integration:
+def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, grid: np.ndarray, every: int,
+                scheme: Scheme, dt: float, tolerance: float, bar: _Progress) -> Integration:
     """Backward Euler / generalized-α on M a + Aᵀλ = Q, Φ(q) = 0 (consistent start from Lagrange)."""
     from cmbs.dynamics import Lagrange
 
@@ -457,16 +484,17 @@ def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, t
         C, K = _force_derivatives(model, inputs, q, v, t, extra=lambda tt: tt.M @ a + tt.A.T @ lam)
         return r, phi, M, A, C, K
 
-    return integrate_index3(residual, q0, qd0, start.qdd, start.lam, times, scheme=scheme, step=dt,
-                            tolerance=tolerance, progress=bar, stop_on=(CmbsError,))
+    return integrate_index3(residual, q0, qd0, start.qdd, start.lam, grid, scheme=scheme, step=dt,
+                            tolerance=tolerance, progress=bar, stop_on=(CmbsError,), keep_every=every)
 
 
-def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, times: np.ndarray,
+def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, grid: np.ndarray, every: int,
                  scheme: Scheme, dt: float, tolerance: float, bar: _Progress) -> Integration:
     """Implicit trapezoidal rule in the independent coordinates z of matrix R (thesis eq. 3.51-3.57):
     Newton on f = Rᵀ(M q̈ - Q) = M̄ z̈ - Q̄ with tangent M̄ + h/2 RᵀC̄R + h²/4 RᵀK̄R.  The dependent
     coordinates follow by position, velocity and acceleration analysis with z held; between output
-    intervals the partition is chosen again if its dependent block became ill-conditioned."""
+    intervals the partition is chosen again if its dependent block became ill-conditioned.  Of
+    the instants of ``grid`` only ``grid[::every]`` are stored."""
     n = model.n
     terms = model.new_terms()
     model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0), out=terms)
@@ -494,15 +522,17 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
         full["q"], full["qd"], full["qdd"] = full["last"]
         bar(t)
 
+    times = grid[::every]
     y, dy = np.zeros((times.size, 2 * n)), np.zeros((times.size, 2 * n))
     y[0], dy[0] = np.concatenate([q0, qd0]), np.concatenate([qd0, full["qdd"]])
     counters: dict[str, int] = {}
-    for k in range(1, times.size):
+    for k in range(1, grid.size):
+        stored = -(-k // every)                     # the kept rows before grid[k]
         for attempt in range(2):  # on failure, once more with independent coordinates chosen here
             start = (full["q"], full["qd"], full["qdd"])
             independent = solver.partition.independent
             part = integrate_index3(residual, start[0][independent], start[1][independent], start[2][independent],
-                                    np.zeros(0), times[k - 1:k + 1], scheme=scheme, step=dt, tolerance=tolerance,
+                                    np.zeros(0), grid[k - 1:k + 1], scheme=scheme, step=dt, tolerance=tolerance,
                                     progress=on_step, stop_on=(CmbsError,))
             for key, value in part.counters.items():
                 counters[key] = counters.get(key, 0) + value
@@ -511,12 +541,15 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
             full["q"], full["qd"], full["qdd"] = start
             solver.repartition(model.jacobian(start[0], times[k - 1]))
         if part.status != "success":
-            return Integration(times[:k], y[:k], dy[:k], part.status, part.message, counters)
-        y[k], dy[k] = np.concatenate([full["q"], full["qd"]]), np.concatenate([full["qd"], full["qdd"]])
+            return Integration(times[:stored], y[:stored], dy[:stored], part.status, part.message, counters)
+        if k % every == 0:
+            y[k // every] = np.concatenate([full["q"], full["qd"]])
+            dy[k // every] = np.concatenate([full["qd"], full["qdd"]])
         try:
-            solver.update_partition(model.jacobian(full["q"], times[k]), times[k])
+            solver.update_partition(model.jacobian(full["q"], grid[k]), grid[k])
         except CmbsError as error:
-            return Integration(times[:k + 1], y[:k + 1], dy[:k + 1], "failed", str(error), counters)
+            done = k // every + 1
+            return Integration(times[:done], y[:done], dy[:done], "failed", str(error), counters)
     return Integration(times, y, dy, "success", "", counters)
 
 
@@ -679,7 +712,8 @@ def _singular_message(model: Model, solver, q: np.ndarray, qd: np.ndarray, t: fl
 
 def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs: Inputs, q0: np.ndarray,
                   qd0: np.ndarray, steps: int, dt: float, started: float, options: dict) -> Trajectory:
-    """The whole RK4 loop in :func:`cmbs.fast.rk4`, ``steps`` steps of dt; outputs at every step.  A
+    """The whole RK4 loop in :func:`cmbs.fast.rk4`, ``steps`` steps of dt; outputs at every
+    ``options["every"]``-th step.  A
     computed-torque law runs compiled (:func:`cmbs.fast.computed_torque`), recorded as
     :func:`_record` records a callable input."""
     from cmbs import fast
@@ -689,8 +723,9 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs
     _, ints, reals, buffer, mass, schur = fast.workspace(model)
     u0 = np.array(inputs(0.0, q0, qd0), dtype=float) if mode == fast.CONSTANT else np.zeros(model.n_u)
     loop_started = time.perf_counter()
-    T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, q_fail, qd_fail, u_fail = fast.rk4(
-        kind, method, parameters, np.array(q0), np.array(qd0), dt, steps, 1, u0, ints, reals, buffer.size, mass,
+    T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, done, q_fail, qd_fail, u_fail = fast.rk4(
+        kind, method, parameters, np.array(q0), np.array(qd0), dt, steps, options["every"], u0, ints, reals,
+        buffer.size, mass,
         np.ascontiguousarray(solver.row_scale), model.m, mode, fast.law_arrays(law, model), schur)
     loop_wall = time.perf_counter() - loop_started
     message = ""
@@ -700,8 +735,7 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs
         message = (f"non-finite state or accelerations at t={t_fail:.6g}: the motion diverged; try a smaller "
                    "step, drift projection (project=True) or another formulation")
     info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall}, "success" if status ==
-                 fast.OK else "failed", message, {"steps": steps if status == fast.OK else recorded,
-                                                  "evaluations": 4 * (steps if status == fast.OK else recorded)})
+                 fast.OK else "failed", message, {"steps": done, "evaluations": 4 * done})
     k = recorded
     trajectory = _trajectory(model, T[:k], Q[:k], QD[:k], QDD[:k], LAM[:k], U[:k], PHI[:k], PHID[:k], info,
                              FORCE[:k])
@@ -711,16 +745,18 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs
 
 def _run_compiled_matrix_r(model: Model, solver, chosen: Formulation, inputs: Inputs, q0: np.ndarray,
                            qd0: np.ndarray, steps: int, dt: float, started: float, options: dict) -> Trajectory:
-    """The matrix-R RK4 loop of :mod:`cmbs.fast_matrix_r`; outputs at every step."""
+    """The matrix-R RK4 loop of :mod:`cmbs.fast_matrix_r`; outputs at every ``options["every"]``-th
+    step."""
     from cmbs import fast_matrix_r
 
     u = np.array(inputs(0.0, q0, qd0), dtype=float)
     loop_started = time.perf_counter()
-    records, recorded, message, repartitions = fast_matrix_r.run(model, solver, u, q0, qd0, dt, steps)
+    records, recorded, reached, message, repartitions = fast_matrix_r.run(model, solver, u, q0, qd0, dt, steps,
+                                                                          options["every"])
     loop_wall = time.perf_counter() - loop_started
     T, Q, QD, QDD, LAM, PHI, PHID, FORCE = (array[:recorded] for array in records)
     status = "failed" if message else "success"
-    done = max(recorded - 1, 0)
+    done = reached
     info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall}, status, message,
                  {"steps": done, "evaluations": 4 * done, "repartitions": repartitions})
     trajectory = _trajectory(model, T, Q, QD, QDD, LAM, np.tile(u, (recorded, 1)), PHI, PHID, info, FORCE)

@@ -7,7 +7,8 @@ projection, recovery of dependent coordinates); the derivative at the new point 
 re-evaluated.  Output is at the times of ``t_out``, by cubic Hermite interpolation between the
 steps' end points and derivatives (dense output, O(h⁴)), by the method's own continuous
 extension where it has one (DOP853: 7th order, three more evaluations in a step with outputs),
-or exactly at the steps for a fixed step equal to the output interval.  Failures come back as a status, never as a swallowed
+or exactly at the steps for a fixed step equal to the output interval; a fixed-step run may keep
+only every k-th of those outputs (``keep_every``), and stores only those.  Failures come back as a status, never as a swallowed
 exception.
 """
 
@@ -62,7 +63,7 @@ def _hermite(t0: float, y0: np.ndarray, f0: np.ndarray, t1: float, y1: np.ndarra
 def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tableau, rtol: float = 1e-6,
               atol: float = 1e-9, step: float | None = None, after_step: AfterStep | None = None,
               max_steps: int = 10_000_000, progress: Callable[[float], None] | None = None,
-              stop_on: tuple[type[Exception], ...] = ()) -> Integration:
+              stop_on: tuple[type[Exception], ...] = (), keep_every: int = 1) -> Integration:
     """Integrate from ``t_out[0]`` through ``t_out[-1]``.
 
     Parameters
@@ -78,6 +79,10 @@ def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tab
     stop_on
         Exception types raised by ``f`` or ``after_step`` that end the run with status
         ``"failed"`` and their message (the output computed so far is kept).
+    keep_every
+        With a fixed ``step``: of the instants ``t_out`` (which the steps hit), keep only
+        ``t_out[::keep_every]`` (whose last must be ``t_out[-1]``); the others are stepped through
+        but not stored, so the kept outputs are those of the run that keeps all, bit for bit.
     """
     t_out = np.asarray(t_out, dtype=float)
     y = np.array(y0, dtype=float)
@@ -85,8 +90,12 @@ def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tab
     adaptive = step is None
     if adaptive and tableau.b_error is None:
         raise ValueError(f"{tableau.name} has no error estimate: give a fixed step")
-    out_y = np.zeros((t_out.size, d))
-    out_dy = np.zeros((t_out.size, d))
+    if keep_every != 1 and (adaptive or keep_every < 1 or (t_out.size - 1) % keep_every):
+        raise ValueError(f"keep_every={keep_every} needs a fixed step and {t_out.size - 1} output intervals that "
+                         "it divides")
+    kept = t_out[::keep_every]
+    out_y = np.zeros((kept.size, d))
+    out_dy = np.zeros((kept.size, d))
     counters = {"steps": 0, "rejected": 0, "evaluations": 0}
 
     def field(t: float, state: np.ndarray) -> np.ndarray:
@@ -97,7 +106,8 @@ def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tab
     next_out = 0
 
     def fail(message: str) -> Integration:
-        return Integration(t_out[:next_out], out_y[:next_out], out_dy[:next_out], "failed", message, counters)
+        stored = -(-next_out // keep_every)          # the kept instants before t_out[next_out]
+        return Integration(kept[:stored], out_y[:stored], out_dy[:stored], "failed", message, counters)
 
     try:
         k1 = field(t, y)
@@ -154,20 +164,23 @@ def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tab
             end = next_out
             while end < t_out.size and t_out[end] <= t_new + 1e-12 * max(1.0, abs(t_new)):
                 end += 1
+            rows = np.arange(-(-next_out // keep_every), -(-end // keep_every))   # kept rows in [next_out, end)
+            next_out = end
+            if rows.size == 0:
+                continue
             if tableau.dense is None:
-                values, slopes = _hermite(t, y, k1, t_new, y_new, k_new, t_out[next_out:end])
+                values, slopes = _hermite(t, y, k1, t_new, y_new, k_new, kept[rows])
             else:
                 try:
                     coefficients = dense_coefficients(field, tableau, t, y, h_try, y_new, k_new, stages)
                 except stop_on as error:
                     return fail(str(error))
-                values, slopes = _dense(coefficients, t, y, h_try, t_out[next_out:end])
-            out_y[next_out:end], out_dy[next_out:end] = values, slopes
-            next_out = end
+                values, slopes = _dense(coefficients, t, y, h_try, kept[rows])
+            out_y[rows], out_dy[rows] = values, slopes
         t, y, k1 = t_new, y_new, k_new
         if progress is not None:
             progress(t)
-    return Integration(t_out, out_y, out_dy, "success", "", counters)
+    return Integration(kept, out_y, out_dy, "success", "", counters)
 
 
 def error_norm(tableau: Tableau, stages: np.ndarray, h: float, scale: np.ndarray) -> float:

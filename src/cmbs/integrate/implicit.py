@@ -82,9 +82,10 @@ Residual = Callable[[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
 def integrate_index3(residual: Residual, q0: np.ndarray, v0: np.ndarray, a0: np.ndarray, lam0: np.ndarray,
                      t_out: np.ndarray, *, scheme: Scheme, step: float, tolerance: float = 1e-10,
                      max_iterations: int = 25, progress: Callable[[float], None] | None = None,
-                     stop_on: tuple[type[Exception], ...] = ()) -> Integration:
+                     stop_on: tuple[type[Exception], ...] = (), keep_every: int = 1) -> Integration:
     """Fixed-step integration of the index-3 DAE; output at ``t_out`` (each a multiple of the step
-    or hit exactly by shortening the last step before it).
+    or hit exactly by shortening the last step before it), of which only ``t_out[::keep_every]``
+    are stored (``keep_every`` must divide the number of intervals, so that the last is kept).
 
     Returns an :class:`~cmbs.integrate.explicit.Integration` whose ``y`` holds (q, v) and ``dy``
     (v, a); ``counters`` include the Newton iterations.  Newton stops when the scaled correction
@@ -93,15 +94,19 @@ def integrate_index3(residual: Residual, q0: np.ndarray, v0: np.ndarray, a0: np.
     n, m = q0.size, lam0.size
     q, v, a, lam = (np.array(x, dtype=float) for x in (q0, v0, a0, lam0))
     x = a.copy()
-    out_y = np.zeros((t_out.size, 2 * n))
-    out_dy = np.zeros((t_out.size, 2 * n))
+    if keep_every < 1 or (t_out.size - 1) % keep_every:
+        raise ValueError(f"keep_every={keep_every} does not divide the {t_out.size - 1} output intervals")
+    kept = t_out[::keep_every]
+    out_y = np.zeros((kept.size, 2 * n))
+    out_dy = np.zeros((kept.size, 2 * n))
     out_y[0], out_dy[0] = np.concatenate([q, v]), np.concatenate([v, a])
     counters = {"steps": 0, "newton_iterations": 0, "evaluations": 0}
     t = float(t_out[0])
     next_out = 1
 
     def fail(message: str) -> Integration:
-        return Integration(t_out[:next_out], out_y[:next_out], out_dy[:next_out], "failed", message, counters)
+        stored = -(-next_out // keep_every)          # the kept instants before t_out[next_out]
+        return Integration(kept[:stored], out_y[:stored], out_dy[:stored], "failed", message, counters)
 
     s = scheme
     while next_out < t_out.size:
@@ -152,6 +157,8 @@ def integrate_index3(residual: Residual, q0: np.ndarray, v0: np.ndarray, a0: np.
         if progress is not None:
             progress(t)
         if abs(t - t_out[next_out]) <= 1e-12 * max(1.0, abs(t)):
-            out_y[next_out], out_dy[next_out] = np.concatenate([q, v]), np.concatenate([v, a])
+            if next_out % keep_every == 0:
+                row = next_out // keep_every
+                out_y[row], out_dy[row] = np.concatenate([q, v]), np.concatenate([v, a])
             next_out += 1
-    return Integration(t_out, out_y, out_dy, "success", "", counters)
+    return Integration(kept, out_y, out_dy, "success", "", counters)

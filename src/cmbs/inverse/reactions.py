@@ -209,7 +209,7 @@ def joint_reaction_history(model: Model, motion: Trajectory) -> dict:
                     for i in range(motion.t.size)]
     else:
         inputs = np.asarray(motion.extras.get("u", np.zeros((motion.t.size, model.n_u))), dtype=float)
-        per_time = [tree_reactions(model, motion.q[i], motion.qd[i], motion.qdd[i], lam[i], inputs[i])
+        per_time = [tree_reactions(model, motion.q[i], motion.qd[i], motion.qdd[i], lam[i], inputs[i], motion.t[i])
                     for i in range(motion.t.size)]
     if not per_time:
         raise CmbsError("the trajectory is empty")

@@ -18,9 +18,10 @@ that the parent — or the ground — applies to link k through joint k::
     N_k = I_k ω̇_k + (G_k - O_k) × m_k (a_Gk - g) - Σ_i (r_i - O_k) × f_i
           + Σ_c [N_c + (O_c - O_k) × F_c],
 
-with f_k the closure forces applied to link k (at points r_i) and c the children of k.  The
+with f_k the closure forces and the forces of springs, dampers and point forces applied to link k
+(at points r_i) and c the children of k.  The
 generalized force of joint k is then ``N_k`` (revolute) or ``F_k·e_k`` (prismatic); it must equal
-the model's actuation and driver force on q_k, ``Σ gain·u - λ_driver``, which the tests use as an
+the model's actuation, joint torque and driver force on q_k, ``Σ gain·u + T_k(t) - λ_driver``, which the tests use as an
 independent check of the Lagrangian equations.  The rest of (F_k, N_k) is the reaction carried
 by the joint's bearing or guide.
 """
@@ -46,8 +47,9 @@ def _rotation(angle: float) -> np.ndarray:
 
 
 def tree_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, lam: np.ndarray,
-                   u: np.ndarray | None = None) -> dict:
-    """Forces and moments transmitted by every joint of a joint-coordinate model.
+                   u: np.ndarray | None = None, t: float = 0.0) -> dict:
+    """Forces and moments transmitted by every joint of a joint-coordinate model at time ``t``
+    (which the model's point forces may depend on).
 
     Returns
     -------
@@ -105,6 +107,9 @@ def tree_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
             applied[la].append((position(la, a_local), force))
         if lb >= 0:
             applied[lb].append((position(lb, b_local), -force))
+    for link, point, force in zip(*equations.point_loads(q, qd, t)):
+        if link >= 0:
+            applied[link].append((point, force))
     for r, name in enumerate(model.constraint_names):
         if 0 <= rows[r] < layout.closure_links.shape[0]:
             closures[name] = float(-lam[r])

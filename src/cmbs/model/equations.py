@@ -42,7 +42,7 @@ import sympy
 from sympy.core.function import AppliedUndef
 from sympy.printing.pycode import PythonCodePrinter
 
-from cmbs.errors import ModelError
+from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.model import Model, Terms
 
 __all__ = ["from_sympy", "from_callables", "SympyEquations", "CallableEquations"]
@@ -317,14 +317,43 @@ def _names(label: str, names: Sequence[str] | None, default: list[str], model: s
     return names
 
 
-def _driver_mask(drivers: Sequence[bool] | None, default: list[bool], model: str) -> np.ndarray:
+def _driver_mask(drivers: Sequence[str | int] | None, names: Sequence[str], model: str,
+                 timed: Sequence[bool] | None = None) -> np.ndarray:
+    """The driver rows (True) among the constraints ``names``, from ``drivers``: the names or
+    indices of the rows that are drivers (removed by :meth:`Model.without_drivers`).
+
+    ``None`` means no driver when no row depends on time explicitly (``timed``, known for
+    symbolic rows only); a row that does is either a driver or a rheonomic constraint of the
+    mechanism, which the equations cannot tell apart, so then ``drivers`` must be given."""
     if drivers is None:
-        return np.array(default, dtype=bool)
-    mask = np.asarray(drivers)
-    if mask.shape != (len(default),) or (mask.size and mask.dtype != bool):
-        raise ModelError(f"model {model!r}: drivers must be {len(default)} booleans (one per "
-                         f"constraint), got {list(drivers)!r}")
-    return mask.astype(bool)
+        moving = [name for name, depends in zip(names, timed or ()) if depends]
+        if moving:
+            listed = ", ".join(repr(name) for name in moving)
+            raise ModelError(f"model {model!r}: constraints {listed} depend on time; say which rows are drivers "
+                             f"(removed by without_drivers()): drivers=[{listed}] if they all are, drivers=[] if "
+                             "they are rheonomic constraints of the mechanism")
+        return np.zeros(len(names), dtype=bool)
+    if isinstance(drivers, (str, bytes)) or not hasattr(drivers, "__iter__"):
+        raise ModelError(f"model {model!r}: drivers must be a list of constraint names or row indices, got {drivers!r}")
+    mask = np.zeros(len(names), dtype=bool)
+    for entry in drivers:
+        if isinstance(entry, str):
+            if entry not in names:
+                raise ModelError(f"model {model!r}: drivers names unknown constraint {entry!r}"
+                                 f"{did_you_mean(entry, names)}; constraints: {', '.join(names) or 'none'}")
+            row = list(names).index(entry)
+        elif isinstance(entry, (int, np.integer)) and not isinstance(entry, (bool, np.bool_)):
+            row = int(entry)
+            if not 0 <= row < len(names):
+                raise ModelError(f"model {model!r}: drivers row index {row} is out of range (the model has "
+                                 f"{len(names)} constraints)")
+        else:
+            raise ModelError(f"model {model!r}: drivers must list constraint names or row indices, got {entry!r} "
+                             f"in {list(drivers)!r}")
+        if mask[row]:
+            raise ModelError(f"model {model!r}: drivers names constraint {names[row]!r} twice")
+        mask[row] = True
+    return mask
 
 
 def _buffer_positions(terms: Terms, fields: Sequence[str]) -> np.ndarray:
@@ -456,7 +485,7 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
                velocities: Sequence[sympy.Symbol] | None = None,
                time: sympy.Symbol | None = None,
                inputs: Sequence[sympy.Symbol] = (),
-               drivers: Sequence[bool] | None = None,
+               drivers: Sequence[str | int] | None = None,
                potential: sympy.Expr | None = None,
                points: Mapping[str, tuple[sympy.Expr, sympy.Expr]] | None = None,
                lines: Sequence[tuple[int | str, int | str]] = (),
@@ -500,8 +529,11 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
     inputs
         Symbols of the actuator inputs ``u`` (their names become the actuator names).
     drivers
-        Boolean mask of the constraint rows that are rheonomic drivers; if None, the rows whose
-        Φ depends explicitly on time.
+        The driver rows, by constraint name or row index (holonomic rows first, then velocity
+        constraints): prescribed motions that :meth:`Model.without_drivers` removes.  None: no
+        driver, allowed only when no row depends explicitly on time; a row that does is either
+        a driver or a rheonomic constraint of the mechanism (kept by ``without_drivers``), so
+        name the drivers (``drivers=[]`` when there are none).
     potential
         ``V(q)`` used only for energy reports; 0.0 when not given (then :meth:`Model.energy`
         is the kinetic energy only, and a conservative Q is not reflected in it).  The model's
@@ -524,7 +556,7 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
         ``constraints`` and marked in :attr:`Model.nonholonomic`.  ``B = ∂ψ/∂q̇``, ``b = ψ|_{q̇=0}``
         and ``γ = -(∂ψ/∂q q̇ + ∂ψ/∂t)`` (so that ``ψ̇ = B q̈ - γ``) are derived symbolically; the
         row holds ``A = B``, ``Φ = 0``, ``Φ_t = b``, ``γ`` (see :class:`~cmbs.model.model.Terms`).
-        ``drivers`` (if given) then has one entry per row of both kinds.
+        ``drivers`` may name them too.
     velocity_constraint_names
         Names of the velocity constraints (``"psi[k]"`` if None).
     backend
@@ -621,7 +653,7 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
                     [f"psi[{k}]" for k in range(len(psi))], name)
     if len(set(names)) != len(names):
         raise ModelError(f"model {name!r}: constraint_names and velocity_constraint_names share names: {list(names)}")
-    mask = _driver_mask(drivers, [t in expression.free_symbols for expression in phi + psi], name)
+    mask = _driver_mask(drivers, names, name, [t in expression.free_symbols for expression in phi + psi])
 
     # ------------------------------------------------------------ derived terms
     # Differentiate in real symbols: with sympy's default (complex) symbols the derivative of
@@ -943,7 +975,7 @@ def from_callables(name: str, *, coordinate_names: Sequence[str],
                    n_constraints: int | None = None,
                    n_inputs: int = 0,
                    input_names: Sequence[str] | None = None,
-                   drivers: Sequence[bool] | None = None,
+                   drivers: Sequence[str | int] | None = None,
                    potential: Callable[[np.ndarray], float] | None = None,
                    points: Callable[[np.ndarray], np.ndarray] | None = None,
                    point_names: Sequence[str] = (),
@@ -979,7 +1011,8 @@ def from_callables(name: str, *, coordinate_names: Sequence[str],
         when None and ``finite_differences``); names ``"psi[k]"`` if None.  The rows follow
         the holonomic ones and are marked in :attr:`Model.nonholonomic`.
     drivers
-        Mask of driver rows (all False if None), holonomic then nonholonomic rows.
+        The driver rows by constraint name or row index (holonomic rows first, then velocity
+        constraints); none if None.
     point_names
         Names of the k points returned by ``points`` (``"p0"``, ... if empty).
     finite_differences
@@ -1139,7 +1172,7 @@ def from_callables(name: str, *, coordinate_names: Sequence[str],
                     [f"psi[{k}]" for k in range(m_velocity)], name)
     if len(set(names)) != len(names):
         raise ModelError(f"model {name!r}: constraint_names and velocity_constraint_names share names: {list(names)}")
-    mask = _driver_mask(drivers, [False] * (m + m_velocity), name)
+    mask = _driver_mask(drivers, names, name)
 
     n_points = 0
     if points is not None:

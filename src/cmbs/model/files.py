@@ -22,7 +22,7 @@ from cmbs.model.model import Model
 from cmbs.model.natural import NaturalModelBuilder
 
 _SECTIONS = ("model", "points", "segments", "bodies", "angles", "distances", "sliders", "drivers", "forces",
-             "torques", "moments", "springs", "actuators")
+             "torques", "moments", "springs", "actuators", "initial_velocities")
 
 
 class _Entry:
@@ -295,18 +295,28 @@ def _entry_of_constraint(constraint: str, bodies: frozenset[str] = frozenset()) 
     return f"{section}.{name.removesuffix(' lock')}"
 
 
-def assembled(model: Model, source: str) -> Model:
+def assembled(model: Model, source: str, given_velocities: tuple[str, ...] = ()) -> Model:
     """Return ``model`` with q0 assembled and q̇0 consistent, or a :class:`ModelError` naming the
     constraint that could not be closed (e.g. a segment whose points cannot be at its length, or
-    an angle half a turn away from the direction of its points)."""
-    from cmbs.kinematics import assemble, velocities
+    an angle half a turn away from the direction of its points), or the driver whose value at
+    t = 0 the mechanism cannot reach (:func:`_unreachable_drivers`).
+
+    q̇0 solves Φ_q q̇ = -Φ_t at (q0, 0) with the velocities of ``given_velocities`` (coordinate
+    names, from ``[initial_velocities]``) held at their values in ``model.qd0`` and the others
+    corrected by least squares from theirs (minimum norm); given velocities that the constraints
+    do not allow are an error (:func:`_check_velocities`)."""
+    from cmbs.kinematics import BranchError, assemble, velocities
 
     try:
         q0 = assemble(model, model.q0, 0.0)
     except ConvergenceError as error:
+        blamed = None if isinstance(error, BranchError) else _unreachable_drivers(model)
+        if blamed:
+            raise ModelError(f"cannot be assembled at t = 0: {blamed[1]}", source=source, entry=blamed[0]) from None
         raise ModelError(f"cannot be assembled: {error}", source=source,
                          entry=_entry_of_constraint(getattr(error, "constraint", ""), _body_names(model))) from None
-    qd0 = velocities(model, q0, 0.0, qd=model.qd0)
+    qd0 = velocities(model, q0, 0.0, qd=model.qd0, fixed=given_velocities)
+    _check_velocities(model, q0, qd0, given_velocities, source)
     return model.replace(q0=q0, qd0=qd0)
 
 
@@ -315,6 +325,100 @@ def _body_names(model: Model) -> frozenset[str]:
 
     segments = model.equations.segments if isinstance(model.equations, NaturalEquations) else ()
     return frozenset(segment.name for segment in segments if segment.kind == "body")
+
+
+def _driven_coordinates(model: Model) -> list[tuple[str, int, float]]:
+    """(driver name, driven coordinate, its value f(0)) of every driver row Φ = q_c - f(t); rows
+    of another form are left out."""
+    terms = model.evaluate(model.q0, np.zeros(model.n), 0.0)
+    driven = []
+    for row in np.flatnonzero(model.drivers):
+        coordinate = int(np.argmax(np.abs(terms.A[row])))
+        unit = np.zeros(model.n)
+        unit[coordinate] = 1.0
+        if np.array_equal(terms.A[row], unit):
+            driven.append((model.constraint_names[row], coordinate, float(model.q0[coordinate] - terms.phi[row])))
+    return driven
+
+
+def _unreachable_drivers(model: Model) -> tuple[str, str] | None:
+    """When the mechanism assembles without its drivers but not with them, (entry, reason) naming
+    the driver whose value at t = 0 it cannot reach: the mechanism assembled with that driver's
+    coordinate held at f(0) fails.  When each value is reachable alone but not all together, the
+    drivers are named together.  None when the drivers are not shown to be the cause."""
+    from cmbs.kinematics import assemble
+
+    driven = _driven_coordinates(model)
+    if not driven:
+        return None
+    free = model.without_drivers()
+    try:
+        start = assemble(free, model.q0, 0.0)
+    except ConvergenceError:
+        return None                     # the mechanism does not close even without its drivers
+
+    def reachable(drivers: list[tuple[str, int, float]]) -> bool:
+        q = start.copy()
+        for _, coordinate, value in drivers:
+            q[coordinate] = value
+        try:
+            assemble(free, q, 0.0, fixed=[coordinate for _, coordinate, _ in drivers])
+        except ConvergenceError:
+            return False
+        return True
+
+    def held(name: str, coordinate: int, value: float) -> str:
+        return f"drivers.{name} holds {model.coordinate_names[coordinate]} at {value:.6g} at t = 0"
+
+    for name, coordinate, value in driven:
+        if not reachable([(name, coordinate, value)]):
+            return (f"drivers.{name}", f"{held(name, coordinate, value)}, which the mechanism cannot reach (it "
+                                       "assembles without its drivers); change the driver's value at t = 0 or the "
+                                       "lengths")
+    if len(driven) > 1 and not reachable(driven):
+        return ("drivers", f"the drivers' values at t = 0 cannot all be reached together, though each can alone "
+                           f"({'; '.join(held(*d) for d in driven)})")
+    return None
+
+
+def _initial_velocities(document: dict, model: Model) -> tuple[Model, tuple[str, ...]]:
+    """``model`` with the velocities of ``[initial_velocities]`` ({coordinate: value}) in its
+    q̇0, and their coordinate names."""
+    table = document.get("initial_velocities", {})
+    if not isinstance(table, dict):
+        raise ModelError("[initial_velocities] must be a table of coordinate = velocity", entry="initial_velocities")
+    qd0 = np.array(model.qd0, dtype=float)
+    for name, value in table.items():
+        entry = f"initial_velocities.{name}"
+        if name not in model.coordinate_names:
+            raise ModelError(f"unknown coordinate {name!r}{did_you_mean(name, model.coordinate_names)} "
+                             f"(coordinates: {', '.join(model.coordinate_names)})", entry=entry)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ModelError(f"the velocity must be a finite number, got {value!r}", entry=entry)
+        qd0[model.coordinate_index(name)] = float(value)
+    return model.replace(qd0=qd0), tuple(table)
+
+
+#: largest |Φ_q q̇0 + Φ_t| (relative to 1 + max |q̇0|) accepted for the given initial velocities
+VELOCITY_TOLERANCE = 1e-9
+
+
+def _check_velocities(model: Model, q0: np.ndarray, qd0: np.ndarray, given: tuple[str, ...], source: str) -> None:
+    """The given initial velocities must be possible: with them held, Φ_q q̇ = -Φ_t must have a
+    solution (they are independent, and a driven coordinate gets its driver's rate)."""
+    if not given or model.m == 0:
+        return
+    terms = model.evaluate(q0, qd0, 0.0)
+    residual = np.abs(terms.A @ qd0 + terms.phi_t)
+    worst = int(np.argmax(residual))
+    if residual[worst] <= VELOCITY_TOLERANCE * (1.0 + float(np.max(np.abs(qd0)))):
+        return
+    values = ", ".join(f"{name} = {qd0[model.coordinate_index(name)]:g}" for name in given)
+    row = model.constraint_names[worst]
+    raise ModelError(f"the given velocities ({values}) violate the velocity constraints at t = 0 (residual "
+                     f"{residual[worst]:.3g} in {'driver' if model.drivers[worst] else 'constraint'} {row!r}): give "
+                     "only independent ones, at most one per degree of freedom, and none of a driven coordinate "
+                     "other than its driver's rate", source=source, entry="initial_velocities")
 
 
 def load_model_file(path: str | Path) -> Model:
@@ -338,7 +442,7 @@ def load_model_file(path: str | Path) -> Model:
     except UnicodeDecodeError:
         raise ModelError("not a text file", source=source) from None
     try:
-        model = _read_builder(document, path.parent, path.stem).build()
+        model, given_velocities = _initial_velocities(document, _read_builder(document, path.parent, path.stem).build())
     except ModelError as error:
         raise error.located(source=source) from None
-    return assembled(model, source)
+    return assembled(model, source, given_velocities)

@@ -25,13 +25,20 @@ velocity-product ("bias") acceleration ``J̇ q̇`` of the point, i.e. its accele
 Equations (THEORY §1, ``M q̈ + Aᵀλ = Q``)::
 
     M = Σ_k m_k J_Gkᵀ J_Gk + I_k ω_kᵀ ω_k,
-    Q = Σ_k m_k J_Gkᵀ (g - J̇_Gk q̇) + B u,
+    Q = Σ_k m_k J_Gkᵀ (g - J̇_Gk q̇) + B u + Σ_springs -f (J_a - J_b)ᵀ e + Σ_forces J_Pᵀ F(t) + Σ_torques e_c T(t),
     closure row  (point a, point or ground b, direction n):
         Φ = n·(r_a - r_b),   A = n·(J_a - J_b),   γ = -n·(J̇_a q̇ - J̇_b q̇),   Φ_t = 0,
     driver row (coordinate c, time function f):
         Φ = q_c - f(t),      A = e_cᵀ,            γ = f''(t),                Φ_t = -f'(t),
-    T = ½ q̇ᵀ M q̇,   V = -Σ_k m_k g·r_Gk.
+    T = ½ q̇ᵀ M q̇,   V = -Σ_k m_k g·r_Gk + Σ_springs ½ k (ℓ - ℓ0)².
 
+Force elements: a spring-damper between points a and b (on links, or fixed on the ground) with
+``d = r_a - r_b``, ``ℓ = |d|``, ``e = d/ℓ``, ``ℓ̇ = e·(J_a - J_b) q̇`` has the tension
+``f = k (ℓ - ℓ0) + c ℓ̇``, i.e. the force ``-f e`` on a and ``+f e`` on b; a point force F(t)
+(ground frame, or the link frame: ``F = R(θ_k) F_local``) at P adds ``J_Pᵀ F``; a joint torque
+T(t) adds ``T`` to its coordinate (a torque between a revolute joint's parent and child, a force
+along a prismatic one).  Q = J_Pᵀ F is the exact virtual work of a force at P (δr_P = J_P δq),
+and the spring's Q is ``-∂V/∂q`` with ``∂ℓ/∂q = eᵀ (J_a - J_b)``.
 ``- Σ m_k J_Gkᵀ J̇_Gk q̇`` is the exact Coriolis/centrifugal term (``ω̇`` has no velocity-product
 part in the plane, since θ_k is linear in q).  All per-link and per-constraint work happens in
 one compiled kernel (:func:`_evaluate_kernel`) reading index and parameter arrays precomputed by
@@ -62,10 +69,15 @@ _DIRECTIONS = {"x": ((1.0, 0.0),), "z": ((0.0, 1.0),), "xz": ((1.0, 0.0), (0.0, 
 # Integer header ip[0:_HEADER]; the named slots hold sizes and offsets into ip (I_O*) or rp (R_O*).
 (I_N, I_NR, I_ND, I_NU, I_NTF, I_NOPS, I_DEPTH, I_NP,
  I_OPARENT, I_OTYPE, I_OORDER, I_OCHAINSTART, I_OCHAIN, I_OCLOSURE, I_ODRIVER, I_OACT,
- I_OTAB, I_OOPS, I_OPOINT, R_OCLOSURE, R_OGAIN, R_OPOINT, R_OREALS, R_NREALS) = range(24)
-_HEADER = 24
+ I_OTAB, I_OOPS, I_OPOINT, R_OCLOSURE, R_OGAIN, R_OPOINT, R_OREALS, R_NREALS,
+ I_NS, I_NF, I_NT, I_OSPRING, I_OFORCE, I_OTORQUE, R_OSPRING, R_OFORCE) = range(32)
+_HEADER = 32
 _LINK_REALS = 8          # per link in rp[2 + 8k:]: ox, oz, angle, comx, comz, mass, inertia, length
 _CLOSURE_REALS = 6       # per closure row: a local (or ground) x, z; b local (or ground) x, z; nx, nz
+_SPRING_REALS = 7        # per spring: a local (or ground) x, z; b local (or ground) x, z; k, c, rest length
+_SPRING_INTS = 2         # per spring: links of a and b (-1: ground)
+_FORCE_INTS = 4          # per point force: link, frame (0 ground, 1 link), functions of f_x and f_z
+FRAMES = {"ground": 0, "link": 1}
 _WORK_PER_LINK = 10      # work per link: θ, θ̇, (cos θ, sin θ), O (2), a_O (2), Jx, Jz (per chain position)
 
 
@@ -143,6 +155,88 @@ def _point(ip, link, lx, lz, W, wk):
     return W[o_O] + rx, W[o_O + 1] + rz, W[o_a] - w2 * rx, W[o_a + 1] - w2 * rz
 
 
+@njit_borrowing(cache=True, inline="always")
+def _point_velocity(ip, link, px, pz, qd, W, wk):
+    """Velocity J_P q̇ of the point (px, pz) on ``link`` (-1: ground, at rest)."""
+    vx, vz = 0.0, 0.0
+    if link < 0:
+        return vx, vz
+    o_cs, o_chain = ip[I_OCHAINSTART], ip[I_OCHAIN]
+    for i in range(ip[o_cs + link], ip[o_cs + link + 1]):
+        j = ip[o_chain + i]
+        cx, cz, cw = _column(ip, j, px, pz, W, wk)
+        vx += cx * qd[j]
+        vz += cz * qd[j]
+    return vx, vz
+
+
+@njit_borrowing(cache=True, inline="always")
+def _add_point_force(ip, link, px, pz, fx, fz, Q, W, wk):
+    """Q += J_Pᵀ F for the force (fx, fz) at the point (px, pz) on ``link`` (-1: ground, no work)."""
+    if link < 0:
+        return
+    o_cs, o_chain = ip[I_OCHAINSTART], ip[I_OCHAIN]
+    for i in range(ip[o_cs + link], ip[o_cs + link + 1]):
+        j = ip[o_chain + i]
+        cx, cz, cw = _column(ip, j, px, pz, W, wk)
+        Q[j] += cx * fx + cz * fz
+
+
+@njit_borrowing(cache=True, inline="always")
+def _spring_geometry(ip, rp, e, W, wk):
+    """Ends a, b (position x, z and link) and stretch ℓ - ℓ0 of spring ``e``, with e = (r_a - r_b)/ℓ."""
+    o_sp, base = ip[I_OSPRING] + _SPRING_INTS * e, ip[R_OSPRING] + _SPRING_REALS * e
+    la, lb = ip[o_sp], ip[o_sp + 1]
+    pax, paz, bax, baz = _point(ip, la, rp[base], rp[base + 1], W, wk)
+    pbx, pbz, bbx, bbz = _point(ip, lb, rp[base + 2], rp[base + 3], W, wk)
+    dx, dz = pax - pbx, paz - pbz
+    length = math.sqrt(dx * dx + dz * dz)
+    return la, pax, paz, lb, pbx, pbz, dx / length, dz / length, length - rp[base + 6]
+
+
+@njit_borrowing(cache=True, inline="always")
+def _spring_force(ip, rp, e, qd, W, wk):
+    """Ends of spring ``e`` (link and position of a, of b) and the force (fx, fz) = -f e it
+    applies to a (b takes the opposite), f = k (ℓ - ℓ0) + c ℓ̇."""
+    la, pax, paz, lb, pbx, pbz, ex, ez, stretch = _spring_geometry(ip, rp, e, W, wk)
+    base = ip[R_OSPRING] + _SPRING_REALS * e
+    vax, vaz = _point_velocity(ip, la, pax, paz, qd, W, wk)
+    vbx, vbz = _point_velocity(ip, lb, pbx, pbz, qd, W, wk)
+    tension = rp[base + 4] * stretch + rp[base + 5] * (ex * (vax - vbx) + ez * (vaz - vbz))
+    return la, pax, paz, lb, pbx, pbz, -tension * ex, -tension * ez
+
+
+@njit_borrowing(cache=True, inline="always")
+def _applied_force(ip, rp, f, tfv, s0, W, wk):
+    """Link, point (x, z) and force (fx, fz) in the ground frame of point force ``f``; the
+    time-function values (f, f', f'') of function i are at tfv[s0 + 3 i:]."""
+    o_f, n = ip[I_OFORCE] + _FORCE_INTS * f, ip[I_N]
+    link, frame = ip[o_f], ip[o_f + 1]
+    fx, fz = tfv[s0 + 3 * ip[o_f + 2]], tfv[s0 + 3 * ip[o_f + 3]]
+    if frame == 1:
+        c, s = W[wk + 2 * n + 2 * link], W[wk + 2 * n + 2 * link + 1]
+        fx, fz = c * fx - s * fz, s * fx + c * fz
+    r_f = ip[R_OFORCE] + 2 * f
+    px, pz, bx, bz = _point(ip, link, rp[r_f], rp[r_f + 1], W, wk)
+    return link, px, pz, fx, fz
+
+
+@njit_borrowing(cache=True, inline="always")
+def _loads(ip, rp, qd, buf, s0, W, wk):
+    """Add the force elements to Q = buf[0:n] (module docstring): springs and dampers, point
+    forces and joint torques; the time-function values (f, f', f'') of function f are at buf[s0 + 3 f:]."""
+    for e in range(ip[I_NS]):
+        la, pax, paz, lb, pbx, pbz, fx, fz = _spring_force(ip, rp, e, qd, W, wk)
+        _add_point_force(ip, la, pax, paz, fx, fz, buf, W, wk)
+        _add_point_force(ip, lb, pbx, pbz, -fx, -fz, buf, W, wk)
+    for f in range(ip[I_NF]):
+        link, px, pz, fx, fz = _applied_force(ip, rp, f, buf, s0, W, wk)
+        _add_point_force(ip, link, px, pz, fx, fz, buf, W, wk)
+    o_t = ip[I_OTORQUE]
+    for k in range(ip[I_NT]):
+        buf[ip[o_t + 2 * k]] += buf[s0 + 3 * ip[o_t + 2 * k + 1]]
+
+
 @njit_borrowing(cache=True)
 def _evaluate_kernel(ip, rp, q, qd, t, u, buf):
     """Fill a :class:`~cmbs.model.model.Terms` buffer: Q, Φ, A, γ, Φ_t, M, then the scratch.
@@ -210,6 +304,8 @@ def _evaluate_kernel(ip, rp, q, qd, t, u, buf):
     o_act, r_gain = ip[I_OACT], ip[R_OGAIN]
     for k in range(nu):
         buf[ip[o_act + k]] += rp[r_gain + k] * u[k]
+    # ---- springs, dampers, point forces and joint torques
+    _loads(ip, rp, qd, buf, s0, buf, wk)
     # ---- loop closures
     o_cl, r_cl = ip[I_OCLOSURE], ip[R_OCLOSURE]
     for r in range(nr):
@@ -267,7 +363,7 @@ def _point_kinematics_kernel(ip, rp, q, qd, link, lx, lz, work, J):
 
 @njit(cache=True)
 def _energy_kernel(ip, rp, q, qd):
-    """(T, V): T = ½ Σ m_k |J_Gk q̇|² + I_k θ̇_k², V = -Σ m_k g·r_Gk."""
+    """(T, V): T = ½ Σ m_k |J_Gk q̇|² + I_k θ̇_k², V = -Σ m_k g·r_Gk + Σ_springs ½ k (ℓ - ℓ0)²."""
     n = ip[I_N]
     W = np.empty(_WORK_PER_LINK * n)
     _kinematics(ip, rp, q, qd, W, 0)
@@ -286,6 +382,9 @@ def _energy_kernel(ip, rp, q, qd):
             vz += cz * qd[j]
         kinetic += 0.5 * (mass * (vx * vx + vz * vz) + inertia * W[n + k] * W[n + k])
         potential -= mass * (rp[0] * px + rp[1] * pz)
+    for e in range(ip[I_NS]):
+        stretch = _spring_geometry(ip, rp, e, W, 0)[8]
+        potential += 0.5 * rp[ip[R_OSPRING] + _SPRING_REALS * e + 4] * stretch * stretch
     return kinetic, potential
 
 
@@ -304,6 +403,23 @@ def _points_kernel(ip, rp, q):
     return out
 
 
+@njit(cache=True)
+def _point_loads_kernel(ip, rp, q, qd, tfv, links, points, forces):
+    """The forces of the springs (two rows each: end a, end b) and point forces at (q, q̇) into
+    ``links`` (-1: ground), ``points`` and ``forces`` (ground frame); function values in ``tfv``."""
+    W = np.empty(_WORK_PER_LINK * ip[I_N])
+    _kinematics(ip, rp, q, qd, W, 0)
+    for e in range(ip[I_NS]):
+        la, pax, paz, lb, pbx, pbz, fx, fz = _spring_force(ip, rp, e, qd, W, 0)
+        links[2 * e], points[2 * e, 0], points[2 * e, 1], forces[2 * e, 0], forces[2 * e, 1] = la, pax, paz, fx, fz
+        links[2 * e + 1], points[2 * e + 1, 0], points[2 * e + 1, 1] = lb, pbx, pbz
+        forces[2 * e + 1, 0], forces[2 * e + 1, 1] = -fx, -fz
+    for f in range(ip[I_NF]):
+        row = 2 * ip[I_NS] + f
+        links[row], points[row, 0], points[row, 1], forces[row, 0], forces[row, 1] = \
+            _applied_force(ip, rp, f, tfv, 0, W, 0)
+
+
 # ------------------------------------------------------------------ the evaluator
 class JointEquations:
     """Evaluator of a joint-coordinate model (the :class:`~cmbs.model.model.ModelEquations` protocol).
@@ -314,14 +430,16 @@ class JointEquations:
     into the scratch rows the kernel reads).
     """
 
-    __slots__ = ("ip", "rp", "n", "m", "scratch_size", "python", "time_functions", "steady_drivers")
-    #: none: joint models have no dampers, forces or torques (:attr:`cmbs.model.model.Model.work_sources`)
-    work_sources: tuple[str, ...] = ()
+    __slots__ = ("ip", "rp", "n", "m", "scratch_size", "python", "time_functions", "steady_drivers",
+                 "work_sources")
 
     def __init__(self, ip: np.ndarray, rp: np.ndarray, n: int, m: int, scratch_size: int,
-                 time_functions: TimeFunctionPack, steady_drivers: frozenset[str] = frozenset()):
+                 time_functions: TimeFunctionPack, steady_drivers: frozenset[str] = frozenset(),
+                 work_sources: tuple[str, ...] = ()):
         #: the drivers of a constant, which hold their coordinate and do no work
         self.steady_drivers = steady_drivers
+        #: the dampers, point forces and joint torques, by name (:attr:`cmbs.model.model.Model.work_sources`)
+        self.work_sources = work_sources
         self.ip = ip
         self.rp = rp
         self.n = n
@@ -348,8 +466,23 @@ class JointEquations:
         return float(_energy_kernel(self.ip, self.rp, q, qd)[0])
 
     def potential_energy(self, q: np.ndarray) -> float:
-        """V = -Σ_k m_k g·r_Gk (gravity only)."""
+        """V = -Σ_k m_k g·r_Gk + Σ_springs ½ k (ℓ - ℓ0)²."""
         return float(_energy_kernel(self.ip, self.rp, q, np.zeros(self.n))[1])
+
+    def point_loads(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The forces the springs, dampers and point forces apply at (q, q̇, t): per force its link
+        (-1: the ground), point (x, z) and force (f_x, f_z) in the ground frame, two rows per spring
+        (end a, then end b) then one per point force.  Their generalized force is Σ J_Pᵀ F, the
+        part of Q :meth:`evaluate` adds for them (the joint torques act on their coordinates)."""
+        rows = 2 * int(self.ip[I_NS]) + int(self.ip[I_NF])
+        links, points, forces = np.zeros(rows, np.int64), np.zeros((rows, 2)), np.zeros((rows, 2))
+        if rows:
+            terms = self.new_terms()          # the kernel writes the time functions' values into its scratch
+            self.evaluate(np.asarray(q, dtype=float), np.asarray(qd, dtype=float), t, np.zeros(int(self.ip[I_NU])),
+                          terms)
+            _point_loads_kernel(self.ip, self.rp, np.asarray(q, dtype=float), np.asarray(qd, dtype=float),
+                                terms.scratch, links, points, forces)
+        return links, points, forces
 
     def point_positions(self, q: np.ndarray) -> np.ndarray:
         """(n_points, 2): ``{link}.origin`` and ``{link}.end`` of every link, then the user points."""
@@ -468,6 +601,31 @@ class _Actuator:
     gain: float
 
 
+@dataclass(frozen=True)
+class _Spring:
+    name: str
+    ends: tuple[str | tuple[float, float], str | tuple[float, float]]
+    stiffness: float
+    damping: float
+    rest_length: float | None
+
+
+@dataclass(frozen=True)
+class _Force:
+    name: str
+    point: str
+    fx: TimeFunction
+    fz: TimeFunction
+    frame: str
+
+
+@dataclass(frozen=True)
+class _Torque:
+    name: str
+    coordinate: str
+    torque: TimeFunction
+
+
 def _name(value: object, what: str) -> str:
     if not isinstance(value, str) or not value.strip():
         raise ModelError(f"{what} name must be a non-empty string, got {value!r}")
@@ -498,7 +656,8 @@ class JointModelBuilder:
     """Build a planar :class:`~cmbs.model.model.Model` in joint coordinates.
 
     Add links (each with one revolute or prismatic joint to its parent or to the ground), named
-    points on links, loop closures, drivers and actuators, then call :meth:`build`.  Links may
+    points on links, loop closures, drivers, actuators and force elements (springs and dampers,
+    point forces, joint torques), then call :meth:`build`.  Links may
     be added in any order (a parent after its child is fine); names are resolved by
     :meth:`build`.  See the module docstring for the kinematics and the equations.
 
@@ -535,6 +694,9 @@ class JointModelBuilder:
         self._closures: dict[str, _Closure] = {}
         self._drivers: dict[str, _Driver] = {}
         self._actuators: dict[str, _Actuator] = {}
+        self._springs: dict[str, _Spring] = {}
+        self._forces: dict[str, _Force] = {}
+        self._torques: dict[str, _Torque] = {}
 
     # -------------------------------------------------------------- definition
     def add_link(self, name: str, *, parent: str | None, joint: str = "revolute", coordinate: str,
@@ -684,6 +846,68 @@ class JointModelBuilder:
         self._actuators[name] = _Actuator(name, _name(coordinate, "coordinate"), _real(gain, entry, "gain"))
         return self
 
+    def add_spring(self, name: str, i: str | Sequence[float], j: str | Sequence[float], *, stiffness: float,
+                   damping: float = 0.0, rest_length: float | None = None) -> "JointModelBuilder":
+        """Linear spring-damper between two points: tension ``f = k (ℓ - ℓ0) + c ℓ̇`` pulls them together.
+
+        ``i`` and ``j`` are named points (user points, ``"{link}.origin"``, ``"{link}.end"``) or
+        fixed ground positions (x, z); ``rest_length`` ℓ0 defaults to their distance at q0.  The
+        spring's energy ½ k (ℓ - ℓ0)² is part of the model's potential energy; a damper (c > 0)
+        is one of its :attr:`~cmbs.model.model.Model.work_sources`.
+        """
+        name = _name(name, "spring")
+        entry = f"spring {name!r}"
+        if name in self._springs:
+            raise ModelError("duplicate spring name", entry=entry)
+        ends = tuple(_name(end, "point") if isinstance(end, str) else _pair(end, entry, "end") for end in (i, j))
+        if ends[0] == ends[1]:
+            raise ModelError(f"both ends are {ends[0]!r}", entry=entry)
+        if not any(isinstance(end, str) for end in ends):
+            raise ModelError("both ends are on the ground: the spring would act on nothing", entry=entry)
+        stiffness, damping = _real(stiffness, entry, "stiffness"), _real(damping, entry, "damping")
+        if stiffness < 0.0 or damping < 0.0:
+            raise ModelError(f"stiffness and damping must be >= 0, got {stiffness!r} and {damping!r}", entry=entry)
+        if rest_length is not None:
+            rest_length = _real(rest_length, entry, "rest_length")
+            if rest_length < 0.0:
+                raise ModelError(f"rest_length must be >= 0, got {rest_length!r}", entry=entry)
+        self._springs[name] = _Spring(name, ends, stiffness, damping, rest_length)  # type: ignore[arg-type]
+        return self
+
+    def add_force(self, name: str, *, point: str, fx: object = 0.0, fz: object = 0.0,
+                  frame: str = "ground") -> "JointModelBuilder":
+        """A force (fx, fz) at a named point; each component anything
+        :func:`cmbs.model.drivers.as_time_function` accepts (number, expression of t, table,
+        callable).  ``frame`` ``"ground"``: components along the ground axes; ``"link"``: along the
+        axes of the point's link (a follower force, turning with it).  Q gains ``J_Pᵀ F``."""
+        name = _name(name, "force")
+        entry = f"force {name!r}"
+        if name in self._forces:
+            raise ModelError("duplicate force name", entry=entry)
+        if frame not in FRAMES:
+            raise ModelError(f"frame must be 'ground' or 'link', got {frame!r}", entry=entry)
+        try:
+            components = as_time_function(fx), as_time_function(fz)
+        except ModelError as error:
+            raise error.located(entry=entry) from None
+        self._forces[name] = _Force(name, _name(point, "point"), *components, frame)
+        return self
+
+    def add_torque(self, name: str, *, coordinate: str, torque: object) -> "JointModelBuilder":
+        """A generalized force ``torque`` (number, expression of t, table, callable) on a joint
+        coordinate: the torque between a revolute joint's parent and child (N m), or the force
+        along a prismatic joint (N)."""
+        name = _name(name, "torque")
+        entry = f"torque {name!r}"
+        if name in self._torques:
+            raise ModelError("duplicate torque name", entry=entry)
+        try:
+            function = as_time_function(torque)
+        except ModelError as error:
+            raise error.located(entry=entry) from None
+        self._torques[name] = _Torque(name, _name(coordinate, "coordinate"), function)
+        return self
+
     # -------------------------------------------------------------- build
     def _topological_order(self, names: list[str]) -> list[int]:
         index = {name: k for k, name in enumerate(names)}
@@ -707,6 +931,49 @@ class JointModelBuilder:
             for j in path:
                 state[j] = 2
         return order
+
+    def _spring_arrays(self, point_of) -> tuple[list[tuple[int, int]], list[float]]:
+        """Per spring the links of its ends (-1: ground) and its reals (ends, k, c, ℓ0; ℓ0 = 0
+        until :meth:`_default_rest_lengths` when not given)."""
+        ints: list[tuple[int, int]] = []
+        reals: list[float] = []
+        for spring in self._springs.values():
+            entry = f"spring {spring.name!r}"
+            ends = [point_of(end, entry) if isinstance(end, str) else (-1, end) for end in spring.ends]
+            ints.append((ends[0][0], ends[1][0]))
+            reals.extend((*ends[0][1], *ends[1][1], spring.stiffness, spring.damping,
+                          0.0 if spring.rest_length is None else spring.rest_length))
+        return ints, reals
+
+    def _default_rest_lengths(self, ip: np.ndarray, rp: np.ndarray, q0: np.ndarray) -> None:
+        """ℓ0 of the springs given none: their length at q0, written into ``rp``."""
+        n = q0.size
+        work, jacobian = np.zeros(_WORK_PER_LINK * n), np.zeros((2, n))
+
+        def position(link: int, local: np.ndarray) -> np.ndarray:
+            if link < 0:
+                return local
+            return np.array(_point_kinematics_kernel(ip, rp, q0, np.zeros(n), link, local[0], local[1], work,
+                                                     jacobian)[:2])
+
+        for e, spring in enumerate(self._springs.values()):
+            links, base = ip[ip[I_OSPRING] + 2 * e:ip[I_OSPRING] + 2 * e + 2], ip[R_OSPRING] + _SPRING_REALS * e
+            ends = [position(int(links[k]), rp[base + 2 * k:base + 2 * k + 2]) for k in range(2)]
+            length = float(np.hypot(*(ends[0] - ends[1])))
+            if length == 0.0:
+                raise ModelError("its ends coincide at q0, where the spring has no direction: separate them",
+                                 entry=f"spring {spring.name!r}")
+            if spring.rest_length is None:
+                rp[base + 6] = length
+
+    def _work_sources(self) -> tuple[str, ...]:
+        """The dampers, and the point forces and joint torques that are not constant zero."""
+        def nonzero(function: TimeFunction) -> bool:
+            return not (is_constant(function) and function.value == 0)
+
+        return (tuple(f"force {f.name!r}" for f in self._forces.values() if nonzero(f.fx) or nonzero(f.fz))
+                + tuple(f"torque {t.name!r}" for t in self._torques.values() if nonzero(t.torque))
+                + tuple(f"damper {s.name!r}" for s in self._springs.values() if s.damping > 0))
 
     def build(self) -> Model:
         """Resolve names, pack the index and parameter arrays and return the frozen :class:`Model`.
@@ -799,6 +1066,19 @@ class JointModelBuilder:
             constraint_names.append(driver.name)
         labels = [f"driver {name}" for name in constraint_names[nr:]]
         nd = len(driver_ints)
+        spring_ints, spring_reals = self._spring_arrays(point_of)
+        force_ints, force_reals = [], []
+        for force in self._forces.values():
+            link, local = point_of(force.point, f"force {force.name!r}")
+            force_ints.append((link, FRAMES[force.frame], len(functions), len(functions) + 1))
+            force_reals.extend(local)
+            functions += [force.fx, force.fz]
+            labels += [f"force {force.name} fx", f"force {force.name} fz"]
+        torque_ints = []
+        for torque in self._torques.values():
+            torque_ints.append((coordinate_of(torque.coordinate, f"torque {torque.name!r}"), len(functions)))
+            functions.append(torque.torque)
+            labels.append(f"torque {torque.name}")
         seen: set[str] = set()
         for constraint in constraint_names:
             if constraint in seen:
@@ -828,6 +1108,9 @@ class JointModelBuilder:
         put(I_OTAB, pack.table)
         put(I_OOPS, pack.ops)
         put(I_OPOINT, point_links)
+        put(I_OSPRING, spring_ints)
+        put(I_OFORCE, force_ints)
+        put(I_OTORQUE, torque_ints)
         ip = np.concatenate(ip_parts)
         for slot, offset in offsets.items():
             ip[slot] = offset
@@ -835,18 +1118,24 @@ class JointModelBuilder:
         link_reals = [(*link.origin, link.angle, *link.com, link.mass, link.inertia, link.length) for link in links]
         rp_parts = [np.array(self.gravity, float), np.array(link_reals, float).ravel(),
                     np.array(closure_reals, float), np.array([act.gain for act in actuators], float),
-                    np.array(point_locals, float).ravel(), pack.reals]
+                    np.array(point_locals, float).ravel(), pack.reals, np.array(spring_reals, float).ravel(),
+                    np.array(force_reals, float)]
         starts = np.cumsum([0] + [part.size for part in rp_parts])
         rp = np.concatenate(rp_parts)
         ip[I_N], ip[I_NR], ip[I_ND], ip[I_NU] = n, nr, nd, len(actuators)
         ip[I_NTF], ip[I_NOPS], ip[I_DEPTH], ip[I_NP] = pack.count, pack.ops.shape[0], pack.depth, len(point_names)
         ip[R_OCLOSURE], ip[R_OGAIN], ip[R_OPOINT], ip[R_OREALS] = starts[2], starts[3], starts[4], starts[5]
         ip[R_NREALS] = pack.reals.size
+        ip[I_NS], ip[I_NF], ip[I_NT] = len(spring_ints), len(force_ints), len(torque_ints)
+        ip[R_OSPRING], ip[R_OFORCE] = starts[6], starts[7]
+        q0 = np.array([link.q0 for link in links], float)
+        self._default_rest_lengths(ip, rp, q0)
         ip.setflags(write=False)
         rp.setflags(write=False)
         scratch = 3 * pack.count + 3 * pack.depth + _WORK_PER_LINK * n
         equations = JointEquations(ip, rp, n, nr + nd, scratch, pack,
-                                   frozenset(d.name for d in self._drivers.values() if is_constant(d.function)))
+                                   frozenset(d.name for d in self._drivers.values() if is_constant(d.function)),
+                                   self._work_sources())
 
         parameters = {
             "builder": "joints",
@@ -858,6 +1147,9 @@ class JointModelBuilder:
             "drivers": [{"name": d.name, "coordinate": d.coordinate, "function": d.function}
                         for d in self._drivers.values()],
             "actuators": [dict(vars(act)) for act in actuators],
+            "springs": [dict(vars(spring)) for spring in self._springs.values()],
+            "forces": [dict(vars(force)) for force in self._forces.values()],
+            "torques": [dict(vars(torque)) for torque in self._torques.values()],
         }
         return Model(
             name=self.name,
@@ -866,7 +1158,7 @@ class JointModelBuilder:
             constraint_names=tuple(constraint_names),
             drivers=np.array([False] * nr + [True] * nd, dtype=bool),
             actuator_names=tuple(act.name for act in actuators),
-            q0=np.array([link.q0 for link in links], float),
+            q0=q0,
             qd0=np.array([link.qd0 for link in links], float),
             point_names=tuple(point_names),
             lines=tuple((2 * k, 2 * k + 1) for k in range(n)),
