@@ -106,7 +106,7 @@ def andrews() -> Model:
     closures = [E[0] - via_B[0], E[1] - via_B[1], E[0] - via_H[0], E[1] - via_H[1], E[0] - via_K[0], E[1] - via_K[1]]
     model = from_sympy(
         "andrews", coordinates=list(angles), velocities=list(rates), mass_matrix=mass, forces=forces,
-        constraints=closures, drivers=[False] * 6,
+        constraints=closures, drivers=[],
         constraint_names=["E via B x", "E via B z", "E via H x", "E via H z", "E via K x", "E via K z"],
         potential=k["c0"] / 2 * (spring_length - k["l0"]) ** 2 - k["mom"] * beta,
         points={"O": (0, 0), "P": P, "E": E, "A": A, "B": B, "C": C, "D": D, "H": H, "K": K},
