@@ -42,35 +42,49 @@ def _parameter(text: str, option: str = "--param") -> tuple[str, object]:
     return key, raw
 
 
+def unique_pairs(pairs, option: str) -> dict[str, object]:
+    """``(key, value)`` pairs of a repeatable option as a dict; a key given twice is a mistake (the
+    first value would otherwise be dropped without a word)."""
+    result: dict[str, object] = {}
+    for key, value in pairs:
+        if key in result:
+            raise _UsageError(f"{option} {key} given twice ({key}={result[key]!r} and {key}={value!r}): give it once")
+        result[key] = value
+    return result
+
+
 #: numeric options checked after parsing (every command that has them): what each must be
 NUMBER_RULES = {
-    "t_end": "positive", "dt": "positive", "rtol": "positive", "atol": "positive", "sample_rate": "positive",
+    "t_end": "positive", "dt": "positive", "rtol": "fraction", "atol": "positive", "sample_rate": "positive",
     "kp": "non-negative", "kd": "non-negative", "ki": "non-negative", "kf": "non-negative",
     "initial_error": "finite",
 }
 
 
 def _check_numbers(args: argparse.Namespace) -> None:
-    """Every numeric option of NUMBER_RULES given on the command line is finite (and > 0 or >= 0):
-    an infinite --t-end would otherwise fail deep inside as an overflow."""
-    wanted = {"positive": "a finite number > 0", "non-negative": "a finite number >= 0", "finite": "a finite number"}
+    """Every numeric option of NUMBER_RULES given on the command line is finite (and > 0, >= 0, or
+    in (0, 1) for a relative tolerance: an rtol of 1 accepts a 100 % error): an infinite --t-end
+    would otherwise fail deep inside as an overflow."""
+    wanted = {"positive": "a finite number > 0", "non-negative": "a finite number >= 0", "finite": "a finite number",
+              "fraction": "a finite number > 0 and < 1"}
     for name, rule in NUMBER_RULES.items():
         value = getattr(args, name, None)
         if value is None:
             continue
-        ok = math.isfinite(value) and {"positive": value > 0, "non-negative": value >= 0, "finite": True}[rule]
+        ok = math.isfinite(value) and {"positive": value > 0, "non-negative": value >= 0, "finite": True,
+                                       "fraction": 0 < value < 1}[rule]
         if not ok:
             raise _UsageError(f"--{name.replace('_', '-')} must be {wanted[rule]}, got {value!r}")
 
 
 def _load(args: argparse.Namespace) -> cmbs.Model:
-    model = cmbs.load(args.model, **dict(_parameter(p) for p in args.param))
+    model = cmbs.load(args.model, **unique_pairs((_parameter(p) for p in args.param), "--param"))
     return model.without_drivers() if getattr(args, "undriven", False) else model
 
 
 def _formulation_options(args: argparse.Namespace) -> dict[str, object]:
     """``--option key=value`` pairs; tuples of names for matrix-r's ``independent``."""
-    options = dict(_parameter(text, "--option") for text in args.option)
+    options = unique_pairs((_parameter(text, "--option") for text in args.option), "--option")
     if isinstance(options.get("independent"), str):
         options["independent"] = tuple(options["independent"].split(","))
     return options
@@ -161,13 +175,14 @@ def _simulate(args: argparse.Namespace) -> int:
     run = simulate(model, formulation=formulation, formulation_options=_formulation_options(args),
                    progress=True, **_simulation_settings(args))
     info = run.info
-    energy, error = run["energy"], run["constraint_error"]
-    print(f"{model.name}: {info['formulation']} + {info['integrator']}, {info['status']} at t = {run.t[-1]:.6g} s "
+    error = run["constraint_error"]
+    print(f"{model.name}: {info['formulation']} + {info['integrator']}, {info['status']} {_reached(run)} "
           f"({info['steps']} steps, {info['wall_time']:.3g} s wall)")
     drift = f" ({info['energy_drift']:.2g} of the largest kinetic energy)" if "energy_drift" in info else ""
-    print(f"  max constraint error {error.max(initial=0.0):.3g}, max velocity constraint error "
-          f"{run['velocity_constraint_error'].max(initial=0.0):.3g}, max |E - E0| "
-          f"{np.abs(energy - energy[0]).max(initial=0.0):.3g} J{drift}")
+    if run.t.size:
+        print(f"  max constraint error {error.max(initial=0.0):.3g}, max velocity constraint error "
+              f"{run['velocity_constraint_error'].max(initial=0.0):.3g}, max |E - E0| "
+              f"{_energy_change(run['energy']):.3g} J{drift}")
     if info.get("note"):
         print(f"  note: {info['note']}")
     if args.out:
@@ -175,15 +190,29 @@ def _simulate(args: argparse.Namespace) -> int:
     if args.plot:
         from cmbs.plotting import plot_simulation, save_figure
 
-        print(f"  figure -> {save_figure(plot_simulation(run, model=model), args.plot)}")
+        print(f"  figure -> {save_figure(plot_simulation(run, model=model), args.plot) if run.t.size else NOTHING}")
     if args.animate:
         from cmbs.animate import animate
 
-        print(f"  animation -> {animate(model, run, args.animate)}")
+        print(f"  animation -> {animate(model, run, args.animate) if run.t.size else NOTHING}")
     if info["status"] != "success":
         print(f"cmbs: simulation failed: {info['message']}", file=sys.stderr)
         return 1
     return 0
+
+
+#: what a run that failed before its first output instant shows instead of a figure or animation
+NOTHING = "not written: no instant computed"
+
+
+def _reached(run: cmbs.Trajectory) -> str:
+    """Where a run stopped: its last output instant, or t = 0 when it failed before its first."""
+    return f"at t = {run.t[-1]:.6g} s" if run.t.size else "at t = 0 s (no instant computed)"
+
+
+def _energy_change(energy: np.ndarray) -> float:
+    """max |E - E0| over a run's outputs (NaN when it has none)."""
+    return float(np.abs(energy - energy[0]).max()) if energy.size else float("nan")
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -210,7 +239,7 @@ def _compare(args: argparse.Namespace) -> int:
         energy = run["energy"]
         drift = f"{run.info['energy_drift']:.3g}" if "energy_drift" in run.info else "-"
         print(f"{name:<16}{run.info['status']:<9}{deviation:>11.3g}{run['constraint_error'].max(initial=0.0):>12.3g}"
-              f"{np.abs(energy - energy[0]).max(initial=0.0):>12.3g}{drift:>10}{run.info['wall_time']:>9.3g}")
+              f"{_energy_change(energy):>12.3g}{drift:>10}{run.info['wall_time']:>9.3g}")
         failed |= run.info["status"] != "success"
         if run.info["status"] != "success":
             print(f"  {name}: {run.info['message']}")
@@ -311,7 +340,7 @@ def _track(args: argparse.Namespace) -> int:
                    label=", ".join(f.text for f in faults) or "nominal", **options)
     run = result.run
     print(f"{plant.name}: {args.controller} tracking of {', '.join(coordinates)}, {run.info['status']} "
-          f"at t = {run.t[-1]:.6g} s")
+          f"{_reached(run)}")
     settling = result.settling_time
     settled = "- (no initial error)" if np.isnan(settling) else "never" if np.isinf(settling) else f"{settling:.4g} s"
     print(f"  NRMSE {', '.join(f'{v:.4g}' for v in result.nrmse)}; settling time (1 %) {settled}")
@@ -321,7 +350,7 @@ def _track(args: argparse.Namespace) -> int:
     if args.plot:
         from cmbs.plotting import plot_simulation, save_figure
 
-        print(f"  figure -> {save_figure(plot_simulation(run, model=plant), args.plot)}")
+        print(f"  figure -> {save_figure(plot_simulation(run, model=plant), args.plot) if run.t.size else NOTHING}")
     return 0 if result.succeeded else 1
 
 

@@ -73,7 +73,11 @@ def variants_from(args: argparse.Namespace, model) -> list:
 
     from cmbs.library import check_parameters, names
 
-    fixed = dict(_fixed(text) for text in args.param)
+    from cmbs.cli import unique_pairs
+
+    fixed = _fixed_parameters(args.param)
+    unique_pairs((_values(text, "--vary") for text in args.vary), "--vary")
+    unique_pairs((_values(text, "--mass") for text in args.mass), "--mass")
     axes = [("parameter", *_values(text, "--vary")) for text in args.vary]
     if axes and args.model in names():
         for _, key, values in axes:              # each value of the grid, checked before any run
@@ -116,6 +120,13 @@ def _listing(names, shown: int = 12) -> str:
     return ", ".join(names[:shown]) + (f", ... ({len(names)} in all)" if len(names) > shown else "")
 
 
+def _fixed_parameters(texts: list[str]) -> dict[str, object]:
+    """The ``--param`` options as a dict (each key once)."""
+    from cmbs.cli import unique_pairs
+
+    return unique_pairs((_fixed(text) for text in texts), "--param")
+
+
 def _fixed(text: str) -> tuple[str, object]:
     key, values = _values(text, "--param")
     if len(values) != 1:
@@ -142,7 +153,7 @@ def _sweep(args: argparse.Namespace) -> int:
                               f"{', '.join(FORMULATIONS)}")
     if args.undriven and args.vary:
         raise SweepUsageError("--undriven cannot be combined with --vary (the varied model is rebuilt by name)")
-    parameters = dict(_fixed(text) for text in args.param)
+    parameters = _fixed_parameters(args.param)
     nominal = load(args.model, **parameters)
     nominal = nominal.without_drivers() if args.undriven else nominal
     variants = variants_from(args, nominal)

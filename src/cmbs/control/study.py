@@ -23,7 +23,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from cmbs.control.faults import ActuatorFault, SensorNoise, mass_fault
+from cmbs.control.faults import ActuatorFault, SensorNoise, check_mass_factor, mass_fault
 from cmbs.errors import CmbsError
 from cmbs.kinematics import assemble
 from cmbs.metrics import nrmse, peak_norm, rms_norm, settling_time
@@ -55,6 +55,8 @@ class Fault:
             except ValueError:
                 values = ()
             if values and all(np.isfinite(values)):
+                if kind == "mass":
+                    check_mass_factor(segment, values[0])
                 return cls(text, kind, values, segment)
         raise CmbsError(f"fault {text!r}: expected {FAULT_SYNTAX}")
 
