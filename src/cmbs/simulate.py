@@ -560,6 +560,8 @@ def _singular_message(model: Model, solver, q: np.ndarray, qd: np.ndarray, t: fl
         solver.accelerations(model.evaluate(q, qd, t, u), q, qd, t)
     except CmbsError as error:
         return str(error)
+    except (np.linalg.LinAlgError, ArithmeticError, ValueError) as error:   # the diagnosis failed, not the run
+        return f"singular system at t={t:.6g} ({type(error).__name__}: {error})"
     return f"singular system at t={t:.6g}"
 
 

@@ -133,6 +133,9 @@ class NaturalModelBuilder:
     _springs: dict[str, tuple] = field(default_factory=dict)
     _actuators: dict[str, tuple[str, float]] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        self.gravity = _pair(self.gravity, "model", "gravity")
+
     # ------------------------------------------------------------------ entries
     def _new_name(self, table: dict, section: str, name: str) -> str:
         if not isinstance(name, str) or not name:
@@ -298,12 +301,33 @@ class NaturalModelBuilder:
         return _Assembler(self).model()
 
 
+#: the largest magnitude of a number of a model (coordinate, length, mass, inertia, gravity, stiffness,
+#: damping, gain, initial value, SI units): far above any mechanism, and its squares and products (in
+#: M, K, energies: at most ~1e48) stay far from the overflow of doubles (1.8e308)
+MAX_MAGNITUDE = 1e12
+#: the shortest length of a segment, spring or angle direction, relative to the model size (the
+#: largest coordinate or given length, at least 1 m): the length is still resolved to ~4 digits
+#: by coordinates of that size (double precision 2.2e-16), and 1/L, 1/L² stay far from overflow
+MIN_LENGTH_RATIO = 1e-12
+
+
 def _finite(value: object, entry: str, label: str) -> float:
+    """``value`` as a float: a number, finite, of magnitude at most :data:`MAX_MAGNITUDE`."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
         raise ModelError(f"{label} must be a number, got {value!r}", entry=entry)
     if not math.isfinite(float(value)):
         raise ModelError(f"{label} must be finite, got {value!r}", entry=entry)
+    if abs(float(value)) > MAX_MAGNITUDE:
+        raise ModelError(f"{label} = {float(value):g} is out of range: |{label}| must be <= {MAX_MAGNITUDE:g}",
+                         entry=entry)
     return float(value)
+
+
+def _check_length(length: float, size: float, entry: str, what: str) -> None:
+    """A length at least :data:`MIN_LENGTH_RATIO` of ``size`` (the model size, at least 1 m)."""
+    if length < MIN_LENGTH_RATIO * size:
+        raise ModelError(f"{what} {length:g} is below {MIN_LENGTH_RATIO:g} of the model size {size:g} (the largest "
+                         "coordinate or given length, at least 1): the points are (nearly) coincident", entry=entry)
 
 
 def _pair(value: object, entry: str, label: str) -> tuple[float, float]:
@@ -362,6 +386,11 @@ class _Assembler:
             self.names.append(name)
             self.kinds.append("angle")
             self.q0.append(initial if initial is not None else actual)
+
+    def _size(self) -> float:
+        """The model size: the largest point coordinate or given segment length, at least 1 (m)."""
+        return max([1.0, *(max(abs(p.x), abs(p.z)) for p in self.b._points.values()),
+                    *(s.length for s in self.b._segments.values() if s.length is not None)])
 
     def _work_sources(self) -> tuple[str, ...]:
         """The forces and torques that are not constant zero, and the springs with damping."""
@@ -424,6 +453,7 @@ class _Assembler:
     def model(self) -> Model:
         b = self.b
         n = len(self.names)
+        size = self._size()
         constraint_names: list[str] = []
 
         rigid, lengths2, lines = [], [], []
@@ -434,6 +464,7 @@ class _Assembler:
             length = segment.length if segment.length is not None else float(np.hypot(*(end - start)))
             if length <= 0:
                 raise ModelError(f"its points {segment.i!r} and {segment.j!r} coincide: length is 0", entry=entry)
+            _check_length(length, size, entry, "length")
             segment.length = length
             rigid.append(self._xz(segment.i, entry) + self._xz(segment.j, entry))
             lengths2.append(length**2)
@@ -505,6 +536,7 @@ class _Assembler:
             if initial == 0:
                 raise ModelError(f"its points {i!r} and {j!r} coincide at their initial positions: the direction "
                                  "of the spring force is undefined", entry=entry)
+            _check_length(initial, size, entry, "initial length")
             rest = rest if rest is not None else initial
             spring_parameters.append([stiffness, damping, rest])
 
@@ -513,6 +545,9 @@ class _Assembler:
             actuator_rows.append([self._coordinate(coordinate, f"actuators.{name}")])
             gains.append(gain)
 
+        if n == 0:
+            raise ModelError("the model has no coordinates: every point is fixed (give a moving point)",
+                             entry="points")
         n_ext = n + len(self.constants)
         mass_ext = np.zeros((n_ext, n_ext))
         gravity_ext = np.zeros(n_ext)
