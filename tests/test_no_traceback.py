@@ -11,6 +11,7 @@ import pytest
 import cmbs
 from cmbs.cli import main
 from cmbs.errors import CmbsError, ModelError
+from cmbs.files_io import PARTIAL
 
 PENDULUM = """
 [points]
@@ -212,12 +213,10 @@ def test_the_singular_message_survives_a_failing_diagnosis():
                          ids=["unwritable", "directory", "name-too-long"])
 def test_an_output_path_that_cannot_be_written_is_refused_before_any_work(tmp_path, capsys, monkeypatch, command,
                                                                            bad):
-    import cmbs.simulate
-
     def no_work(*args, **kwargs):
-        raise AssertionError("the run started before the output path was checked")
+        raise AssertionError("the model was loaded before the output path was checked")
 
-    monkeypatch.setattr(cmbs.simulate, "simulate", no_work)
+    monkeypatch.setattr(cmbs, "load", no_work)
     (tmp_path / "a-directory.npz").mkdir()
     for suffix in (".png", ".gif", ".csv"):
         (tmp_path / f"a-directory{suffix}").mkdir()
@@ -305,3 +304,41 @@ def test_a_relative_tolerance_of_one_or_more_is_refused(capsys, command):
 def test_a_repeated_key_is_refused(capsys, command):
     assert main(command) == 2
     assert "given twice" in one_error_line(capsys)
+
+
+def test_sigterm_during_a_write_leaves_no_temporary(tmp_path):
+    """The CLI turns SIGTERM into an unwinding exception: a write in progress removes its
+    temporary and the command exits 143."""
+    import signal
+    import subprocess
+    import sys
+
+    script = textwrap.dedent(f"""
+        import sys, time
+        from pathlib import Path
+        import cmbs.cli, cmbs.trajectory
+        from cmbs.files_io import atomic_path
+
+        def slow_save(self, path):
+            with atomic_path(Path(path)) as temporary, open(temporary, "wb") as stream:
+                stream.write(b"half a result")
+                stream.flush()
+                print("writing", flush=True)
+                time.sleep(60)
+
+        cmbs.trajectory.Trajectory.save = slow_save
+        sys.exit(cmbs.cli.main(["simulate", "pendulum", "--t-end", "0.01", "--out", {str(tmp_path / 'r.npz')!r}]))
+        """)
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True)
+    try:
+        for line in child.stdout:
+            if line.startswith("writing"):
+                break
+        assert any(PARTIAL in path.name for path in tmp_path.iterdir())
+        child.send_signal(signal.SIGTERM)
+        assert child.wait(timeout=30) == 143
+    finally:
+        child.kill()
+    assert child.stderr.read().strip().endswith("cmbs: terminated")
+    assert list(tmp_path.iterdir()) == []

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import signal
 import sys
 from typing import Sequence
 
@@ -20,6 +21,15 @@ from cmbs.files_io import checked_output
 
 class _UsageError(CmbsError):
     """A bad command-line option."""
+
+
+class _Terminated(BaseException):
+    """SIGTERM arrived: unwinds like KeyboardInterrupt, so that a write in progress removes its
+    temporary file (:func:`cmbs.files_io.atomic_path`)."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise _Terminated
 
 
 #: words read as a yes/no value in ``key=value`` options
@@ -551,9 +561,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         from cmbs.jit import announce_compilation
 
         announce_compilation(lambda line: print(line, file=sys.stderr, flush=True))
+    previous = _catch_sigterm()
     try:
         _check_numbers(args)
         return args.run(args)
+    except _Terminated:
+        print("cmbs: terminated", file=sys.stderr)
+        return 143
     except CmbsError as error:
         print(f"cmbs: error: {error}", file=sys.stderr)
         return error.exit_status
@@ -565,6 +579,18 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # no second error at exit
         return 0
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _catch_sigterm():
+    """Turn SIGTERM into :class:`_Terminated` (main thread only); the previous handler, or None."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _terminate)
 
 
 if __name__ == "__main__":
