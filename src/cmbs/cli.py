@@ -67,7 +67,7 @@ def unique_pairs(pairs, option: str) -> dict[str, object]:
 NUMBER_RULES = {
     "t_end": "positive", "dt": "positive", "rtol": "fraction", "atol": "positive", "sample_rate": "positive",
     "kp": "non-negative", "kd": "non-negative", "ki": "non-negative", "kf": "non-negative",
-    "initial_error": "finite",
+    "initial_error": "finite", "worker_timeout": "positive",
 }
 
 

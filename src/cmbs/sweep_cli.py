@@ -32,6 +32,9 @@ def add_sweep_command(commands, model_command: Callable, dynamics_options: Calla
     command.add_argument("--every", type=int, default=1, help="record every N-th step of --dt (default 1)")
     command.add_argument("--workers", type=int, help="local worker processes (default: the CPUs; 1: this process)")
     command.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run on this Dask scheduler")
+    command.add_argument("--worker-timeout", type=float, default=60.0, metavar="SECONDS",
+                         help="Dask: give up when the cluster has had no worker this long; the variants not done "
+                              "fail (default 60)")
     command.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                          help="progress bar on stderr (default: when stderr is a terminal)")
     command.add_argument("--coordinate", help="coordinate of the figure (default: the first)")
@@ -163,7 +166,7 @@ def _sweep(args: argparse.Namespace) -> int:
                               f"{_listing(nominal.coordinate_names)}")
     result = sweep(target, variants, t_end=args.t_end, formulation=args.formulation, integrator=args.integrator,
                    dt=args.dt, rtol=args.rtol, atol=args.atol, project=args.project, every=args.every,
-                   workers=args.workers, scheduler=args.scheduler,
+                   workers=args.workers, scheduler=args.scheduler, worker_timeout=args.worker_timeout,
                    progress=sys.stderr.isatty() if args.progress is None else args.progress)
     failed = int(np.count_nonzero(result.status != "success"))
     mode, used = result.info["mode"], result.info["workers"]
