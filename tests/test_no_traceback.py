@@ -142,6 +142,21 @@ def test_numbers_out_of_range_are_named_at_load(tmp_path, capsys, text, entry, p
     assert problem in line
 
 
+def test_a_table_value_out_of_range_is_named(tmp_path, capsys):
+    path = write(tmp_path, PENDULUM + """
+[angles.th]
+segment = "rod"
+
+[drivers.d]
+coordinate = "th"
+table = { t = [0.0, 1.0], value = [0.0, 1e200] }
+interpolation = "linear"
+""")
+    assert main(["describe", str(path)]) == 2
+    assert one_error_line(capsys) == (f"cmbs: error: {path}: drivers.d.table: table has a time or value of "
+                                      "magnitude above 1e+12 (out of range)")
+
+
 def test_the_builder_refuses_the_same_numbers():
     builder = cmbs.NaturalModelBuilder("big", gravity=(0.0, -9.81))
     with pytest.raises(ModelError, match=r"points.P: x = 1e\+200 is out of range"):

@@ -40,6 +40,7 @@ import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions, is_constant
+from cmbs.model.limits import MAX_MAGNITUDE, MIN_LENGTH_RATIO
 from cmbs.model.model import Model, Terms
 from cmbs.model.packing import int_section, pack, real_section
 
@@ -299,16 +300,6 @@ class NaturalModelBuilder:
     def build(self) -> Model:
         """Validate the whole model and return it (coordinates at the approximate initial guess)."""
         return _Assembler(self).model()
-
-
-#: the largest magnitude of a number of a model (coordinate, length, mass, inertia, gravity, stiffness,
-#: damping, gain, initial value, SI units): far above any mechanism, and its squares and products (in
-#: M, K, energies: at most ~1e48) stay far from the overflow of doubles (1.8e308)
-MAX_MAGNITUDE = 1e12
-#: the shortest length of a segment, spring or angle direction, relative to the model size (the
-#: largest coordinate or given length, at least 1 m): the length is still resolved to ~4 digits
-#: by coordinates of that size (double precision 2.2e-16), and 1/L, 1/L² stay far from overflow
-MIN_LENGTH_RATIO = 1e-12
 
 
 def _finite(value: object, entry: str, label: str) -> float:
