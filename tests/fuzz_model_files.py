@@ -66,13 +66,13 @@ class Report:
     statuses: Counter = field(default_factory=Counter)
     uncaught: list[tuple[str, str, str]] = field(default_factory=list)    # (mutations, error, traceback tail)
     timeouts: list[str] = field(default_factory=list)
-    warned: int = 0
+    warned: list[tuple[str, str]] = field(default_factory=list)    # (mutations, first RuntimeWarning)
 
     def summary(self) -> str:
         kinds = Counter(error.split(":", 1)[0] for _, error, _ in self.uncaught)
         lines = [f"{self.count} mutants: exit status {dict(sorted(self.statuses.items()))}; "
                  f"{len(self.uncaught)} uncaught exception(s); {len(self.timeouts)} timeout(s); "
-                 f"{self.warned} with a RuntimeWarning"]
+                 f"{len(self.warned)} with a RuntimeWarning"]
         lines += [f"  {count} x {kind}" for kind, count in kinds.most_common()]
         return "\n".join(lines)
 
@@ -339,9 +339,11 @@ def fuzz(count: int, seed: int = 1, keep: Path | None = None,
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 outcome, value = check(path)
-            report.warned += any(issubclass(w.category, RuntimeWarning) for w in caught)
             report.count += 1
             label = f"{source_name}: {'; '.join(mutations)}"
+            runtime = [w for w in caught if issubclass(w.category, RuntimeWarning)]
+            if runtime:
+                report.warned.append((label, f"{runtime[0].filename}:{runtime[0].lineno}: {runtime[0].message}"))
             if outcome == "status":
                 report.statuses[value] += 1
             elif outcome == "timeout":
@@ -375,6 +377,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"uncaught: {error}\n    in {label}")
     for label in report.timeouts[:20]:
         print(f"timeout: {label}")
+    for label, warning in report.warned[:20]:
+        print(f"RuntimeWarning: {warning}\n    in {label}")
     return 1 if report.uncaught else 0
 
 

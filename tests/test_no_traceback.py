@@ -357,3 +357,19 @@ def test_sigterm_during_a_write_leaves_no_temporary(tmp_path):
         child.kill()
     assert child.stderr.read().strip().endswith("cmbs: terminated")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_tracking_that_fails_at_its_first_instant_is_a_failed_run_not_a_traceback():
+    """The slider-crank at its dead centre: lagrange cannot start, so the tracking run has no
+    instant; its measures are NaN (nothing to measure) and it is reported as failed."""
+    from cmbs.control.study import format_table, track
+
+    plant = cmbs.load("slider-crank", crank_angle=90)
+    times = np.array([0.0, 0.01, 0.02])
+    zeros = np.zeros((3, plant.n))
+    motion = cmbs.Trajectory(times, np.tile(plant.q0, (3, 1)), zeros, zeros, plant.coordinate_names)
+    result = track(plant, lambda t, q, qd: np.zeros(plant.n_u), motion, ["theta1"], t_end=0.02)
+    assert not result.succeeded and result.run.t.size == 0
+    assert "dependent: rigid rod" in result.run.info["message"]
+    assert np.isnan(result.nrmse).all() and np.isnan(result.rms_norm) and np.isnan(result.peak_norm)
+    assert "failed" in format_table([result])

@@ -361,6 +361,8 @@ def _track(args: argparse.Namespace) -> int:
         from cmbs.plotting import plot_simulation, save_figure
 
         print(f"  figure -> {save_figure(plot_simulation(run, model=plant), args.plot) if run.t.size else NOTHING}")
+    if not result.succeeded:
+        print(f"cmbs: tracking failed: {run.info['message']}", file=sys.stderr)
     return 0 if result.succeeded else 1
 
 

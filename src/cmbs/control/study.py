@@ -119,6 +119,9 @@ def track(plant: Model, law: Law, motion: Trajectory, coordinates: Sequence[str]
     run = simulate(plant, t_end=t_end, u=law, q0=q0, dt=dt, **options)
     wall = time.perf_counter() - started
     k = run.t.size
+    if k < 2:     # the run failed at (or right after) its first instant: nothing to measure
+        return TrackingRun(label, run, tuple(coordinates), np.full(len(coordinates), np.nan), np.nan, np.nan, np.nan,
+                           wall)
     reference = motion.q[:k, columns]
     values = run.q[:, [run.names.index(name) for name in coordinates]]
     error = reference - values
