@@ -157,6 +157,17 @@ interpolation = "linear"
                                       "magnitude above 1e+12 (out of range)")
 
 
+@pytest.mark.parametrize("model, key, value, shown", [
+    ("human", "height", "1e300", "1e+300"), ("slider-crank", "crank_speed", "1e300", "1e+300"),
+    ("chaplygin-sleigh", "inertia", "1e300", "1e+300"), ("chain", "links", "10000000000000", "10000000000000"),
+])
+def test_a_library_parameter_out_of_range_is_named(capsys, model, key, value, shown):
+    """human height=1e300 overflowed in its builder; the others loaded a model of infinite energy."""
+    assert main(["describe", model, "--param", f"{key}={value}"]) == 2
+    assert one_error_line(capsys) == (f"cmbs: error: model {model!r}: parameter {key} = {shown} is out of range: "
+                                      f"|{key}| must be <= 1e+12")
+
+
 def test_the_builder_refuses_the_same_numbers():
     builder = cmbs.NaturalModelBuilder("big", gravity=(0.0, -9.81))
     with pytest.raises(ModelError, match=r"points.P: x = 1e\+200 is out of range"):
