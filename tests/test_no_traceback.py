@@ -320,6 +320,11 @@ def test_a_relative_tolerance_of_one_or_more_is_refused(capsys, command):
     assert "--rtol must be a finite number > 0 and < 1, got 2.0" in one_error_line(capsys)
 
 
+def test_simulate_refuses_a_relative_tolerance_of_one_or_more():
+    with pytest.raises(CmbsError, match="rtol must be < 1, got 2"):
+        cmbs.simulate(cmbs.load("pendulum"), t_end=0.1, rtol=2.0)
+
+
 @pytest.mark.parametrize("command", [
     ["describe", "slider-crank", "--param", "crank_angle=10", "--param", "crank_angle=20"],
     ["simulate", "pendulum", "--t-end", "0.05", "--formulation", "penalty", "--option", "alpha=1e6",

@@ -10,7 +10,7 @@ import argparse
 import math
 import signal
 import sys
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -52,7 +52,7 @@ def _parameter(text: str, option: str = "--param") -> tuple[str, object]:
     return key, raw
 
 
-def unique_pairs(pairs, option: str) -> dict[str, object]:
+def unique_pairs(pairs: Iterable[tuple[str, object]], option: str) -> dict[str, object]:
     """``(key, value)`` pairs of a repeatable option as a dict; a key given twice is a mistake (the
     first value would otherwise be dropped without a word)."""
     result: dict[str, object] = {}
