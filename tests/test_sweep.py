@@ -235,6 +235,23 @@ def test_dask_sweep_whose_last_worker_dies_stops_with_a_message(cluster):
     assert np.all(result.recorded[failed] == 0) and np.all(result.recorded[~failed] == len(result.t))
 
 
+def test_a_task_that_killed_its_workers_is_a_failed_variant():
+    """Dask gives up a task that took down every worker that ran it (KilledWorker): that variant
+    fails with the reason, as a variant whose run fails, instead of a traceback for the sweep."""
+    from types import SimpleNamespace
+
+    from cmbs.sweep import _task_output
+
+    class Lost:
+        def result(self):
+            worker = SimpleNamespace(address="tcp://127.0.0.1:4000")     # what the scheduler's record shows
+            raise distributed.KilledWorker("run_variant-1", worker, allowed_failures=3)
+
+    output = _task_output(Lost(), 4)
+    assert output["status"] == "failed" and output["q"].shape == (0, 4)
+    assert output["message"].startswith("its task was lost with every Dask worker that ran it")
+
+
 def test_dask_sweep_names_an_unreachable_scheduler(four_bar):
     with pytest.raises(CmbsError, match="cannot reach the Dask scheduler"):
         sweep(four_bar, [Variant()], t_end=0.01, formulation="penalty", scheduler="tcp://127.0.0.1:9")

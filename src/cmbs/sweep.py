@@ -366,7 +366,18 @@ def _run_dask(model: str | Model, settings: RunSettings, variants: list[Variant]
         if lost:
             client.cancel(list(lost))
         message = f"no Dask worker for {worker_timeout:g} s (the last worker died or none joined): not run"
-        return [_failed_output(n, message) if future in lost else future.result() for future in futures]
+        return [_failed_output(n, message) if future in lost else _task_output(future, n) for future in futures]
+
+
+def _task_output(future, n: int) -> dict:
+    """The output of a finished Dask task; a variant whose task killed every worker that ran it
+    (Dask's KilledWorker, after its allowed failures) is a failed variant, not a traceback."""
+    from distributed import KilledWorker
+
+    try:
+        return future.result()
+    except KilledWorker as error:
+        return _failed_output(n, f"its task was lost with every Dask worker that ran it ({error})")
 
 
 def _await_with_workers(client, futures: list, bar: tqdm, worker_timeout: float) -> set:
@@ -379,15 +390,16 @@ def _await_with_workers(client, futures: list, bar: tqdm, worker_timeout: float)
     while pending:
         try:
             done, pending = wait(pending, timeout=poll, return_when="FIRST_COMPLETED")
-            bar.update(len(done))
-        except TimeoutError:
-            pass
-        if client.scheduler_info()["workers"]:
-            idle_since = None
-        elif idle_since is None:
-            idle_since = time.monotonic()
-        elif time.monotonic() - idle_since >= worker_timeout:
-            return pending
+        except TimeoutError:          # nothing finished within poll seconds: is any worker left?
+            if client.scheduler_info()["workers"]:
+                idle_since = None
+            elif idle_since is None:
+                idle_since = time.monotonic()
+            elif time.monotonic() - idle_since >= worker_timeout:
+                return pending
+            continue
+        bar.update(len(done))
+        idle_since = None
     return set()
 
 
