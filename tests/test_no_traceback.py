@@ -389,3 +389,17 @@ def test_tracking_that_fails_at_its_first_instant_is_a_failed_run_not_a_tracebac
     assert "dependent: rigid rod" in result.run.info["message"]
     assert np.isnan(result.nrmse).all() and np.isnan(result.rms_norm) and np.isnan(result.peak_norm)
     assert "failed" in format_table([result])
+
+
+@pytest.mark.parametrize("command, problem", [
+    (["track", "four-bar", "--t-end", "0.1", "--kp", "1e300"], "--kp = 1e+300 is out of range: |kp| must be <= 1e+12"),
+    (["track", "four-bar", "--t-end", "0.1", "--fault", "scale:1e300"],
+     "fault 'scale:1e300': 1e+300 is out of range: values must be <= 1e+12 in magnitude"),
+    (["sweep", "pendulum", "--t-end", "0.1", "--speed", "P.x=0,1e300"],
+     "--speed P.x: 1e+300 is out of range: values must be <= 1e+12 in magnitude"),
+], ids=["gain", "fault", "sweep-speed"])
+def test_an_option_out_of_range_is_refused_before_any_work(capsys, command, problem):
+    """A gain or fault of 1e300 made the adaptive step shrink without end (the run never
+    finished); a speed of 1e300 failed every variant at t = 0."""
+    assert main(command) == 2
+    assert problem in one_error_line(capsys)

@@ -17,6 +17,7 @@ import numpy as np
 import cmbs
 from cmbs.errors import CmbsError
 from cmbs.files_io import checked_output
+from cmbs.model.limits import MAX_MAGNITUDE
 
 
 class _UsageError(CmbsError):
@@ -73,8 +74,9 @@ NUMBER_RULES = {
 
 def _check_numbers(args: argparse.Namespace) -> None:
     """Every numeric option of NUMBER_RULES given on the command line is finite (and > 0, >= 0, or
-    in (0, 1) for a relative tolerance: an rtol of 1 accepts a 100 % error): an infinite --t-end
-    would otherwise fail deep inside as an overflow."""
+    in (0, 1) for a relative tolerance: an rtol of 1 accepts a 100 % error) and of magnitude at
+    most MAX_MAGNITUDE, as the numbers of a model: an infinite --t-end would otherwise fail deep
+    inside as an overflow."""
     wanted = {"positive": "a finite number > 0", "non-negative": "a finite number >= 0", "finite": "a finite number",
               "fraction": "a finite number > 0 and < 1"}
     for name, rule in NUMBER_RULES.items():
@@ -85,6 +87,9 @@ def _check_numbers(args: argparse.Namespace) -> None:
                                        "fraction": 0 < value < 1}[rule]
         if not ok:
             raise _UsageError(f"--{name.replace('_', '-')} must be {wanted[rule]}, got {value!r}")
+        if abs(value) > MAX_MAGNITUDE:    # e.g. a gain of 1e300 shrinks an adaptive step without end
+            raise _UsageError(f"--{name.replace('_', '-')} = {value!r} is out of range: |{name}| must be <= "
+                              f"{MAX_MAGNITUDE:g}")
 
 
 def _load(args: argparse.Namespace) -> cmbs.Model:

@@ -10,7 +10,7 @@ from typing import Callable
 
 import numpy as np
 
-from cmbs.errors import CmbsError, did_you_mean
+from cmbs.errors import CmbsError, check_in_range, did_you_mean
 
 
 class SweepUsageError(CmbsError):
@@ -66,6 +66,7 @@ def _numbers(key: str, values: list, option: str) -> list[float]:
     if not all(isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
                for value in values):
         raise SweepUsageError(f"{option} {key}: expected numbers, got {values}")
+    check_in_range(values, f"{option} {key}")
     return [float(value) for value in values]
 
 

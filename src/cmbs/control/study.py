@@ -24,7 +24,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from cmbs.control.faults import ActuatorFault, SensorNoise, check_mass_factor, mass_fault
-from cmbs.errors import CmbsError
+from cmbs.errors import CmbsError, check_in_range
 from cmbs.kinematics import assemble
 from cmbs.metrics import nrmse, peak_norm, rms_norm, settling_time
 from cmbs.model.model import Model
@@ -55,6 +55,7 @@ class Fault:
             except ValueError:
                 values = ()
             if values and all(np.isfinite(values)):
+                check_in_range(values, f"fault {text!r}")
                 if kind == "mass":
                     check_mass_factor(segment, values[0])
                 return cls(text, kind, values, segment)
