@@ -169,6 +169,12 @@ def test_a_library_parameter_out_of_range_is_named(capsys, model, key, value, sh
                                       f"|{key}| must be <= 1e+12")
 
 
+def test_a_chain_too_long_to_build_is_refused_before_any_work(capsys):
+    """links=100000000 ran for minutes and filled the memory (5,000 links: 5 min, 5.6 GB)."""
+    assert main(["describe", "chain", "--param", "links=100000000"]) == 2
+    assert one_error_line(capsys).startswith("cmbs: error: chain: links must be at most 1000, got 100000000")
+
+
 def test_the_builder_refuses_the_same_numbers():
     builder = cmbs.NaturalModelBuilder("big", gravity=(0.0, -9.81))
     with pytest.raises(ModelError, match=r"points.P: x = 1e\+200 is out of range"):
