@@ -158,6 +158,12 @@ interpolation = "linear"
                                       "magnitude above 1e+12 (out of range)")
 
 
+def test_table_times_too_close_are_refused():
+    """Times 1e-320 apart gave infinite slopes (an overflow warning, then a failure at t = 0)."""
+    with pytest.raises(ModelError, match=r"table times must be at least 1e-12 apart .* got two 9.99989e-321 apart"):
+        cmbs.Table(np.array([0.0, 1e-320, 1.0]), np.array([0.0, 1.0, 2.0]), "linear")
+
+
 @pytest.mark.parametrize("model, key, value, shown", [
     ("human", "height", "1e300", "1e+300"), ("slider-crank", "crank_speed", "1e300", "1e+300"),
     ("chaplygin-sleigh", "inertia", "1e300", "1e+300"), ("chain", "links", "10000000000000", "10000000000000"),
