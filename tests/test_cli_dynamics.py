@@ -59,5 +59,5 @@ def test_bad_dynamics_options_exit_2(tmp_path, capsys):
                      "--out", str(tmp_path / "x.npz")]) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 7 and all(line.startswith("cmbs: error: ") for line in err)
-    assert "rtol must be a finite number > 0, got -1e-08" in err[5] and "atol" in err[6]
+    assert "rtol must be a finite number > 0 and < 1, got -1e-08" in err[5] and "atol" in err[6]
     assert list(tmp_path.iterdir()) == []

@@ -202,6 +202,56 @@ def test_dask_sweep_equals_the_serial_run_and_survives_a_killed_worker(cluster, 
     assert "8/8" in capsys.readouterr().err
 
 
+def test_dask_sweep_whose_last_worker_dies_stops_with_a_message(cluster):
+    """Both workers are killed while they hold tasks: with no worker left the scheduler would
+    keep the tasks forever; after worker_timeout the variants not done fail with the reason,
+    those done keep their results."""
+    import threading
+    import time
+
+    address, workers = cluster
+    model = cmbs.load("four-bar").without_drivers()
+    variants = _initial_states(model, 8)
+    done = {}
+    thread = threading.Thread(target=lambda: done.setdefault("result", sweep(
+        model, variants, scheduler=address, worker_timeout=1.0, t_end=0.4, dt=1e-3, every=20,
+        formulation="penalty")))
+    thread.start()
+    with distributed.Client(address, timeout=30) as client:
+        deadline = time.monotonic() + 60
+        while not any(client.processing().values()) and time.monotonic() < deadline:
+            time.sleep(0.02)
+    for worker in workers:
+        worker.kill()
+        worker.wait()
+    killed = time.monotonic()
+    thread.join(timeout=60)
+    assert not thread.is_alive(), "the sweep waits for a worker that will never come"
+    assert time.monotonic() - killed < 30
+    result = done["result"]
+    failed = result.status == "failed"
+    assert failed.any()
+    assert all("no Dask worker for 1 s" in message for message in result.message[failed])
+    assert np.all(result.recorded[failed] == 0) and np.all(result.recorded[~failed] == len(result.t))
+
+
+def test_a_task_that_killed_its_workers_is_a_failed_variant():
+    """Dask gives up a task that took down every worker that ran it (KilledWorker): that variant
+    fails with the reason, as a variant whose run fails, instead of a traceback for the sweep."""
+    from types import SimpleNamespace
+
+    from cmbs.sweep import _task_output
+
+    class Lost:
+        def result(self):
+            worker = SimpleNamespace(address="tcp://127.0.0.1:4000")     # what the scheduler's record shows
+            raise distributed.KilledWorker("run_variant-1", worker, allowed_failures=3)
+
+    output = _task_output(Lost(), 4)
+    assert output["status"] == "failed" and output["q"].shape == (0, 4)
+    assert output["message"].startswith("its task was lost with every Dask worker that ran it")
+
+
 def test_dask_sweep_names_an_unreachable_scheduler(four_bar):
     with pytest.raises(CmbsError, match="cannot reach the Dask scheduler"):
         sweep(four_bar, [Variant()], t_end=0.01, formulation="penalty", scheduler="tcp://127.0.0.1:9")

@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import signal
 import sys
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Iterable, Sequence
 
 import numpy as np
 
@@ -20,10 +21,20 @@ from cmbs.units import bracketed, coordinate_unit, force_unit
 
 if TYPE_CHECKING:
     from cmbs.control.study import TrackingRun
+from cmbs.model.limits import MAX_MAGNITUDE
 
 
 class _UsageError(CmbsError):
     """A bad command-line option."""
+
+
+class _Terminated(BaseException):
+    """SIGTERM arrived: unwinds like KeyboardInterrupt, so that a write in progress removes its
+    temporary file (:func:`cmbs.files_io.atomic_path`)."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise _Terminated
 
 
 #: words read as a yes/no value in ``key=value`` options
@@ -79,35 +90,53 @@ class Offset(float):
         return math.radians(self)
 
 
+def unique_pairs(pairs: Iterable[tuple[str, object]], option: str) -> dict[str, object]:
+    """``(key, value)`` pairs of a repeatable option as a dict; a key given twice is a mistake (the
+    first value would otherwise be dropped without a word)."""
+    result: dict[str, object] = {}
+    for key, value in pairs:
+        if key in result:
+            raise _UsageError(f"{option} {key} given twice ({key}={result[key]!r} and {key}={value!r}): give it once")
+        result[key] = value
+    return result
+
+
 #: numeric options checked after parsing (every command that has them): what each must be
 NUMBER_RULES = {
-    "t_end": "positive", "dt": "positive", "rtol": "positive", "atol": "positive", "sample_rate": "positive",
+    "t_end": "positive", "dt": "positive", "rtol": "fraction", "atol": "positive", "sample_rate": "positive",
     "kp": "non-negative", "kd": "non-negative", "ki": "non-negative", "kf": "non-negative",
-    "initial_error": "finite",
+    "initial_error": "finite", "worker_timeout": "positive",
 }
 
 
 def _check_numbers(args: argparse.Namespace) -> None:
-    """Every numeric option of NUMBER_RULES given on the command line is finite (and > 0 or >= 0):
-    an infinite --t-end would otherwise fail deep inside as an overflow."""
-    wanted = {"positive": "a finite number > 0", "non-negative": "a finite number >= 0", "finite": "a finite number"}
+    """Every numeric option of NUMBER_RULES given on the command line is finite (and > 0, >= 0, or
+    in (0, 1) for a relative tolerance: an rtol of 1 accepts a 100 % error) and of magnitude at
+    most MAX_MAGNITUDE, as the numbers of a model: an infinite --t-end would otherwise fail deep
+    inside as an overflow."""
+    wanted = {"positive": "a finite number > 0", "non-negative": "a finite number >= 0", "finite": "a finite number",
+              "fraction": "a finite number > 0 and < 1"}
     for name, rule in NUMBER_RULES.items():
         value = getattr(args, name, None)
         if value is None:
             continue
-        ok = math.isfinite(value) and {"positive": value > 0, "non-negative": value >= 0, "finite": True}[rule]
+        ok = math.isfinite(value) and {"positive": value > 0, "non-negative": value >= 0, "finite": True,
+                                       "fraction": 0 < value < 1}[rule]
         if not ok:
             raise _UsageError(f"--{name.replace('_', '-')} must be {wanted[rule]}, got {value!r}")
+        if abs(value) > MAX_MAGNITUDE:    # e.g. a gain of 1e300 shrinks an adaptive step without end
+            raise _UsageError(f"--{name.replace('_', '-')} = {value!r} is out of range: |{name}| must be <= "
+                              f"{MAX_MAGNITUDE:g}")
 
 
 def _load(args: argparse.Namespace) -> cmbs.Model:
-    model = cmbs.load(args.model, **dict(_parameter(p) for p in args.param))
+    model = cmbs.load(args.model, **unique_pairs((_parameter(p) for p in args.param), "--param"))
     return model.without_drivers() if getattr(args, "undriven", False) else model
 
 
 def _formulation_options(args: argparse.Namespace) -> dict[str, object]:
     """``--option key=value`` pairs; tuples of names for matrix-r's ``independent``."""
-    options = dict(_parameter(text, "--option") for text in args.option)
+    options = unique_pairs((_parameter(text, "--option") for text in args.option), "--option")
     if isinstance(options.get("independent"), str):
         options["independent"] = tuple(options["independent"].split(","))
     return options
@@ -210,10 +239,11 @@ def _simulate(args: argparse.Namespace) -> int:
                    every=args.every, progress=True, **_simulation_settings(args))
     info = run.info
     error = run["constraint_error"]
-    print(f"{model.name}: {info['formulation']} + {info['integrator']}, {info['status']} at t = {run.t[-1]:.6g} s "
+    print(f"{model.name}: {info['formulation']} + {info['integrator']}, {info['status']} {_reached(run)} "
           f"({info['steps']} steps, {timing(info)})")
-    print(f"  max constraint error {error.max(initial=0.0):.3g}, max velocity constraint error "
-          f"{run['velocity_constraint_error'].max(initial=0.0):.3g}, {energy_statement(model, run)}")
+    if run.t.size:
+        print(f"  max constraint error {error.max(initial=0.0):.3g}, max velocity constraint error "
+              f"{run['velocity_constraint_error'].max(initial=0.0):.3g}, {energy_statement(model, run)}")
     if info.get("note"):
         print(f"  note: {info['note']}")
     if args.out:
@@ -221,11 +251,11 @@ def _simulate(args: argparse.Namespace) -> int:
     if args.plot:
         from cmbs.plotting import plot_simulation, save_figure
 
-        print(f"  figure -> {save_figure(plot_simulation(run, model=model), args.plot)}")
+        print(f"  figure -> {save_figure(plot_simulation(run, model=model), args.plot) if run.t.size else NOTHING}")
     if args.animate:
         from cmbs.animate import animate
 
-        print(f"  animation -> {animate(model, run, args.animate)}")
+        print(f"  animation -> {animate(model, run, args.animate) if run.t.size else NOTHING}")
     if info["status"] != "success":
         print(f"cmbs: simulation failed: {info['message']}", file=sys.stderr)
         return 1
@@ -237,7 +267,7 @@ def _energy_balance(model: cmbs.Model, run: cmbs.Trajectory) -> str:
     with zero inputs), or "-" when the model has other sources of work."""
     from cmbs.simulate import supplied_work
 
-    work = supplied_work(model, run)
+    work = supplied_work(model, run) if run.t.size else None
     if work is None:
         return "-"
     energy = run["energy"]
@@ -265,6 +295,15 @@ def energy_statement(model: cmbs.Model, run: cmbs.Trajectory) -> str:
     sources = model.work_sources
     doers = ", ".join(sources) if sources else "forces these equations do not name"
     return f"E - E0 {change[-1]:.6g} J at the end (work of {doers}; not an error)"
+
+
+#: what a run that failed before its first output instant shows instead of a figure or animation
+NOTHING = "not written: no instant computed"
+
+
+def _reached(run: cmbs.Trajectory) -> str:
+    """Where a run stopped: its last output instant, or t = 0 when it failed before its first."""
+    return f"at t = {run.t[-1]:.6g} s" if run.t.size else "at t = 0 s (no instant computed)"
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -397,7 +436,7 @@ def _track(args: argparse.Namespace) -> int:
                    label=", ".join(f.text for f in faults) or "nominal", **options)
     run = result.run
     print(f"{plant.name}: {args.controller} tracking of {', '.join(coordinates)}, {run.info['status']} "
-          f"at t = {run.t[-1]:.6g} s")
+          f"{_reached(run)}")
     nrmse = ", ".join(f"{name} {100 * value:.4g} %" for name, value in zip(coordinates, result.nrmse))
     print(f"  NRMSE (of the reference's range) {nrmse}; settling time (1 %) {_settling(result, motion)}")
     print(f"  actuation RMS norm {result.rms_norm:.6g}, peak norm {result.peak_norm:.6g}")
@@ -406,7 +445,9 @@ def _track(args: argparse.Namespace) -> int:
     if args.plot:
         from cmbs.plotting import plot_simulation, save_figure
 
-        print(f"  figure -> {save_figure(plot_simulation(run, model=plant), args.plot)}")
+        print(f"  figure -> {save_figure(plot_simulation(run, model=plant), args.plot) if run.t.size else NOTHING}")
+    if not result.succeeded:
+        print(f"cmbs: tracking failed: {run.info['message']}", file=sys.stderr)
     return 0 if result.succeeded else 1
 
 
@@ -651,9 +692,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         from cmbs.jit import announce_compilation
 
         announce_compilation(lambda line: print(line, file=sys.stderr, flush=True))
+    previous = _catch_sigterm()
     try:
         _check_numbers(args)
         return args.run(args)
+    except _Terminated:
+        print("cmbs: terminated", file=sys.stderr)
+        return 143
     except CmbsError as error:
         print(f"cmbs: error: {error}", file=sys.stderr)
         return error.exit_status
@@ -665,6 +710,18 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())   # no second error at exit
         return 0
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _catch_sigterm():
+    """Turn SIGTERM into :class:`_Terminated` (main thread only); the previous handler, or None."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _terminate)
 
 
 if __name__ == "__main__":

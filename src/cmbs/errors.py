@@ -74,3 +74,13 @@ def did_you_mean(name: str | Sequence[str], choices: Iterable[str]) -> str:
     close = [choice for choice in choices if choice.lower() == name.lower()] or \
         difflib.get_close_matches(name, choices, n=1)
     return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def check_in_range(values: Iterable[float], what: str) -> None:
+    """CmbsError naming ``what`` unless every value is at most
+    :data:`cmbs.model.limits.MAX_MAGNITUDE` in magnitude (the bound of a model's numbers)."""
+    from cmbs.model.limits import MAX_MAGNITUDE
+
+    for value in values:
+        if abs(value) > MAX_MAGNITUDE:
+            raise CmbsError(f"{what}: {value:g} is out of range: values must be <= {MAX_MAGNITUDE:g} in magnitude")

@@ -255,6 +255,8 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     for name, value in (("rtol", rtol), ("atol", atol)):
         if not (value > 0 and np.isfinite(value)):  # a zero or negative scale makes the error norm meaningless
             raise CmbsError(f"{name} must be a finite number > 0, got {value}")
+    if rtol >= 1:                                   # a relative error of 100 % accepts any step
+        raise CmbsError(f"rtol must be < 1, got {rtol}")
     if integrator not in INTEGRATORS:
         raise CmbsError(f"unknown integrator {integrator!r}{did_you_mean(integrator, INTEGRATORS)}; "
                         f"choose one of {', '.join(INTEGRATORS)}")
@@ -707,6 +709,8 @@ def _singular_message(model: Model, solver, q: np.ndarray, qd: np.ndarray, t: fl
         solver.accelerations(model.evaluate(q, qd, t, u), q, qd, t)
     except CmbsError as error:
         return str(error)
+    except (np.linalg.LinAlgError, ArithmeticError, ValueError) as error:   # the diagnosis failed, not the run
+        return f"singular system at t={t:.6g} ({type(error).__name__}: {error})"
     return f"singular system at t={t:.6g}"
 
 

@@ -214,7 +214,8 @@ class SweepResult:
 def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, formulation: str = "lagrange",
           formulation_options: Mapping[str, object] | None = None, integrator: str = "rk4", dt: float = 1e-3,
           rtol: float = 1e-6, atol: float = 1e-9, project: bool = False, every: int = 1, workers: int | None = None,
-          scheduler: str | None = None, batched: bool | None = None, progress: bool = False) -> SweepResult:
+          scheduler: str | None = None, batched: bool | None = None, progress: bool = False,
+          worker_timeout: float = 60.0) -> SweepResult:
     """Run ``variants`` of the simulation of ``model`` (a :class:`~cmbs.Model`, or a library name
     or model file path, which parameter variants need); options as :func:`cmbs.simulate`.
 
@@ -223,7 +224,9 @@ def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, form
     it); otherwise ``scheduler`` (a Dask address) or a local pool of ``workers`` processes
     (default: the machine's CPUs; 1 runs in this process).  ``progress`` shows a progress bar
     (tqdm, on stderr) counting the variants done; the batched path then runs in about 50 blocks
-    of variants, one compiled call each, with the same results.
+    of variants, one compiled call each, with the same results.  On Dask, when the cluster has
+    had no worker for ``worker_timeout`` seconds (the last one died, or none joined), the
+    variants not done fail with that message instead of waiting forever.
     """
     variants = list(variants)
     if not variants:
@@ -231,6 +234,8 @@ def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, form
     settings = RunSettings(t_end=float(t_end), formulation=formulation,
                            formulation_options=dict(formulation_options or {}), integrator=integrator, dt=float(dt),
                            rtol=rtol, atol=atol, project=project, every=int(every))
+    if not worker_timeout > 0:
+        raise CmbsError(f"sweep: worker_timeout must be > 0 seconds, got {worker_timeout}")
     if settings.t_end <= 0 or settings.dt <= 0 or settings.every < 1:
         raise CmbsError(f"sweep: t_end and dt must be positive and every >= 1 (got t_end={t_end}, dt={dt}, "
                         f"every={every})")
@@ -252,7 +257,8 @@ def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, form
         if plan is not None:
             outputs, mode, used = _run_batched(nominal, settings, variants, plan, bar), "batched", _threads()
         elif scheduler:
-            outputs, mode, used = _run_dask(model, settings, variants, scheduler, bar), "dask", scheduler
+            outputs = _run_dask(model, settings, variants, scheduler, bar, nominal.n, worker_timeout)
+            mode, used = "dask", scheduler
         else:
             used = workers or os.cpu_count() or 1
             outputs, mode = _run_processes(model, settings, variants, used, bar), "processes"
@@ -311,9 +317,7 @@ def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> 
                        qd0=None if variant.qd0 is None else np.asarray(variant.qd0, dtype=float), u=u)
         status, message, compile_time = run.info["status"], run.info.get("message", ""), run.info["compile_time"]
     except CmbsError as error:
-        empty = np.zeros((0, n))
-        return {"q": empty, "qd": empty, "energy": np.zeros(0), "phi": np.zeros(0), "status": "failed",
-                "message": str(error)}
+        return _failed_output(n, str(error))
     index = np.searchsorted(run.t, times - 1e-9 * settings.dt)
     valid = index < run.t.size
     valid[valid] = np.abs(run.t[index[valid]] - times[valid]) <= 1e-9 * max(1.0, settings.t_end)
@@ -330,6 +334,13 @@ def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> 
     return {"q": q, "qd": qd, "energy": energy, "phi": run["constraint_error"][picked], "status": status,
             "message": message, "drift": energy_drift(sources, kinetic, energy, run["u"][picked]),
             "compile_time": compile_time}
+
+
+def _failed_output(n: int, message: str) -> dict:
+    """The output of a variant that computed nothing."""
+    empty = np.zeros((0, n))
+    return {"q": empty, "qd": empty, "energy": np.zeros(0), "phi": np.zeros(0), "status": "failed",
+            "message": message}
 
 
 def _run_processes(model: str | Model, settings: RunSettings, variants: list[Variant], workers: int,
@@ -353,9 +364,9 @@ def _counted(outputs: Iterable[dict], bar: tqdm) -> list[dict]:
 
 
 def _run_dask(model: str | Model, settings: RunSettings, variants: list[Variant], scheduler: str,
-              bar: tqdm) -> list[dict]:
+              bar: tqdm, n: int, worker_timeout: float) -> list[dict]:
     try:
-        from distributed import Client, as_completed
+        from distributed import Client
     except ImportError:
         raise CmbsError("sweep: --scheduler needs dask's distributed package (pip install 'cmbs[dask]')") from None
     try:
@@ -365,9 +376,45 @@ def _run_dask(model: str | Model, settings: RunSettings, variants: list[Variant]
     with client:
         futures = client.map(run_variant, [model] * len(variants), [settings] * len(variants), variants,
                              pure=False, retries=2)
-        for _ in as_completed(futures):
-            bar.update(1)
-        return client.gather(futures)
+        lost = _await_with_workers(client, futures, bar, worker_timeout)
+        if lost:
+            client.cancel(list(lost))
+        message = f"no Dask worker for {worker_timeout:g} s (the last worker died or none joined): not run"
+        return [_failed_output(n, message) if future in lost else _task_output(future, n) for future in futures]
+
+
+def _task_output(future, n: int) -> dict:
+    """The output of a finished Dask task; a variant whose task killed every worker that ran it
+    (Dask's KilledWorker, after its allowed failures) is a failed variant, not a traceback."""
+    from distributed import KilledWorker
+
+    try:
+        return future.result()
+    except KilledWorker as error:
+        return _failed_output(n, f"its task was lost with every Dask worker that ran it ({error})")
+
+
+def _await_with_workers(client, futures: list, bar: tqdm, worker_timeout: float) -> set:
+    """Wait for ``futures``, counting each on ``bar`` as it completes; stop when the cluster has
+    had no worker for ``worker_timeout`` seconds.  The futures not done then (empty when all are)."""
+    from distributed import wait
+
+    pending, idle_since = set(futures), None
+    poll = min(1.0, worker_timeout / 4)
+    while pending:
+        try:
+            done, pending = wait(pending, timeout=poll, return_when="FIRST_COMPLETED")
+        except TimeoutError:          # nothing finished within poll seconds: is any worker left?
+            if client.scheduler_info()["workers"]:
+                idle_since = None
+            elif idle_since is None:
+                idle_since = time.monotonic()
+            elif time.monotonic() - idle_since >= worker_timeout:
+                return pending
+            continue
+        bar.update(len(done))
+        idle_since = None
+    return set()
 
 
 # ---------------------------------------------------------------------------------- batched path

@@ -10,7 +10,7 @@ from typing import Callable
 
 import numpy as np
 
-from cmbs.errors import CmbsError, did_you_mean
+from cmbs.errors import CmbsError, check_in_range, did_you_mean
 
 
 class SweepUsageError(CmbsError):
@@ -32,6 +32,9 @@ def add_sweep_command(commands, model_command: Callable, dynamics_options: Calla
     command.add_argument("--every", type=int, default=1, help="record every N-th step of --dt (default 1)")
     command.add_argument("--workers", type=int, help="local worker processes (default: the CPUs; 1: this process)")
     command.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run on this Dask scheduler")
+    command.add_argument("--worker-timeout", type=float, default=60.0, metavar="SECONDS",
+                         help="Dask: give up when the cluster has had no worker this long; the variants not done "
+                              "fail (default 60)")
     command.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                          help="progress bar on stderr (default: when stderr is a terminal)")
     command.add_argument("--coordinate", help="coordinate of the figure (default: the first)")
@@ -63,6 +66,7 @@ def _numbers(key: str, values: list, option: str) -> list[float]:
     if not all(isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
                for value in values):
         raise SweepUsageError(f"{option} {key}: expected numbers, got {values}")
+    check_in_range(values, f"{option} {key}")
     return [float(value) for value in values]
 
 
@@ -73,7 +77,11 @@ def variants_from(args: argparse.Namespace, model) -> list:
 
     from cmbs.library import check_parameters, names
 
-    fixed = dict(_fixed(text) for text in args.param)
+    from cmbs.cli import unique_pairs
+
+    fixed = _fixed_parameters(args.param)
+    unique_pairs((_values(text, "--vary") for text in args.vary), "--vary")
+    unique_pairs((_values(text, "--mass") for text in args.mass), "--mass")
     axes = [("parameter", *_values(text, "--vary")) for text in args.vary]
     if axes and args.model in names():
         for _, key, values in axes:              # each value of the grid, checked before any run
@@ -138,6 +146,13 @@ def _listing(names, shown: int = 12) -> str:
     return ", ".join(names[:shown]) + (f", ... ({len(names)} in all)" if len(names) > shown else "")
 
 
+def _fixed_parameters(texts: list[str]) -> dict[str, object]:
+    """The ``--param`` options as a dict (each key once)."""
+    from cmbs.cli import unique_pairs
+
+    return unique_pairs((_fixed(text) for text in texts), "--param")
+
+
 def _fixed(text: str) -> tuple[str, object]:
     key, values = _values(text, "--param")
     if len(values) != 1:
@@ -164,7 +179,7 @@ def _sweep(args: argparse.Namespace) -> int:
                               f"{', '.join(FORMULATIONS)}")
     if args.undriven and args.vary:
         raise SweepUsageError("--undriven cannot be combined with --vary (the varied model is rebuilt by name)")
-    parameters = dict(_fixed(text) for text in args.param)
+    parameters = _fixed_parameters(args.param)
     nominal = load(args.model, **parameters)
     nominal = nominal.without_drivers() if args.undriven else nominal
     variants = variants_from(args, nominal)
@@ -174,7 +189,7 @@ def _sweep(args: argparse.Namespace) -> int:
                               f"{_listing(nominal.coordinate_names)}")
     result = sweep(target, variants, t_end=args.t_end, formulation=args.formulation, integrator=args.integrator,
                    dt=args.dt, rtol=args.rtol, atol=args.atol, project=args.project, every=args.every,
-                   workers=args.workers, scheduler=args.scheduler,
+                   workers=args.workers, scheduler=args.scheduler, worker_timeout=args.worker_timeout,
                    progress=sys.stderr.isatty() if args.progress is None else args.progress)
     failed = int(np.count_nonzero(result.status != "success"))
     mode, used = result.info["mode"], result.info["workers"]

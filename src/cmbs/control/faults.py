@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Callable, Sequence
 
 import numpy as np
@@ -71,11 +72,18 @@ def nominal_work_sources(model: Model) -> tuple[str, ...] | None:
     return model.replace(equations=equations).work_sources
 
 
+def check_mass_factor(segment: str, factor: float) -> None:
+    """A mass fault's factor is finite and > 0: a zero or negative mass has no physical meaning."""
+    if not (math.isfinite(factor) and factor > 0):
+        raise CmbsError(f"mass fault on segment {segment!r}: the mass factor must be > 0 (finite), got {factor!r}")
+
+
 def mass_fault(model: Model, segment: str, *, factor: float, t0: float = 0.0) -> Model:
     """``model`` whose segment ``segment`` has ``factor`` times its mass and inertia from ``t0``
     (e.g. factor 1.025 for the thesis's 2.5 % fault).  Natural-coordinate models only.
     Energies are reported with the nominal masses; :func:`mass_fault_energy_parts` gives what
     the faulty masses add."""
+    check_mass_factor(segment, factor)
     equations = model.equations
     if not isinstance(equations, NaturalEquations):
         raise CmbsError(f"mass faults need a natural-coordinate model; {model.name!r} is not one")

@@ -23,8 +23,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from cmbs.control.faults import ActuatorFault, SensorNoise, mass_fault
-from cmbs.errors import CmbsError
+from cmbs.control.faults import ActuatorFault, SensorNoise, check_mass_factor, mass_fault
+from cmbs.errors import CmbsError, check_in_range
 from cmbs.kinematics import assemble
 from cmbs.metrics import nrmse, peak_norm, rms_norm, settling_time
 from cmbs.model.model import Model
@@ -55,6 +55,9 @@ class Fault:
             except ValueError:
                 values = ()
             if values and all(np.isfinite(values)):
+                check_in_range(values, f"fault {text!r}")
+                if kind == "mass":
+                    check_mass_factor(segment, values[0])
                 return cls(text, kind, values, segment)
         raise CmbsError(f"fault {text!r}: expected {FAULT_SYNTAX}")
 
@@ -120,6 +123,9 @@ def track(plant: Model, law: Law, motion: Trajectory, coordinates: Sequence[str]
     run = simulate(plant, t_end=t_end, u=law, q0=q0, dt=dt, **options)
     wall = time.perf_counter() - started
     k = run.t.size
+    if k < 2:     # the run failed at (or right after) its first instant: nothing to measure
+        return TrackingRun(label, run, tuple(coordinates), np.full(len(coordinates), np.nan), np.nan, np.nan, np.nan,
+                           wall)
     reference = motion.q[:k, columns]
     values = run.q[:, [run.names.index(name) for name in coordinates]]
     error = reference - values

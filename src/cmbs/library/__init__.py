@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Callable
 
 from cmbs.errors import ModelError, did_you_mean
+from cmbs.model.limits import MAX_MAGNITUDE
 from cmbs.model.model import Model
 
 
@@ -140,6 +141,9 @@ def _check_parameter(model: str, key: str, value: object, default: object) -> ob
         return value
     if not ok:
         raise ModelError(f"model {model!r}: parameter {key} must be {kind}, got {value!r}")
+    if python is not bool and abs(value) > MAX_MAGNITUDE:
+        raise ModelError(f"model {model!r}: parameter {key} = {value!r} is out of range: |{key}| must be <= "
+                         f"{MAX_MAGNITUDE:g}")
     return python(value)
 
 

@@ -27,6 +27,7 @@ from cmbs.jit import njit_borrowing
 import numpy as np
 
 from cmbs.errors import ModelError
+from cmbs.model.limits import MAX_MAGNITUDE, MIN_LENGTH_RATIO
 from cmbs.lazy import lazy_module
 from cmbs.model.expressions import Program, evaluate_program, parse_expression
 
@@ -95,8 +96,14 @@ class Table(TimeFunction):
             raise ModelError(f"table needs at least 2 samples, got {times.size}")
         if not np.all(np.isfinite(times)) or not np.all(np.isfinite(values)):
             raise ModelError("table contains a non-finite time or value")
+        if max(np.abs(times).max(), np.abs(values).max()) > MAX_MAGNITUDE:
+            raise ModelError(f"table has a time or value of magnitude above {MAX_MAGNITUDE:g} (out of range)")
         if np.any(np.diff(times) <= 0.0):
             raise ModelError("table times must be strictly increasing")
+        closest = MIN_LENGTH_RATIO * max(1.0, np.abs(times).max())     # slopes stay finite (< 1e36)
+        if np.diff(times).min() < closest:
+            raise ModelError(f"table times must be at least {closest:g} apart ({MIN_LENGTH_RATIO:g} of the largest "
+                             f"time, at least 1 s), got two {np.diff(times).min():g} apart")
         if self.interpolation == "linear":
             slopes = np.diff(values) / np.diff(times)
             coefficients = np.zeros((times.size - 1, 4))

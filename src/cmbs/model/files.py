@@ -118,14 +118,17 @@ def _table(entry: _Entry, base: Path, default_interpolation: str | None = None) 
 def _file_table(entry: _Entry, path_text: str, base: Path, interpolation: str) -> Table:
     """A driver table read from a two-column CSV file (t, value) relative to the model file."""
     path = (base / path_text) if not Path(path_text).is_absolute() else Path(path_text)
-    if not path.is_file():
-        raise ModelError(f"file {str(path)!r} not found", entry=f"{entry.label}.file")
     try:
+        if not path.is_file():
+            raise ModelError(f"file {str(path)!r} not found", entry=f"{entry.label}.file")
         with path.open(newline="") as stream:
             rows = [row for row in csv.reader(stream) if row and not row[0].lstrip().startswith("#")]
         if rows and not _is_number(rows[0][0]):
             rows = rows[1:]
         data = np.array([[float(v) for v in row[:2]] for row in rows])
+    except (OSError, UnicodeDecodeError) as error:
+        raise ModelError(f"file {str(path)!r} cannot be read ({_reason(error)})", entry=f"{entry.label}.file") \
+            from None
     except (ValueError, IndexError):
         raise ModelError(f"{str(path)!r} must have two numeric columns t, value", entry=f"{entry.label}.file") \
             from None
@@ -135,6 +138,11 @@ def _file_table(entry: _Entry, path_text: str, base: Path, interpolation: str) -
         return Table(data[:, 0], data[:, 1], interpolation)
     except ModelError as error:
         raise ModelError(error.problem, entry=f"{entry.label}.file") from None
+
+
+def _reason(error: OSError | UnicodeDecodeError) -> str:
+    """The system's reason for a failed read, without the file name it repeats."""
+    return getattr(error, "strerror", None) or "not a text file"
 
 
 def _is_number(text: str) -> bool:
@@ -180,6 +188,8 @@ def _read_builder(document: dict, base: Path, default_name: str) -> NaturalModel
     unknown = sorted(set(document) - set(_SECTIONS))
     if unknown:
         raise ModelError(f"unknown section(s) {', '.join(map(repr, unknown))} (allowed: {', '.join(_SECTIONS)})")
+    if not any(document.get(section) for section in _SECTIONS if section != "model"):
+        raise ModelError("the file defines no points (an empty model)", entry="points")
     header = _Entry("model", document.get("model", {}), ("name", "description", "source", "gravity"))
     builder = NaturalModelBuilder(header.string("name") or default_name, gravity=header.pair("gravity") or (0.0, -9.81),
                                   description=header.string("description") or "", source=header.string("source") or "")
@@ -431,16 +441,18 @@ def load_model_file(path: str | Path) -> Model:
     """
     path = Path(path)
     source = str(path)
-    if path.is_dir():
-        raise ModelError("is a folder, not a model file (give the path of a .toml file)", source=source)
-    if not path.is_file():
-        raise ModelError("no such model file", source=source)
     try:
+        if path.is_dir():
+            raise ModelError("is a folder, not a model file (give the path of a .toml file)", source=source)
+        if not path.is_file():
+            raise ModelError("no such model file", source=source)
         document = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as error:
         raise ModelError(f"not valid TOML: {error}", source=source) from None
     except UnicodeDecodeError:
         raise ModelError("not a text file", source=source) from None
+    except OSError as error:
+        raise ModelError(f"cannot be read ({_reason(error)})", source=source) from None
     try:
         model, given_velocities = _initial_velocities(document, _read_builder(document, path.parent, path.stem).build())
     except ModelError as error:

@@ -64,6 +64,7 @@ import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions, is_constant
+from cmbs.model.limits import MAX_MAGNITUDE, MIN_LENGTH_RATIO
 from cmbs.model.model import Model, Terms
 from cmbs.model.packing import int_section, pack, real_section
 
@@ -167,6 +168,9 @@ class NaturalModelBuilder:
     _moments: dict[str, tuple[str, TimeFunction]] = field(default_factory=dict)
     _springs: dict[str, tuple] = field(default_factory=dict)
     _actuators: dict[str, tuple[str, float]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.gravity = _pair(self.gravity, "model", "gravity")
 
     # ------------------------------------------------------------------ entries
     def _new_name(self, table: dict, section: str, name: str) -> str:
@@ -418,11 +422,22 @@ class NaturalModelBuilder:
 
 
 def _finite(value: object, entry: str, label: str) -> float:
+    """``value`` as a float: a number, finite, of magnitude at most :data:`MAX_MAGNITUDE`."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
         raise ModelError(f"{label} must be a number, got {value!r}", entry=entry)
     if not math.isfinite(float(value)):
         raise ModelError(f"{label} must be finite, got {value!r}", entry=entry)
+    if abs(float(value)) > MAX_MAGNITUDE:
+        raise ModelError(f"{label} = {float(value):g} is out of range: |{label}| must be <= {MAX_MAGNITUDE:g}",
+                         entry=entry)
     return float(value)
+
+
+def _check_length(length: float, size: float, entry: str, what: str) -> None:
+    """A length at least :data:`MIN_LENGTH_RATIO` of ``size`` (the model size, at least 1 m)."""
+    if length < MIN_LENGTH_RATIO * size:
+        raise ModelError(f"{what} {length:g} is below {MIN_LENGTH_RATIO:g} of the model size {size:g} (the largest "
+                         "coordinate or given length, at least 1): the points are (nearly) coincident", entry=entry)
 
 
 def _pair(value: object, entry: str, label: str) -> tuple[float, float]:
@@ -481,6 +496,11 @@ class _Assembler:
             self.names.append(name)
             self.kinds.append("angle")
             self.q0.append(initial if initial is not None else actual)
+
+    def _size(self) -> float:
+        """The model size: the largest point coordinate or given segment length, at least 1 (m)."""
+        return max([1.0, *(max(abs(p.x), abs(p.z)) for p in self.b._points.values()),
+                    *(s.length for s in self.b._segments.values() if s.length is not None)])
 
     def _work_sources(self) -> tuple[str, ...]:
         """The forces and torques that are not constant zero, and the springs with damping."""
@@ -546,6 +566,7 @@ class _Assembler:
     def model(self) -> Model:
         b = self.b
         n = len(self.names)
+        size = self._size()
         constraint_names: list[str] = []
 
         rigid, lengths2, lines = [], [], []
@@ -556,6 +577,7 @@ class _Assembler:
             length = segment.length if segment.length is not None else float(np.hypot(*(end - start)))
             if length <= 0:
                 raise ModelError(f"its points {segment.i!r} and {segment.j!r} coincide: length is 0", entry=entry)
+            _check_length(length, size, entry, "length")
             segment.length = length
             rigid.append(self._xz(segment.i, entry) + self._xz(segment.j, entry))
             lengths2.append(length**2)
@@ -649,6 +671,7 @@ class _Assembler:
             if initial == 0:
                 raise ModelError(f"its points {i!r} and {j!r} coincide at their initial positions: the direction "
                                  "of the spring force is undefined", entry=entry)
+            _check_length(initial, size, entry, "initial length")
             rest = rest if rest is not None else initial
             spring_parameters.append([stiffness, damping, rest])
 
@@ -657,6 +680,9 @@ class _Assembler:
             actuator_rows.append([self._coordinate(coordinate, f"actuators.{name}")])
             gains.append(gain)
 
+        if n == 0:
+            raise ModelError("the model has no coordinates: every point is fixed (give a moving point)",
+                             entry="points")
         n_ext = n + len(self.constants)
         mass_ext = np.zeros((n_ext, n_ext))
         gravity_ext = np.zeros(n_ext)
