@@ -71,6 +71,8 @@ def test_cli_motion_on_a_joint_model_with_reactions(tmp_path, capsys):
     ("theta1 = __import__('os')", "unexpected character"),
     ("theta1 2*t", "expected NAME = EXPRESSION"),
     ("theta1 = t; theta1 = 2*t", "given twice"),
+    ("theta1 = 1/t", "motion of theta1: value or time derivatives not finite at t = 0"),
+    ("theta1 = sqrt(t)", "motion of theta1: value or time derivatives not finite at t = 0: (f, f', f'') = (0.0, inf"),
 ])
 def test_cli_motion_mistakes(motion, message, capsys):
     assert main(["inverse", "slider-crank-joint", "--motion", motion, "--t-end", "1", "--dt", "0.1"]) == 2

@@ -605,7 +605,8 @@ def _trajectory(model: Model, t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd:
         for i in range(t.size if model.m else 0):
             model.evaluate(q[i], qd[i], t[i], u[i], out=terms)
             force[i] = -terms.A.T @ lam[i]
-    kinetic, potential = model.energy_parts(q, qd)
+    with np.errstate(over="ignore", invalid="ignore"):   # a diverged run: its status and notes say so
+        kinetic, potential = model.energy_parts(q, qd)
     energy = kinetic + potential
     _note_energy_drift(model, kinetic, energy, u, info)
     _note_constraint_violation(model, t, q, position_error, info)
