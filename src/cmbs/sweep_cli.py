@@ -34,7 +34,7 @@ def add_sweep_command(commands, model_command: Callable, dynamics_options: Calla
     command.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run on this Dask scheduler")
     command.add_argument("--worker-timeout", type=float, default=60.0, metavar="SECONDS",
                          help="Dask: give up when the cluster has had no worker this long; the variants not done "
-                              "fail (default 60)")
+                              "fail")
     command.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                          help="progress bar on stderr (default: when stderr is a terminal)")
     command.add_argument("--coordinate", help="coordinate of the figure (default: the first)")
