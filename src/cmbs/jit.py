@@ -13,8 +13,6 @@ from __future__ import annotations
 import os
 from typing import Callable
 
-from cmbs.collector import freeze_at_exit, initialise_numba_target_on_first_use
-
 try:
     if os.environ.get("CMBS_DISABLE_NUMBA", "") not in ("", "0"):
         raise ImportError("CMBS_DISABLE_NUMBA is set")
@@ -22,51 +20,28 @@ try:
 except ImportError:
     _numba = None
 
-if _numba is not None:
-    freeze_at_exit()
-
 #: True when the kernels are compiled by numba.
 COMPILED = _numba is not None
 #: numba's version, or "none": part of the name of generated equation modules.
 VERSION = _numba.__version__ if _numba is not None else "none"
 
 
-def initialise_on_first_use() -> None:
-    """With numba, initialise its CPU target at the next compiled call without the collector
-    walking what it builds (:func:`cmbs.collector.initialise_numba_target_on_first_use`)."""
-    if _numba is not None:
-        initialise_numba_target_on_first_use()
-
-
 def njit(*args, **options) -> Callable:
-    """``numba.njit`` with numba, else a decorator that leaves the function as it is.
-
-    The function keeps numba's reference counting (NRT) even when called from a
-    :func:`njit_borrowing` one, so it may create arrays, provided it returns none to such a
-    caller."""
+    """``numba.njit`` with numba, else a decorator that leaves the function as it is."""
     if _numba is not None:
-        return _numba.njit(*args, **{"_nrt": True, **options})
+        return _numba.njit(*args, **options)
     if len(args) == 1 and callable(args[0]) and not options:
         return args[0]
     return lambda function: function
 
 
 def njit_borrowing(*args, **options) -> Callable:
-    """:func:`njit` without numba's reference counting: for the kernels of the hot paths.
-
-    numba counts the references to every array a compiled function receives, slices or reshapes,
-    with an atomic increment and decrement each time; in a four-bar's forward-dynamics
-    evaluation these cost about a third of the time, and the Python call of a kernel pays them
-    on every argument.  A borrowing function works only on arrays its caller owns: it must not
-    create an array (np.empty, .copy(), np.linalg, a slice assignment that needs a temporary:
-    numba then refuses to compile it, "NRT required but not enabled") and must not keep an
-    array returned by a :func:`njit` callee (that would never be freed: tests/test_borrowing.py
-    checks that the compiled paths free everything they allocate).  It returns scalars or tuples
-    of scalars, never an array, not even a view to Python (which would box it without an owner),
-    unless it is ``inline="always"`` and called from compiled code only: it is then compiled
-    into its caller, with the caller's reference counting.  numba's option is ``_nrt=False``."""
-    if _numba is not None:
-        return _numba.njit(*args, **{**options, "_nrt": False})
+    """:func:`njit` for the kernels of the hot paths, which by design work on arrays their caller
+    owns: they take packed arrays (a model's ``ints``/``reals``, a run's workspace), write into
+    work arrays the caller allocated once per run, create no array themselves and return scalars
+    or tuples of scalars.  Each array argument costs numba a reference-count increment and
+    decrement per call, so a hot kernel takes few of them.  The compiled paths free every array
+    they allocate, and the fixed-step RK4 loop allocates none per step (tests/test_borrowing.py)."""
     return njit(*args, **options)
 
 
