@@ -80,13 +80,13 @@ def initialise_numba_target_on_first_use() -> None:
 
 def settle_the_command_process() -> None:
     """For the ``cmbs`` command only, which owns its process: freeze the objects alive now (the
-    modules it imported), freeze what numba's target initialisation builds at the first compiled
-    call, and freeze everything at exit, before the interpreter's final collection.  Never called
-    by the library."""
+    modules it imported; without a full collection first, which would walk them all once more
+    to free the few cycles the imports left), freeze what numba's target initialisation builds
+    at the first compiled call, and freeze everything at exit, before the interpreter's final
+    collection.  Never called by the library."""
     from cmbs.jit import COMPILED
 
-    with long_lived():
-        pass
+    gc.freeze()
     if COMPILED:
         initialise_numba_target_on_first_use()
     atexit.register(gc.freeze)
