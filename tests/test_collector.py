@@ -94,6 +94,7 @@ def test_import_cmbs_and_its_runs_leave_the_collector_and_other_packages_modules
     assert after("bindings", output) == "True True True True"
 
 
+@pytest.mark.skipif(not jit.COMPILED, reason="numba's thread setting: numba is not installed")
 def test_import_cmbs_and_a_compiled_run_leave_the_thread_settings_as_they_were():
     pytest.importorskip("threadpoolctl")
     output = run("""
