@@ -1,12 +1,12 @@
-"""Lazily imported modules: ``import cmbs`` leaves scipy's interpolate, optimize and sparse
-unexecuted until first used, and they then work as usual."""
+"""Modules imported on first use: ``import cmbs`` leaves scipy's interpolate, optimize and sparse
+unexecuted until first used, and they then work as usual, imported the usual way."""
 
 import subprocess
 import sys
 
 import pytest
 
-from cmbs.lazy import lazy_module
+from cmbs.lazy import lazy_module, on_first_use
 
 PROBE = """
 import sys
@@ -36,19 +36,21 @@ def test_a_lazy_submodule_is_bound_to_its_package_and_executed_at_first_use():
     assert output.split() == ["_LazyModule", "JointModelBuilder", "module"]
 
 
-def test_lazy_module_returns_an_imported_module_and_rejects_unknown_names():
-    import math
+def test_lazy_module_returns_an_imported_module_and_rejects_unknown_and_foreign_names():
+    import cmbs.units
 
-    assert lazy_module("math") is math
+    assert lazy_module("cmbs.units") is cmbs.units
     with pytest.raises(ImportError, match="no_such_module"):
-        lazy_module("no_such_module")
+        lazy_module("cmbs.no_such_module")
+    with pytest.raises(ValueError, match="'math'.*on_first_use"):
+        lazy_module("math")                  # another package's module: sys.modules is not cmbs's
 
 
-def test_objects_are_frozen_out_of_the_final_collection_when_numba_is_loaded():
-    """cmbs.jit registers gc.freeze at exit; a handler registered before importing cmbs runs
-    after it (atexit is last-in, first-out) and sees the frozen objects."""
-    probe = ("import atexit, gc; atexit.register(lambda: print('frozen', gc.get_freeze_count() > 0)); "
-             "import cmbs.jit; print('compiled', cmbs.jit.COMPILED)")
+def test_on_first_use_imports_the_module_the_usual_way_at_the_first_attribute_read():
+    probe = ("import sys; from cmbs.lazy import on_first_use; colorsys = on_first_use('colorsys'); "
+             "print('colorsys' in sys.modules); print(colorsys.rgb_to_hsv(1.0, 0.0, 0.0), "
+             "type(sys.modules['colorsys']) is type(sys), colorsys.rgb_to_hsv is sys.modules['colorsys'].rgb_to_hsv)")
     output = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
-    compiled = "compiled True" in output
-    assert f"frozen {compiled}" in output
+    assert output.splitlines() == ["False", "(0.0, 1.0, 1.0) True True"]
+    with pytest.raises(ModuleNotFoundError, match="no_such_module"):
+        on_first_use("no_such_module").anything

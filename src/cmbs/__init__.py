@@ -11,23 +11,18 @@ The public API::
 
 from pathlib import Path as _Path
 
-from cmbs.collector import long_lived as _long_lived
-
-with _long_lived():  # the modules live as long as the process: no collections while they are made
-    from cmbs.jit import initialise_on_first_use as _initialise_on_first_use
-    from cmbs.dynamics import (Baumgarte, Lagrange, MatrixR, Penalty, Projection, UdwadiaKalaba, formulation)
-    from cmbs.errors import CmbsError, ConvergenceError, ExpressionError, ModelError, SingularSystemError
-    from cmbs.errors import did_you_mean as _did_you_mean
-    from cmbs.inputs import SampledInput
-    from cmbs.kinematics import (ConstraintReport, accelerations, assemble, constraint_report, kinematic_analysis,
-                                 singular_configurations, velocities)
-    from cmbs.model.drivers import Constant, Expression, PythonFunction, Table
-    from cmbs.model.model import Model, Terms
-    from cmbs.model.natural import NaturalModelBuilder
-    from cmbs.simulate import simulate
-    from cmbs.sweep import SweepResult, Variant, grid, sweep
-    from cmbs.trajectory import Trajectory
-_initialise_on_first_use()  # after the imports: creating the first kernel took numba's compiler lock
+from cmbs.dynamics import (Baumgarte, Lagrange, MatrixR, Penalty, Projection, UdwadiaKalaba, formulation)
+from cmbs.errors import CmbsError, ConvergenceError, ExpressionError, ModelError, SingularSystemError
+from cmbs.errors import did_you_mean as _did_you_mean
+from cmbs.inputs import SampledInput
+from cmbs.kinematics import (ConstraintReport, accelerations, assemble, constraint_report, kinematic_analysis,
+                             singular_configurations, velocities)
+from cmbs.model.drivers import Constant, Expression, PythonFunction, Table
+from cmbs.model.model import Model, Terms
+from cmbs.model.natural import NaturalModelBuilder
+from cmbs.simulate import simulate
+from cmbs.sweep import SweepResult, Variant, grid, sweep
+from cmbs.trajectory import Trajectory
 
 __version__ = "0.1.0"
 

@@ -685,7 +685,17 @@ def _formulation_help() -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``cmbs`` console script; returns the exit status."""
+    """Entry point of the ``cmbs`` console script; returns the exit status.
+
+    Called without ``argv``, as the console script and ``python -m cmbs.cli`` call it, it owns
+    its process and keeps the garbage collector from walking the objects that live as long as
+    the process (:func:`cmbs.collector.settle_the_command_process`: frozen after the imports, at
+    numba's first compiled call and at exit).  Called with ``argv`` from a program, it leaves
+    that program's collector alone."""
+    if argv is None:
+        from cmbs.collector import settle_the_command_process
+
+        settle_the_command_process()
     parser = build_parser()
     args = parser.parse_args(argv)
     if sys.stderr.isatty():

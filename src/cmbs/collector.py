@@ -1,20 +1,20 @@
-"""Python's cyclic garbage collector and the objects that live as long as the process.
+"""Python's cyclic garbage collector in the process of the ``cmbs`` command.
 
 A compiled run starts by creating some 10⁵ objects that are never freed: the modules of numpy,
 numba and cmbs, and numba's typing and lowering registries, which numba builds when its CPU
 target initialises (at the first compiled call, loading scipy.linalg for its BLAS).  The cyclic
 collector examines young objects often while they are being created and walks all of them at
-each full collection: in a whole launch (import, the four-bar, 10 s of RK4) about 60 ms went to
-collections that found nothing to free, a tenth of the process.
+each full collection, and once more in the interpreter's final collection at exit.
 
-:func:`long_lived` pauses the collector while a block creates such objects and then moves
-everything alive out of its reach (``gc.freeze``: a permanent generation that no collection
-walks); ``import cmbs`` runs in one, and so does numba's target initialisation
-(:func:`initialise_numba_target_on_first_use`).  The cost is the usual one
-of ``gc.freeze``: a reference cycle among the frozen objects that becomes garbage is kept until
-exit.  :func:`freeze_at_exit` spares the interpreter's final collection the same walk (about
-0.2 s); memory is returned to the system at exit as always, and only finalizers of objects left
-in cycles are skipped there, which CPython does not promise to run at exit anyway.
+The library leaves the collector alone: a program that imports cmbs keeps its collector as it set
+it.  The ``cmbs`` command owns its process, and :func:`settle_the_command_process` (called by
+:func:`cmbs.cli.main` as the process's entry point) moves the objects alive after its imports out
+of the collector's reach (``gc.freeze``: a permanent generation that no collection walks), does
+the same with what numba's target initialisation builds (:func:`long_lived`,
+:func:`initialise_numba_target_on_first_use`), and freezes everything at exit, sparing the final
+collection its walk.  The cost is the usual one of ``gc.freeze``: a reference cycle among the
+frozen objects that becomes garbage is kept until exit, and at exit only finalizers of objects
+left in cycles are skipped, which CPython does not promise to run at exit anyway.
 """
 
 from __future__ import annotations
@@ -52,11 +52,6 @@ def long_lived() -> Iterator[None]:
                 gc.enable()
 
 
-def freeze_at_exit() -> None:
-    """Freeze every object when the interpreter exits, before its final collection."""
-    atexit.register(gc.freeze)
-
-
 def initialise_numba_target_on_first_use() -> None:
     """Initialise numba's CPU target in a :func:`long_lived` block at the next compiled call
     (numba's ``numba:compiler_lock`` event, raised when a kernel is compiled or loaded from the
@@ -81,3 +76,17 @@ def initialise_numba_target_on_first_use() -> None:
             pass
 
     event.register("numba:compiler_lock", FirstCompiledCall())
+
+
+def settle_the_command_process() -> None:
+    """For the ``cmbs`` command only, which owns its process: freeze the objects alive now (the
+    modules it imported; without a full collection first, which would walk them all once more
+    to free the few cycles the imports left), freeze what numba's target initialisation builds
+    at the first compiled call, and freeze everything at exit, before the interpreter's final
+    collection.  Never called by the library."""
+    from cmbs.jit import COMPILED
+
+    gc.freeze()
+    if COMPILED:
+        initialise_numba_target_on_first_use()
+    atexit.register(gc.freeze)

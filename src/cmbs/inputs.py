@@ -8,9 +8,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cmbs.errors import CmbsError
-from cmbs.lazy import lazy_module
+from cmbs.lazy import on_first_use
 
-interpolate = lazy_module("scipy.interpolate")
+interpolate = on_first_use("scipy.interpolate")
 
 
 @dataclass(frozen=True)

@@ -17,12 +17,12 @@ from typing import Sequence
 import numpy as np
 
 from cmbs.errors import ConvergenceError, ModelError
-from cmbs.lazy import lazy_module
+from cmbs.lazy import on_first_use
 from cmbs.model.model import Model
 from cmbs.trajectory import Trajectory
 
-linalg = lazy_module("scipy.linalg")
-optimize = lazy_module("scipy.optimize")
+linalg = on_first_use("scipy.linalg")
+optimize = on_first_use("scipy.optimize")
 
 
 @dataclass(frozen=True)

@@ -2,9 +2,12 @@
 call (scipy's linalg, interpolate, optimize and sparse take about 0.3 s to import, more than a
 compiled 10 s simulation of a small mechanism).
 
-:func:`lazy_module` is the recipe of the Python documentation for
-:class:`importlib.util.LazyLoader`: the module object exists at once and its code runs at the
-first attribute access.
+:func:`on_first_use` stands for a module of another package inside cmbs: its first attribute read
+imports the module in the usual way, so a program that imports cmbs finds in ``sys.modules`` and on
+the parent package exactly what a plain import puts there.  :func:`lazy_module` is the recipe of
+the Python documentation for :class:`importlib.util.LazyLoader`, for cmbs's own modules only (a
+module object in ``sys.modules`` at once, its code run at the first attribute access), where
+numba needs a module global.
 """
 
 from __future__ import annotations
@@ -15,9 +18,31 @@ import sys
 from types import ModuleType
 
 
+class on_first_use:  # noqa: N801 -- used like a module: ``linalg = on_first_use("scipy.linalg")``
+    """The module ``name``, imported by a plain import at the first attribute read through this
+    object, which then forwards every attribute read to the module.  It is no module and is put
+    nowhere: ``sys.modules`` and the parent package are left to the import system."""
+
+    def __init__(self, name: str) -> None:
+        self._name = name
+        self._module: ModuleType | None = None
+
+    def __getattr__(self, attribute: str) -> object:
+        if self._module is None:
+            self._module = importlib.import_module(self._name)
+        return getattr(self._module, attribute)
+
+    def __repr__(self) -> str:
+        return f"<{self._name}, imported on first use>"
+
+
 def lazy_module(name: str) -> ModuleType:
-    """The module ``name``, imported when one of its attributes is first read (at once if it was
-    already imported)."""
+    """The cmbs module ``name``, imported when one of its attributes is first read (at once if it
+    was already imported).  Only for cmbs's own modules: the module is put in ``sys.modules`` and
+    bound to its package as the import system does; for another package's modules use
+    :class:`on_first_use`, which leaves both to the import system."""
+    if name.partition(".")[0] != "cmbs":
+        raise ValueError(f"lazy_module is for cmbs's own modules, not {name!r}: use on_first_use")
     module = sys.modules.get(name)
     if module is not None:
         return module
@@ -30,8 +55,7 @@ def lazy_module(name: str) -> ModuleType:
     sys.modules[name] = module
     loader.exec_module(module)
     parent, _, child = name.rpartition(".")
-    if parent:      # bound to its package, as the import system binds a submodule it imports
-        setattr(sys.modules[parent], child, module)
+    setattr(sys.modules[parent], child, module)  # bound to its package, as the import system binds a submodule
     return module
 
 

@@ -19,10 +19,10 @@ from typing import Callable, Sequence
 import numpy as np
 
 from cmbs.errors import CmbsError
-from cmbs.lazy import lazy_module
+from cmbs.lazy import on_first_use
 from cmbs.trajectory import Trajectory
 
-interpolate = lazy_module("scipy.interpolate")
+interpolate = on_first_use("scipy.interpolate")
 
 Law = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
 

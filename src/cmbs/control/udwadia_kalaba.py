@@ -64,12 +64,12 @@ import numpy as np
 from cmbs.control.base import actuator_map, gain_vector
 from cmbs.dynamics.projection import pseudo_inverse
 from cmbs.errors import CmbsError
-from cmbs.lazy import lazy_module
+from cmbs.lazy import on_first_use
 from cmbs.model import joints
 from cmbs.model.model import Model
 from cmbs.model.natural import NaturalEquations, point_map
 
-linalg = lazy_module("scipy.linalg")
+linalg = on_first_use("scipy.linalg")
 
 Desired = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
 

@@ -20,10 +20,10 @@ import numpy as np
 
 from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters, constraint_velocity
 from cmbs.errors import SingularSystemError
-from cmbs.lazy import lazy_module
+from cmbs.lazy import on_first_use
 from cmbs.model.model import Model, Terms
 
-linalg = lazy_module("scipy.linalg")
+linalg = on_first_use("scipy.linalg")
 
 
 @dataclass(frozen=True)

@@ -35,10 +35,10 @@ import numpy as np
 
 from cmbs.dynamics.base import Accelerations, check_parameters
 from cmbs.errors import CmbsError, ConvergenceError, SingularSystemError
-from cmbs.lazy import lazy_module
+from cmbs.lazy import on_first_use
 from cmbs.model.model import Model, Terms
 
-linalg = lazy_module("scipy.linalg")
+linalg = on_first_use("scipy.linalg")
 
 #: κ₁ (:func:`partition_condition`) at an evaluated stage above which :func:`rounding_note`
 #: warns.  At a state δ from a singular position, κ ~ 1/δ; the positions a recovery reaches are then uncertain by

@@ -38,10 +38,10 @@ from typing import ClassVar
 import numpy as np
 
 from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters, constraint_velocity
-from cmbs.lazy import lazy_module
+from cmbs.lazy import on_first_use
 from cmbs.model.model import Model, Terms
 
-linalg = lazy_module("scipy.linalg")
+linalg = on_first_use("scipy.linalg")
 
 #: α = ALPHA_SCALE · max diag M / max diag AᵀA (at q0) when no α is given.
 ALPHA_SCALE = 1e4

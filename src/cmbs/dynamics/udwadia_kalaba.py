@@ -28,10 +28,10 @@ import numpy as np
 
 from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.projection import pseudo_inverse, reference_row_scale
-from cmbs.lazy import lazy_module
+from cmbs.lazy import on_first_use
 from cmbs.model.model import Model, Terms
 
-linalg = lazy_module("scipy.linalg")
+linalg = on_first_use("scipy.linalg")
 
 
 @dataclass(frozen=True)

@@ -28,10 +28,10 @@ import numpy as np
 
 from cmbs.errors import ModelError
 from cmbs.model.limits import MAX_MAGNITUDE, MIN_LENGTH_RATIO
-from cmbs.lazy import lazy_module
+from cmbs.lazy import on_first_use
 from cmbs.model.expressions import Program, evaluate_program, parse_expression
 
-interpolate = lazy_module("scipy.interpolate")
+interpolate = on_first_use("scipy.interpolate")
 
 KIND_EXPRESSION, KIND_PIECEWISE, KIND_PYTHON, KIND_UNUSED = 0, 1, 2, 3
 
