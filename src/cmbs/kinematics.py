@@ -218,7 +218,7 @@ def _refuse_half_turns(model: Model, q: np.ndarray, t: float) -> None:
 
 def follow_branch(model: Model, q: np.ndarray, t_from: float, t_to: float, *, fixed: Sequence[str | int] = (),
                   fixed_to: np.ndarray | None = None, tolerance: float = 1e-12, max_iterations: int = 50,
-                  max_correction: float = 0.05) -> np.ndarray:
+                  max_correction: float = 0.05, rates: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Carry the assembled configuration ``q`` at ``t_from`` to ``t_to`` along its own assembly
     branch (natural-parameter continuation, Allgower & Georg, *Introduction to Numerical
     Continuation Methods*, 2003, ch. 2), while the ``fixed`` coordinates move linearly from their
@@ -231,7 +231,9 @@ def follow_branch(model: Model, q: np.ndarray, t_from: float, t_to: float, *, fi
     :func:`coordinate_scales`, is at most ``max_correction`` (5 % of the model's size, or
     0.05 rad) and no angle sits half a turn away; else it is halved.  Other branches lie much
     farther away except at a singular configuration, so the result is the configuration the
-    mechanism reaches by moving continuously — never one of another assembly mode.
+    mechanism reaches by moving continuously — never one of another assembly mode.  ``rates``,
+    q̇ and q̈ at ``t_from`` when the caller has them (time moving, nothing held), spare the first
+    predictor's velocity and acceleration analyses.
 
     Raises
     ------
@@ -256,7 +258,10 @@ def follow_branch(model: Model, q: np.ndarray, t_from: float, t_to: float, *, fi
     s, h = 0.0, 1.0
     while s < 1.0:
         h = min(h, 1.0 - s)
-        guess = _predict(model, q, t_from + s * duration, h, duration, columns, change)
+        if s == 0.0 and rates is not None and columns.size == 0:
+            guess = q + h * duration * rates[0] + 0.5 * (h * duration) ** 2 * rates[1]
+        else:
+            guess = _predict(model, q, t_from + s * duration, h, duration, columns, change)
         guess[columns] = start_values + (s + h) * change
         t = t_from + (s + h) * duration if s + h < 1.0 else t_to
         try:
@@ -351,7 +356,7 @@ def kinematic_analysis(model: Model, times: np.ndarray, *, q0: np.ndarray | None
     for step, t in enumerate(times):
         if step > 0:
             q = follow_branch(model, q, float(times[step - 1]), float(t), tolerance=tolerance,
-                              max_iterations=max_iterations)
+                              max_iterations=max_iterations, rates=(QD[step - 1], QDD[step - 1]))
         qd = velocities(model, q, float(t), qd=np.zeros(n))
         Q[step], QD[step], QDD[step] = q, qd, accelerations(model, q, qd, float(t))
     return Trajectory(times, Q, QD, QDD, model.coordinate_names,
