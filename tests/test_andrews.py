@@ -76,3 +76,20 @@ def test_a_diverged_run_says_its_constraints_are_violated(andrews):
     run = simulate(andrews, t_end=0.03, integrator="rk4")
     assert "the constraints are violated by up to" in run.info["note"]
     assert run.info["status"] == "failed" and "the motion diverged" in run.info["message"]
+
+
+def test_its_coordinates_are_angles(andrews):
+    """from_sympy's coordinate_kinds: the angles read in rad and their forces in N m; a kind it
+    does not know, or a count that does not match, is refused."""
+    import sympy
+
+    from cmbs.errors import ModelError
+    from cmbs.model.equations import from_sympy
+    from cmbs.units import coordinate_unit, force_unit
+
+    assert andrews.coordinate_kinds == ("angle",) * 7
+    assert coordinate_unit(andrews, "beta") == "rad" and force_unit(andrews, "beta") == "N m"
+    x = sympy.Symbol("x")
+    for kinds in (["meters"], ["x", "z"]):
+        with pytest.raises(ModelError, match="coordinate_kinds must give one of"):
+            from_sympy("bad", coordinates=[x], mass_matrix=sympy.Matrix([[1]]), forces=[0], coordinate_kinds=kinds)

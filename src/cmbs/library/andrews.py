@@ -112,7 +112,7 @@ def andrews() -> Model:
         points={"O": (0, 0), "P": P, "E": E, "A": A, "B": B, "C": C, "D": D, "H": H, "K": K},
         lines=[("O", "P"), ("P", "E"), ("B", "E"), ("B", "D"), ("E", "D"), ("A", "H"), ("H", "E"), ("A", "K"),
                ("K", "E"), ("C", "D")],
-        q0=list(INITIAL_ANGLES), qd0=[0.0] * 7,
+        q0=list(INITIAL_ANGLES), qd0=[0.0] * 7, coordinate_kinds=["angle"] * 7,
         description="Andrews' squeezing mechanism: 7 bodies (grams), spring 4530 N/m, motor torque 0.033 N m; "
                     "7 angles, 6 closures, 1 DOF",
         source="W. Schiehlen, Multibody Systems Handbook (1990); E. Hairer, G. Wanner, Solving ODEs II (1996) "

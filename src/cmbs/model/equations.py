@@ -475,6 +475,21 @@ class SympyEquations:
         return np.array(self._points_function(np.asarray(q, float).tolist()), dtype=float).reshape(-1, 2)
 
 
+#: The coordinate kinds a model of its own equations may state.
+EQUATION_KINDS = ("angle", "x", "z", "distance", "generic")
+
+
+def _coordinate_kinds(kinds: Sequence[str] | None, n: int, name: str) -> tuple[str, ...]:
+    """The ``n`` coordinate kinds given to :func:`from_sympy` (all "generic" if None), checked."""
+    if kinds is None:
+        return ("generic",) * n
+    kinds = tuple(kinds)
+    if len(kinds) != n or not all(kind in EQUATION_KINDS for kind in kinds):
+        raise ModelError(f"model {name!r}: coordinate_kinds must give one of {', '.join(EQUATION_KINDS)} for each "
+                         f"of the {n} coordinates, got {kinds!r}")
+    return kinds
+
+
 def _rebuild_sympy_equations(name: str, keywords: dict) -> SympyEquations:
     return from_sympy(name, **keywords).equations
 
@@ -496,6 +511,7 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
                constraint_names: Sequence[str] | None = None,
                velocity_constraints: sympy.Matrix | Sequence[sympy.Expr] | None = None,
                velocity_constraint_names: Sequence[str] | None = None,
+               coordinate_kinds: Sequence[str] | None = None,
                backend: str = "python",
                cache: bool = True) -> Model:
     """A :class:`Model` from SymPy expressions of the equations of motion (THEORY §1).
@@ -559,6 +575,9 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
         ``drivers`` may name them too.
     velocity_constraint_names
         Names of the velocity constraints (``"psi[k]"`` if None).
+    coordinate_kinds
+        What each coordinate measures, for units and scales: ``"angle"`` (rad), ``"x"``, ``"z"``,
+        ``"distance"`` (m) or ``"generic"`` (the model's own units); all ``"generic"`` if None.
     backend
         ``"python"`` (default): generated scalar code on the ``math`` module, no compile delay;
         best for small models.  ``"numba"``: the same code compiled by numba (compile time of
@@ -590,6 +609,7 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
     n = len(q)
     if n == 0:
         raise ModelError(f"model {name!r}: coordinates is empty; at least one coordinate is needed")
+    kinds = _coordinate_kinds(coordinate_kinds, n, name)
     if velocities is None:
         qd = _default_velocities(q, forces, name, velocity_constraints)
     else:
@@ -725,7 +745,7 @@ def from_sympy(name: str, *, coordinates: Sequence[sympy.Symbol], mass_matrix: s
         _check_symmetric_sympy(name, equations, mass, asymmetric, q0_array)
     _check_mass(name, np.array(terms.M), q0_array, symmetric_tolerance=None)
     return Model(name=name, coordinate_names=tuple(symbol.name for symbol in q),
-                 coordinate_kinds=("generic",) * n, constraint_names=names, drivers=mask,
+                 coordinate_kinds=kinds, constraint_names=names, drivers=mask,
                  actuator_names=tuple(symbol.name for symbol in u), q0=q0_array, qd0=qd0_array,
                  point_names=point_names, lines=line_pairs, equations=equations,
                  description=description, source=source,
