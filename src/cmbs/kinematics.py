@@ -113,20 +113,32 @@ def scaled_residuals(phi: np.ndarray, A: np.ndarray, size: float) -> np.ndarray:
     return np.abs(phi) / (np.where(norms > 0.0, norms, 1.0) * size)
 
 
-def half_turn_angles(model: Model, q: np.ndarray, t: float = 0.0) -> list[tuple[str, float]]:
+def position_errors(model: Model, q: np.ndarray, t: float = 0.0) -> np.ndarray:
+    """Each constraint row's :func:`scaled_residuals` at (q, t), against the model's size at its
+    q0 (0 for nonholonomic rows, which have no position-level error): how far q lies from the
+    constraints, as a fraction of the mechanism's size."""
+    terms = model.evaluate(q, np.zeros(model.n), t)
+    rows = model.holonomic
+    errors = np.zeros(model.m)
+    errors[rows] = scaled_residuals(terms.phi[rows], terms.A[rows], model_size(model, model.q0))
+    return errors
+
+
+def half_turn_angles(model: Model, q: np.ndarray, t: float = 0.0, A: np.ndarray | None = None) -> list[tuple[str, float]]:
     """The angle coordinates of a natural-coordinate model that sit half a turn away from the
     direction they measure, as (name, value) pairs.
 
     The angle constraint cos φ (u×v) - sin φ (u·v) = |u||v| sin(θ - φ) also vanishes at
     φ = θ + π.  On the right branch ∂Φ/∂φ = -|u||v| cos(θ - φ) < 0; on the spurious one it is
-    > 0 (see :mod:`cmbs.model.natural`).  Models of other kinds have no such root: [].
+    > 0 (see :mod:`cmbs.model.natural`).  Models of other kinds have no such root: [].  ``A``,
+    the Jacobian at (q, t) when the caller has it.
     """
     from cmbs.model.model import base_equations
     from cmbs.model.natural import NaturalEquations
 
     if not isinstance(base_equations(model)[0], NaturalEquations):
         return []
-    A = model.jacobian(q, t)
+    A = model.jacobian(q, t) if A is None else A
     wrong = []
     for row, constraint in enumerate(model.constraint_names):
         kind, _, name = constraint.partition(" ")
@@ -182,7 +194,7 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
         if not np.isfinite(residual):
             break
         if residual < tolerance:
-            _refuse_half_turns(model, q, t)
+            _refuse_half_turns(model, q, t, terms.A)
             return q
         if iteration == max_iterations:
             break
@@ -204,8 +216,8 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
     raise error
 
 
-def _refuse_half_turns(model: Model, q: np.ndarray, t: float) -> None:
-    wrong = half_turn_angles(model, q, t)
+def _refuse_half_turns(model: Model, q: np.ndarray, t: float, A: np.ndarray) -> None:
+    wrong = half_turn_angles(model, q, t, A)
     if wrong:
         name, value = wrong[0]
         error = BranchError(

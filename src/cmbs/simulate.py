@@ -47,7 +47,7 @@ NUMERICALLY_DAMPED = tuple(INDEX3)
 #: (RK4 at 10 ms on the 3-link chain: 0.17; backward Euler at 10 ms: 0.03 to 1.3).
 ENERGY_NOTE = 1e-3
 #: A run whose constraint error, as a displacement relative to the mechanism's size, passes this
-#: gets a note (:func:`constraint_violation`).
+#: gets a note (:func:`cmbs.kinematics.position_errors`).
 CONSTRAINT_NOTE = 1e-3
 #: ... and a run whose constraints are violated by more than the mechanism's size has diverged: it
 #: is marked failed.
@@ -75,26 +75,25 @@ START_TOLERANCE = 1e-6
 def check_start(model: Model, q: np.ndarray, qd: np.ndarray) -> None:
     """Refuse, before any work, a start state off the constraints or with an angle half a turn from
     its points (:func:`cmbs.kinematics.half_turn_angles`): the run would be another mechanism's."""
-    from cmbs.kinematics import half_turn_angles, model_size, scaled_residuals
+    from cmbs.kinematics import half_turn_angles, position_errors
 
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd))):
         raise CmbsError(f"the start state of model {model.name!r} is not finite")
     if not model.m:
         return
-    terms = model.evaluate(q, qd, 0.0)
-    rows = np.flatnonzero(model.holonomic)
-    positions = scaled_residuals(terms.phi[rows], terms.A[rows], model_size(model, model.q0))
-    if positions.size and not positions.max() <= START_TOLERANCE:
-        worst = rows[int(np.argmax(positions))]
+    positions = position_errors(model, q)
+    if not positions.max() <= START_TOLERANCE:
+        worst = int(np.argmax(positions))
         raise CmbsError(f"q0 violates constraint {model.constraint_names[worst]!r} of model {model.name!r} by "
                         f"{positions.max():.3g} times the mechanism's size: assemble it first (cmbs.assemble)")
+    terms = model.evaluate(q, qd, 0.0)
     scale = np.abs(terms.A).max(axis=1) * np.abs(qd).max(initial=0.0) + np.abs(terms.phi_t)
     rates = np.abs(terms.A @ qd + terms.phi_t) / np.where(scale > 0, scale, 1.0)
     if not rates.max() <= START_TOLERANCE:
         worst = int(np.argmax(rates))
         raise CmbsError(f"qd0 violates constraint {model.constraint_names[worst]!r} of model {model.name!r} (A q̇ + Φ_t "
                         f"is {rates.max():.3g} of its terms): make it consistent first (cmbs.velocities)")
-    wrong = half_turn_angles(model, q, 0.0)
+    wrong = half_turn_angles(model, q, 0.0, terms.A)
     if wrong:
         name, value = wrong[0]
         raise CmbsError(f"q0 puts angle {name} = {value:.6g} rad of model {model.name!r} half a turn away from the "
@@ -674,16 +673,6 @@ def _note_energy_drift(model: Model, kinetic: np.ndarray, energy: np.ndarray, u:
                         f"largest kinetic energy ({cause})")
 
 
-def constraint_violation(model: Model, q: np.ndarray, t: float) -> float:
-    """The largest constraint error at (q, t) as a displacement relative to the model's size at q0
-    (:func:`cmbs.kinematics.scaled_residuals`), holonomic rows only."""
-    from cmbs.kinematics import model_size, scaled_residuals
-
-    terms = model.evaluate(q, np.zeros(model.n), t)
-    rows = model.holonomic
-    return float(np.max(scaled_residuals(terms.phi[rows], terms.A[rows], model_size(model, model.q0)), initial=0.0))
-
-
 def _note_constraint_violation(model: Model, t: np.ndarray, q: np.ndarray, position_error: np.ndarray,
                                info: dict) -> None:
     """A note when the constraints are violated by more than :data:`CONSTRAINT_NOTE` of the model's
@@ -691,8 +680,10 @@ def _note_constraint_violation(model: Model, t: np.ndarray, q: np.ndarray, posit
     mechanism's."""
     if not t.size or not model.holonomic.any():
         return
+    from cmbs.kinematics import position_errors
+
     for k in dict.fromkeys((int(np.nanargmax(position_error)) if np.any(np.isfinite(position_error)) else -1, -1)):
-        violation = constraint_violation(model, q[k], float(t[k])) if np.all(np.isfinite(q[k])) else np.inf
+        violation = position_errors(model, q[k], float(t[k])).max() if np.all(np.isfinite(q[k])) else np.inf
         if not violation <= CONSTRAINT_NOTE:
             _add_note(info, f"the constraints are violated by up to {violation:.2g} times the mechanism's size (t = "
                             f"{t[k]:.6g}): the motion is not the mechanism's (a smaller dt or rtol, or project=True)")

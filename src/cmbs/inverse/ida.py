@@ -156,19 +156,16 @@ def check_motion(model: Model, motion: Trajectory) -> None:
     """Raise a :class:`CmbsError` unless ``motion`` is one the model's drivers impose: Φ = 0,
     A q̇ = -Φ_t and q̈ equal to the acceleration analysis's (A q̈ = γ) at every instant, to
     :data:`MOTION_TOLERANCE`."""
-    from cmbs.kinematics import model_size, scaled_residuals, velocities
+    from cmbs.kinematics import position_errors, velocities
 
     if tuple(motion.names) != model.coordinate_names:
         raise CmbsError(f"the motion's coordinates ({', '.join(motion.names)}) are not model {model.name!r}'s "
                         f"({', '.join(model.coordinate_names)})")
-    size = model_size(model, model.q0)
-    rows = model.holonomic
     speed_scale = max(float(np.abs(motion.qd).max(initial=0.0)), 1e-300)
     accel_scale = max(float(np.abs(motion.qdd).max(initial=0.0)), 1e-300)
     for i, t in enumerate(motion.t):
         q, qd = motion.q[i], motion.qd[i]
-        terms = model.evaluate(q, qd, t)
-        position = float(np.max(scaled_residuals(terms.phi[rows], terms.A[rows], size), initial=0.0))
+        position = float(position_errors(model, q, t).max(initial=0.0))
         if not position <= MOTION_TOLERANCE:
             _disagreement(model, t, f"positions violate its constraints by {position:.3g} of its size")
         for label, given, own, scale in (("velocities", qd, velocities(model, q, t, qd=qd), speed_scale),
