@@ -23,7 +23,7 @@ import numpy as np
 
 from cmbs.errors import CmbsError, ExpressionError, did_you_mean
 from cmbs.inverse.ida import driven_columns
-from cmbs.model.drivers import Expression, Table, TimeFunction
+from cmbs.model.drivers import Expression, Table, TimeFunction, checked_at_start
 from cmbs.model.model import Model, Terms, WrappedEquations
 from cmbs.trajectory import Trajectory
 
@@ -90,25 +90,12 @@ def prescribe(model: Model, functions: Mapping[str, TimeFunction]) -> Model:
         constraint_names=free.constraint_names + tuple(f"motion {name}" for name in names),
         drivers=np.concatenate([free.drivers, np.ones(len(names), dtype=bool)]),
         nonholonomic=np.concatenate([free.nonholonomic, np.zeros(len(names), dtype=bool)]))
-    start = np.array([_value_at_start(name, functions[name]) for name in names])
+    start = np.array([checked_at_start(functions[name], f"motion of {name}")(0.0) for name in names])
     q0 = follow_branch(free, assemble(free, model.q0, 0.0), 0.0, 0.0, fixed=names, fixed_to=start[:, 0])
     qd0 = model.qd0.copy()
     qd0[columns] = start[:, 1]
     q0 = assemble(prescribed, q0, 0.0, fixed=names)
     return prescribed.replace(q0=q0, qd0=velocities(prescribed, q0, 0.0, qd=qd0, fixed=names))
-
-
-def _value_at_start(name: str, function: TimeFunction) -> tuple[float, float, float]:
-    """(f, f', f'') of the motion of coordinate ``name`` at t = 0, or a CmbsError naming it when
-    they are not finite there (``1/t``): not a failed assembly."""
-    with np.errstate(all="ignore"):
-        try:
-            values = tuple(float(value) for value in function(0.0))
-        except (ArithmeticError, ValueError) as error:
-            raise CmbsError(f"motion of {name}: cannot be evaluated at t = 0 ({error})") from None
-    if not all(np.isfinite(values)):
-        raise CmbsError(f"motion of {name}: value or time derivatives not finite at t = 0: (f, f', f'') = {values}")
-    return values
 
 
 def read_motion(source: str, model: Model, *, coordinates: Sequence[str] | None = None,

@@ -293,3 +293,19 @@ def evaluate_time_functions(table, ops, reals, t, stack, out):
             coefficients = reals[r0 + pieces + 1:r0 + pieces + 1 + 4 * pieces]
             value = evaluate_piecewise(breaks, coefficients, t)
             out[k, 0], out[k, 1], out[k, 2] = value[0], value[1], value[2]
+
+
+def checked_at_start(function: TimeFunction, label: str) -> TimeFunction:
+    """``function`` once its value and time derivatives at t = 0 are known to be finite, so that
+    e.g. ``1/t`` or ``sqrt(0-1)`` is reported where it is given, naming ``label`` (a model-file
+    entry, a prescribed coordinate), rather than as a division by zero or a NaN deep inside
+    assembly; else a :class:`ModelError`."""
+    with np.errstate(all="ignore"):
+        try:
+            values = function(0.0)
+        except (ArithmeticError, ValueError) as error:
+            raise ModelError(f"cannot be evaluated at t = 0 ({error})", entry=label) from None
+    if not np.all(np.isfinite(values)):
+        raise ModelError(f"value or time derivatives not finite at t = 0: (f, f', f'') = {tuple(values)}",
+                         entry=label)
+    return function

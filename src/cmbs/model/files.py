@@ -17,7 +17,7 @@ from typing import Any, Callable
 import numpy as np
 
 from cmbs.errors import ConvergenceError, ModelError, did_you_mean
-from cmbs.model.drivers import Table, TimeFunction, as_time_function
+from cmbs.model.drivers import Table, TimeFunction, as_time_function, checked_at_start
 from cmbs.model.model import Model
 from cmbs.model.natural import NaturalModelBuilder
 
@@ -85,20 +85,7 @@ class _Entry:
                 function = as_time_function(value)
             except ModelError as error:
                 raise ModelError(error.problem, entry=f"{self.label}.{key}") from None
-        return _checked_at_start(function, f"{self.label}.{key}")
-
-
-def _checked_at_start(function: TimeFunction, label: str) -> TimeFunction:
-    """Evaluate ``function`` at t = 0 so that e.g. ``1/t`` or ``sqrt(0-1)`` is reported here, naming
-    its entry, rather than as a division by zero or a NaN deep inside assembly."""
-    try:
-        values = function(0.0)
-    except (ArithmeticError, ValueError) as error:
-        raise ModelError(f"cannot be evaluated at t = 0 ({error})", entry=label) from None
-    if not np.all(np.isfinite(values)):
-        raise ModelError(f"value or time derivatives not finite at t = 0: (f, f', f'') = {tuple(values)}",
-                         entry=label)
-    return function
+        return checked_at_start(function, f"{self.label}.{key}")
 
 
 def _table(entry: _Entry, base: Path, default_interpolation: str | None = None) -> Table:
