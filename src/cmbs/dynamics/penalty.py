@@ -14,7 +14,7 @@ previous evaluation's λ*,
     λ*_{k+1} = λ*_k + α r_k,      r_k = A q̈_k - γ + 2μΩΦ̇ + Ω²Φ,
 
 until the constraint-acceleration residual r_k is below ``tolerance`` relative to
-‖A‖ ‖q̈‖ + ‖γ - 2μΩΦ̇ - Ω²Φ‖ (max norms), or stops shrinking (by half an iteration).  That
+‖A‖ ‖q̈‖ + ‖γ - 2μΩΦ̇ - Ω²Φ‖ (max norms), or until an iteration no longer halves it.  That
 residual is what the iteration drives to zero, and rounding leaves it near machine precision
 whatever the conditioning of M + αAᵀA, so the test is attainable; the change of q̈ between
 iterations is not (it stalls at cond · ε).  At a singular position the acceleration equations
@@ -54,9 +54,8 @@ RESIDUAL_NOTE = 1e-6
 class Penalty:
     """Penalty method: α (default None: scaled to the model, see the module docstring), μ (1),
     Ω (10 s⁻¹); up to ``iterations`` (20) augmented-Lagrangian updates of λ* per evaluation,
-    until the relative constraint-acceleration residual is below ``tolerance`` (1e-12) or stops
-    shrinking;
-    ``iterations=0`` is the plain penalty."""
+    until the relative constraint-acceleration residual is below ``tolerance`` (1e-12) or an
+    iteration no longer halves it; ``iterations=0`` is the plain penalty."""
 
     name: ClassVar[str] = "penalty"
     alpha: float | None = None
