@@ -72,14 +72,14 @@ from typing import Callable  # noqa: E402
 import numpy as np  # noqa: E402
 
 import cmbs  # noqa: E402
-from cmbs.fast import CompiledDynamics  # noqa: E402
+from cmbs.dynamics.field import CompiledDynamics  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_model import environment, fmt, time_call  # noqa: E402  (same timing method and helpers)
 from reporting import write_report  # noqa: E402
 
 FORMULATIONS = ("lagrange", "baumgarte", "penalty", "matrix-r", "projection", "udwadia-kalaba")
-COMPILED_FORMULATIONS = ("lagrange", "baumgarte", "projection")   # cmbs.fast.CompiledDynamics
+COMPILED_FORMULATIONS = ("lagrange", "baumgarte", "projection")   # cmbs.dynamics.field.CompiledDynamics
 GRAVITY = 9.81
 STEP = 1e-3                  # RK4 step, output interval of RK45, step of the other tools
 TOLERANCE = 1e-8             # RK45 rtol = atol
@@ -1285,7 +1285,7 @@ def main(argv: list[str] | None = None) -> int:
                 and run.get("loop_s") and run["status"] == "success"
                 and run["span"] == max(r["span"] for r in cases[label]["runs"])]
     if compiled:
-        print("  compiled RK4 path (cmbs.fast): loop = model + solve + RK4 inside numba; the rest of info['wall_time'] "
+        print("  compiled RK4 path (cmbs.integrate.compiled_rk4): loop = model + solve + RK4 inside numba; the rest of info['wall_time'] "
               "is building the trajectory (energy, -Aᵀλ at every output)")
         for label, run in compiled:
             wall, loop = run["wall_s"]["median"], run["loop_s"]

@@ -9,7 +9,7 @@ Target: forward simulation of one stride (1.13 s) under computed-torque control 
 (RK4, Lagrange) in <= 0.5 s wall (issue 5).  Timed: :func:`cmbs.simulate` of the tracking plant
 (:mod:`cmbs.gait.track`: residual actuators; measured GRF as tabulated point forces, or none) under
 :class:`cmbs.control.ComputedTorque` from a 5° initial error, on the compiled loop
-(:mod:`cmbs.fast`, chosen automatically: the plant has no Python wrapper, the law is exactly a
+(:mod:`cmbs.integrate.compiled_rk4`, chosen automatically: the plant has no Python wrapper, the law is exactly a
 ComputedTorque) and on the Python loop (``compiled=False``); the law's construction is not timed.
 
     python benchmarks/bench_gait.py

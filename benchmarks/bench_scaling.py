@@ -36,7 +36,7 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 import cmbs  # noqa: E402
-from cmbs.fast import CompiledDynamics  # noqa: E402
+from cmbs.dynamics.field import CompiledDynamics  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_dynamics import GRAVITY, installed, mujoco_measure, pinocchio_measure, rod, tree_from  # noqa: E402

@@ -6,7 +6,8 @@ import pytest
 
 import cmbs
 from cmbs.banded import band_factor, band_plan, band_solve, gram_profile, inverse_trace, jacobian_pattern
-from cmbs.fast import CompiledDynamics, _cholesky_in_place, workspace
+from cmbs.dynamics.field import CompiledDynamics
+from cmbs.dynamics.kkt import cholesky_in_place, packed_workspace, workspace_views
 
 
 def _band_storage(K, order, width):
@@ -65,13 +66,13 @@ def test_profile_cholesky_and_takahashi_trace_match_numpy():
     for i in range(m):                       # the profile covers G's non-zeros
         assert np.all(G[i, :start[i]] == 0.0)
     factor = np.tril(G).copy()
-    assert _cholesky_in_place(factor, start)
+    assert cholesky_in_place(factor, start)
     np.testing.assert_allclose(np.tril(factor), np.linalg.cholesky(G), rtol=0, atol=1e-12)
     width = int(np.max(np.arange(m) - start))
     Z = np.zeros((m, width + 1))
     assert inverse_trace(factor, start, Z) == pytest.approx(np.trace(np.linalg.inv(G)), rel=1e-11)
     dense = np.tril(G).copy()                # the dense profile gives the same
-    assert _cholesky_in_place(dense, np.zeros(m, dtype=np.int64))
+    assert cholesky_in_place(dense, np.zeros(m, dtype=np.int64))
     assert inverse_trace(dense, np.zeros(m, dtype=np.int64), np.zeros((m, m))) == pytest.approx(
         np.trace(np.linalg.inv(G)), rel=1e-11)
 
@@ -86,7 +87,7 @@ def test_large_chains_take_the_band_path_with_the_python_solver_results(closed):
     qd = cmbs.velocities(model, q, qd=rng.normal(size=model.n))
     for name in ("lagrange", "projection"):
         compiled = CompiledDynamics(model, name)
-        assert workspace(model)[5][16] == 1            # the band KKT plan is used
+        assert workspace_views(*packed_workspace(model))[16] == 1      # the band KKT plan is used
         qdd, lam = compiled.accelerations(q, qd)
         expected = compiled.solver.accelerations(model.evaluate(q, qd, 0.0), q, qd, 0.0)
         np.testing.assert_allclose(qdd, expected.qdd, rtol=0, atol=1e-9 * np.abs(expected.qdd).max())

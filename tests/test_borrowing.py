@@ -31,7 +31,7 @@ SCRIPT = textwrap.dedent("""
 
     import cmbs
     from cmbs.control import ComputedTorque, Reference
-    from cmbs.fast import CompiledDynamics
+    from cmbs.dynamics.field import CompiledDynamics
 
     four_bar = cmbs.load("four-bar").without_drivers()
     slider = cmbs.load("slider-crank")

@@ -5,8 +5,9 @@ import pytest
 
 import cmbs
 from cmbs.errors import CmbsError
+from cmbs.model.compiled import model_kernel
+from cmbs.model.natural import NaturalKernel
 from cmbs.simulate import simulate
-from cmbs import fast as compiled
 from helpers import kitchen_sink
 
 
@@ -48,7 +49,7 @@ def test_compiled_loop_refuses_what_it_cannot_run():
 def test_jacobi_extreme_eigenvalues_match_lapack():
     """The rank check's small symmetric eigenvalue routine against numpy (LAPACK), including
     nearly rank-deficient Gram matrices."""
-    from cmbs.fast import _gram_extremes
+    from cmbs.dynamics.kkt import _gram_extremes
 
     rng = np.random.default_rng(0)
     for m in range(1, 13):
@@ -77,7 +78,7 @@ def test_compiled_loop_equals_python_loop_on_the_human_model():
 def test_gram_bounds_enclose_the_extreme_eigenvalues():
     """The cheap certificate of the rank check: trace G and 1/trace G⁻¹ bracket G's spectrum,
     and a certified A is never one the SVD test calls singular, also when the bounds are reused."""
-    from cmbs.fast import _certify, _gram_bounds, _gram_singular, column_rows
+    from cmbs.dynamics.kkt import certify, gram_bounds, gram_singular, column_rows
 
     rng = np.random.default_rng(1)
     for m in (1, 3, 8, 20):
@@ -91,7 +92,7 @@ def test_gram_bounds_enclose_the_extreme_eigenvalues():
             gram, factor = np.empty((m, m)), np.empty((m, m))
             rows_of, dense = column_rows(None, m, n), np.zeros(m, dtype=np.int64)
             band = np.zeros((m, m))
-            low, high = _gram_bounds(A, scale, gram, factor, rows_of, dense, band)
+            low, high = gram_bounds(A, scale, gram, factor, rows_of, dense, band)
             scaled = A * scale[:, None]
             np.testing.assert_allclose(gram, scaled @ scaled.T, rtol=1e-13, atol=1e-13)
             eigenvalues = np.linalg.eigvalsh(scaled @ scaled.T)  # known to rounding, ~ε‖G‖
@@ -101,12 +102,12 @@ def test_gram_bounds_enclose_the_extreme_eigenvalues():
             reference, A0 = np.zeros(3), np.zeros((m, n))
             for tolerance in (1e-4, 1e-2):
                 for _ in range(2):              # afresh, then from the reference bounds (same A)
-                    singular, certified, decided = _certify(A, scale, tolerance, reference, A0, gram, factor,
+                    singular, certified, decided = certify(A, scale, tolerance, reference, A0, gram, factor,
                                                             rows_of, dense, band)
                     if not decided:             # over 12 rows, bounds inconclusive: LAPACK decides
                         assert m > 12 and not certified
                         np.testing.assert_allclose(gram, scaled @ scaled.T, rtol=1e-13, atol=1e-13)
-                        singular = _gram_singular(gram, tolerance)
+                        singular = gram_singular(gram, tolerance)
                     assert singular == (sigma[-1] < tolerance * max(sigma[0], 1.0))
                     assert not (certified and singular)
 
@@ -114,7 +115,7 @@ def test_gram_bounds_enclose_the_extreme_eigenvalues():
 @pytest.mark.parametrize("kind", ["natural", "joint"])
 def test_schur_solve_equals_the_full_saddle_point_system(kind):
     """Block elimination of the massive coordinates against numpy's solve of [M Aᵀ; A 0]."""
-    from cmbs.fast import KIND_JOINT, KIND_NATURAL, _schur_solve, schur_workspace
+    from cmbs.dynamics.kkt import schur_solve, schur_workspace
 
     rng = np.random.default_rng(2)
     n, m = 9, 5
@@ -129,37 +130,37 @@ def test_schur_solve_equals_the_full_saddle_point_system(kind):
     A[:, 6] -= 0.5
     Q, c = rng.normal(size=n), rng.normal(size=m)
     expected = np.linalg.solve(np.block([[M, A.T], [A, np.zeros((m, m))]]), np.concatenate([Q, c]))
-    schur = schur_workspace(KIND_NATURAL if kind == "natural" else KIND_JOINT, M, m)
+    schur = schur_workspace(kind == "natural", M, m)
     assert schur[1] == (1 if kind == "natural" else 0)
     qdd, lam = np.empty(n), np.empty(m)
-    assert _schur_solve(M, Q, A, c, schur, qdd, lam)
+    assert schur_solve(M, Q, A, c, schur, qdd, lam)
     np.testing.assert_allclose(qdd, expected[:n], rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(lam, expected[n:], rtol=1e-10, atol=1e-10)
 
 
 def test_schur_solve_declines_a_semi_definite_mass_block():
-    from cmbs.fast import KIND_NATURAL, _schur_solve, schur_workspace
+    from cmbs.dynamics.kkt import schur_solve, schur_workspace
 
     M = np.diag([1.0, 1.0, 0.0])
     M[0, 1] = M[1, 0] = 1.0                 # rows 0, 1 carry mass but their block is singular
     A = np.array([[1.0, 0.0, 1.0]])
-    schur = schur_workspace(KIND_NATURAL, M, 1)
+    schur = schur_workspace(True, M, 1)
     assert schur[1] == -1
-    assert not _schur_solve(M, np.ones(3), A, np.zeros(1), schur, np.empty(3), np.empty(1))
+    assert not schur_solve(M, np.ones(3), A, np.zeros(1), schur, np.empty(3), np.empty(1))
 
 
 def test_lu_solves_match_numpy():
-    from cmbs.fast import _lu_in_place, _lu_solve, _lu_solve_transposed
+    from cmbs.dynamics.kkt import lu_in_place, lu_solve, lu_solve_transposed
 
     rng = np.random.default_rng(3)
     for size in (1, 4, 11):
         K = rng.normal(size=(size, size))
         b = rng.normal(size=size)
         factors, pivots = K.copy(), np.empty(size, dtype=np.int64)
-        assert _lu_in_place(factors, pivots)
+        assert lu_in_place(factors, pivots)
         x, y = b.copy(), b.copy()
-        _lu_solve(factors, pivots, x)
-        _lu_solve_transposed(factors, pivots, y)
+        lu_solve(factors, pivots, x)
+        lu_solve_transposed(factors, pivots, y)
         np.testing.assert_allclose(x, np.linalg.solve(K, b), rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(y, np.linalg.solve(K.T, b), rtol=1e-10, atol=1e-12)
 
@@ -176,7 +177,7 @@ def _random_states(model, count, seed):
 @pytest.mark.parametrize("formulation", ["lagrange", "baumgarte", "projection"])
 def test_compiled_dynamics_equals_the_python_solver(name, formulation):
     """One compiled call (model terms + solve) against model.evaluate + the Python solver."""
-    from cmbs.fast import CompiledDynamics
+    from cmbs.dynamics.field import CompiledDynamics
 
     model = cmbs.load(name, links=6, closed=True) if name == "chain" else cmbs.load(name)
     model = model.without_drivers() if name == "four-bar" else model
@@ -194,11 +195,12 @@ def test_compiled_dynamics_equals_the_python_solver(name, formulation):
 def test_projection_takes_the_svd_at_a_singular_position_and_the_schur_path_elsewhere():
     """At θ1 = 90° the slider-crank's A loses rank: the certified Schur path must decline, the
     SVD path gives the Python projection's answer; a regular state is taken by the Schur path."""
-    from cmbs.fast import CompiledDynamics, _projection_by_schur, workspace
+    from cmbs.dynamics.field import CompiledDynamics
+    from cmbs.dynamics.projection import _by_schur
 
     model = cmbs.load("slider-crank")
     compiled = CompiledDynamics(model, "projection")
-    schur = workspace(model)[5]
+    schur = _schur_tuple(model)
     row_scale = np.ascontiguousarray(compiled.solver.row_scale, dtype=float)
     values = dict(zip(model.coordinate_names, model.q0))
     values.update({"A.x": 0.0, "A.z": 1.0, "C.x": 0.0, "theta1": np.pi / 2, "theta2": -np.pi})
@@ -208,8 +210,8 @@ def test_projection_takes_the_svd_at_a_singular_position_and_the_schur_path_else
         qd = cmbs.velocities(model, q, qd=np.ones(model.n))
         terms = model.evaluate(q, qd, 0.0)
         qdd, lam = np.empty(model.n), np.empty(model.m)
-        taken = _projection_by_schur(True, terms.M, terms.Q, terms.A, terms.gamma, row_scale,
-                                     compiled.formulation.threshold, schur, qdd, lam)
+        taken = _by_schur(terms.M, terms.Q, terms.A, terms.gamma, row_scale, compiled.formulation.threshold, schur,
+                          qdd, lam)
         assert taken == schur_expected
         expected = compiled.solver.accelerations(terms, q, qd, 0.0)
         got_qdd, got_lam = compiled.accelerations(q, qd, 0.0)
@@ -219,11 +221,11 @@ def test_projection_takes_the_svd_at_a_singular_position_and_the_schur_path_else
 
 def test_over_twelve_dependent_constraints_are_found_by_the_counted_fallback():
     """A hanging 7-link chain whose every link is constrained twice: 14 rows of rank 7.  Beyond
-    12 rows the compiled rank test leaves the Jacobi rotations for LAPACK (``_field_fallback``,
+    12 rows the compiled rank test leaves the Jacobi rotations for LAPACK (``gram_singular``,
     on the Gram matrix the bounds left); it must stop as the Python solver does, while the
     projection (SVD) gives the Python solver's accelerations."""
     from cmbs.errors import SingularSystemError
-    from cmbs.fast import CompiledDynamics
+    from cmbs.dynamics.field import CompiledDynamics
     from cmbs.model.natural import NaturalModelBuilder
 
     builder = NaturalModelBuilder("chain-twice", gravity=(0.0, -9.81))
@@ -247,7 +249,7 @@ def test_over_twelve_dependent_constraints_are_found_by_the_counted_fallback():
 
 def test_compiled_dynamics_names_the_constraints_at_a_singular_position_and_checks_sizes():
     from cmbs.errors import SingularSystemError
-    from cmbs.fast import CompiledDynamics
+    from cmbs.dynamics.field import CompiledDynamics
 
     model = cmbs.load("slider-crank")
     values = dict(zip(model.coordinate_names, model.q0))
@@ -333,8 +335,8 @@ def test_undriven_model_no_longer_evaluates_its_drivers_time_functions():
     included) equal those of the same model with the driver given as an expression."""
     callable_driven = kitchen_sink(python_driver=True).without_drivers()
     expression_driven = kitchen_sink(python_driver=False).without_drivers()
-    assert compiled.supported(kitchen_sink(python_driver=True)) is None
-    assert compiled.supported(callable_driven) == compiled.KIND_NATURAL
+    assert model_kernel(kitchen_sink(python_driver=True)) is None
+    assert isinstance(model_kernel(callable_driven), NaturalKernel)
     rng = np.random.default_rng(3)
     q = callable_driven.q0 + 0.01 * rng.standard_normal(callable_driven.n)
     qd = rng.standard_normal(callable_driven.n)
@@ -349,45 +351,56 @@ def test_undriven_model_no_longer_evaluates_its_drivers_time_functions():
     assert np.abs(loaded - unloaded).max() > 0.1      # the force and torque functions are still evaluated
 
 
+def _schur_tuple(model):
+    """The unpacked workspace of a model's compiled solves (views into a private copy)."""
+    from cmbs.dynamics.kkt import packed_workspace, workspace_views
+
+    return workspace_views(*packed_workspace(model))
+
+
 def test_packed_workspace_unpacks_to_the_same_entries():
-    """CompiledDynamics passes the Schur workspace as three arrays; unpacked, every entry has the
-    original's values, shape and dtype (a chain large enough for the band plan's arrays)."""
-    from cmbs.fast import pack_workspace, unpack_workspace, workspace
+    """The compiled solves carry the Schur workspace as three arrays; unpacked (compiled, and for
+    Python callers), every entry has the original's values, shape and dtype (a chain large enough for the band plan's arrays)."""
+    from cmbs.banded import jacobian_pattern
+    from cmbs.dynamics.kkt import pack_workspace, schur_workspace, unpack_workspace, workspace_views
     from cmbs.jit import njit
 
     unpacked_views = njit(lambda floats, integers, layout: unpack_workspace(floats, integers, layout))
     for model in (cmbs.load("four-bar").without_drivers(), cmbs.load("chain", links=30, closed=True)):
-        schur = workspace(model)[5]
-        for original, unpacked in zip(schur, unpacked_views(*pack_workspace(schur)), strict=True):
-            if isinstance(original, np.ndarray):
-                assert unpacked.dtype == original.dtype and unpacked.shape == original.shape
-                np.testing.assert_array_equal(unpacked, original)
-            else:
-                assert unpacked == original
+        schur = schur_workspace(True, model.mass_matrix(model.q0), model.m, jacobian_pattern(model))
+        packed = pack_workspace(schur)
+        for original, compiled, python in zip(schur, unpacked_views(*packed), workspace_views(*packed), strict=True):
+            for unpacked in (compiled, python):
+                if isinstance(original, np.ndarray):
+                    assert unpacked.dtype == original.dtype and unpacked.shape == original.shape
+                    np.testing.assert_array_equal(unpacked, original)
+                else:
+                    assert unpacked == original
 
 
 def test_reused_rank_bounds_bracket_the_singular_values_and_are_refreshed_when_a_moves_far():
     """Weyl's inequality: bounds kept from a reference A₀ still bracket σ_min² and σ_max² of a
     nearby A (checked against numpy's SVD); a far A gets fresh Gram bounds."""
-    from cmbs.fast import CompiledDynamics, _bounds, workspace
+    from cmbs.dynamics.field import CompiledDynamics
+    from cmbs.dynamics.kkt import bounds
 
     model = cmbs.load("four-bar").without_drivers()
-    schur = workspace(model)[5]
+    schur = _schur_tuple(model)
     row_scale = np.ascontiguousarray(CompiledDynamics(model).solver.row_scale, dtype=float)
     arrays = (schur[27], schur[28], schur[7], schur[8], schur[13], schur[14], schur[15])
     A0 = np.array(model.evaluate(model.q0, model.qd0, 0.0).A)
-    assert not _bounds(A0, row_scale, *arrays)[2]                  # the first call computes afresh
+    assert not bounds(A0, row_scale, *arrays)[2]                  # the first call computes afresh
     rng = np.random.default_rng(5)
     for size, reuse_expected in ((1e-4, True), (1e-2, True), (0.5, False)):
         A = A0 + size * rng.standard_normal(A0.shape) * (A0 != 0)
-        low, high, reused = _bounds(A, row_scale, *arrays)
+        low, high, reused = bounds(A, row_scale, *arrays)
         sigma = np.linalg.svd(row_scale[:, None] * A, compute_uv=False)
         assert reused == reuse_expected
         assert low <= sigma.min() ** 2 * (1 + 1e-12) and high >= sigma.max() ** 2 * (1 - 1e-12)
         if not reused:
-            assert _bounds(A, row_scale, *arrays)[2]              # the far A is the new reference
+            assert bounds(A, row_scale, *arrays)[2]              # the far A is the new reference
         schur[27][0] = 0.0
-        _bounds(A0, row_scale, *arrays)                            # back to A₀ as the reference
+        bounds(A0, row_scale, *arrays)                            # back to A₀ as the reference
 
 
 def test_gram_over_the_structural_pattern_equals_the_dense_product():
@@ -395,7 +408,7 @@ def test_gram_over_the_structural_pattern_equals_the_dense_product():
     only within its profile; outside it G stays zero.  Against the dense product, for sparse
     banded matrices whose pattern also holds entries that happen to be zero."""
     from cmbs.banded import gram_profile
-    from cmbs.fast import _gram, column_rows
+    from cmbs.dynamics.kkt import _gram, column_rows
 
     rng = np.random.default_rng(4)
     for m, n in ((6, 10), (30, 50)):
@@ -414,93 +427,19 @@ def test_gram_over_the_structural_pattern_equals_the_dense_product():
             np.testing.assert_allclose(gram, scaled @ scaled.T, rtol=1e-14, atol=1e-14)
 
 
-@pytest.mark.parametrize("every", [1, 7])
-def test_loop_goes_on_with_the_svd_from_the_stage_that_needs_it(every):
-    """The projection through the slider-crank's singular position: the loop without the paths
-    that create arrays stops at the first stage needing the SVD, and the loop with them goes on
-    from that stage.  The records must equal, bit for bit, those of the full loop run from t = 0,
-    so the resumed stage and the record counter carry on exactly."""
-    model = cmbs.load("slider-crank").without_drivers()
-    chosen = cmbs.formulation("projection")
-    plan = compiled.compiled_plan(model, chosen, "rk4", None, False, 1.2, 1e-3)
-    assert plan is not None
-    kind, method, parameters, mode, law = plan
-    solver = chosen.bind(model)
-    parameters = compiled.bound_parameters(method, parameters, solver)
-    _, ints, reals, buffer, mass, schur = compiled.workspace(model)
-    steps, h = 1200, 1e-3
-    law = compiled.law_arrays(law, model)
-    row_scale = np.ascontiguousarray(solver.row_scale)
-    u0 = np.zeros(model.n_u)
-
-    def arguments():
-        state, records, work = compiled._rk4_arrays(np.array(model.q0), np.array(model.qd0), u0, model.m,
-                                                    steps // every + 1, buffer.size, law[8].shape[0])
-        return (kind, method, parameters, h, steps, every, ints, reals, mass, row_scale, mode, law,
-                compiled._private_copy(schur), *state, work, records), records
-
-    lean, _ = arguments()
-    recorded, status, t_stop, step, stage = compiled._rk4_steps_borrowed(*lean, 0, 0, 0)
-    assert status == compiled.FALLBACK and 0 < step < steps and t_stop == pytest.approx(step * h, abs=h)
-    full, full_records = arguments()
-    count, status, _, _, _ = compiled._rk4_steps(*full, 0, 0, 0)
-    assert status == compiled.OK and count == steps // every + 1
-    resumed = compiled.rk4(kind, method, parameters, np.array(model.q0), np.array(model.qd0), h, steps, every, u0,
-                           ints, reals, buffer.size, mass, row_scale, model.m, mode, law, schur)
-    assert resumed[9] == count and resumed[10] == compiled.OK
-    for got, expected in zip(resumed[:9], full_records):
-        np.testing.assert_array_equal(got, expected)
-
-
-SMALL_NATURAL_CASES = [("four-bar", "lagrange"), ("four-bar", "baumgarte"), ("four-bar", "projection"),
-                       ("slider-crank", "lagrange"), ("slider-crank", "projection"), ("kitchen-sink", "baumgarte")]
-
-
-@pytest.mark.parametrize("name, formulation", SMALL_NATURAL_CASES)
-def test_small_natural_loop_takes_the_general_loops_steps_bit_for_bit(name, formulation):
-    """The loop compiled for natural models with constant inputs and no band solve
-    (:func:`cmbs.fast._rk4_steps_small_natural`) does the general borrowing loop's operations:
-    the same records, status, stop time and stopping stage, bit for bit, on driven models, up to
-    the slider-crank's singular position (Lagrange: SINGULAR; projection: FALLBACK to the SVD)."""
-    model = kitchen_sink(python_driver=False) if name == "kitchen-sink" else cmbs.load(name)
-    chosen = cmbs.formulation(formulation)
-    steps, h = 2000, 1e-3
-    plan = compiled.compiled_plan(model, chosen, "rk4", None, False, steps * h, h)
-    assert plan is not None
-    kind, method, parameters, mode, law = plan
-    solver = chosen.bind(model)
-    parameters = compiled.bound_parameters(method, parameters, solver)
-    _, ints, reals, buffer, mass, schur = compiled.workspace(model)
-    assert kind == compiled.KIND_NATURAL and mode == compiled.CONSTANT and schur[16] != 1
-    law = compiled.law_arrays(law, model)
-    u0 = np.full(model.n_u, 0.3 if name == "kitchen-sink" else 0.0)     # the kitchen sink's actuator pushes
-
-    def run(loop):
-        state, records, work = compiled._rk4_arrays(np.array(model.q0), np.array(model.qd0), u0, model.m, steps + 1,
-                                                    buffer.size, law[8].shape[0])
-        ending = loop(kind, method, parameters, h, steps, 1, ints, reals, mass, np.ascontiguousarray(solver.row_scale),
-                      mode, law, compiled._private_copy(schur), *state, work, records, 0, 0, 0)
-        return ending, records
-
-    (general_ending, general), (small_ending, small) = run(compiled._rk4_steps_borrowed), run(
-        compiled._rk4_steps_small_natural)
-    assert small_ending == general_ending
-    expected_status = {"slider-crank": compiled.SINGULAR if formulation == "lagrange" else compiled.FALLBACK}
-    assert general_ending[1] == expected_status.get(name, compiled.OK)
-    for got, expected in zip(small, general):
-        np.testing.assert_array_equal(got, expected)
-
-
 def test_workspace_is_built_once_per_model_and_released_with_it():
-    """The compiled workspace of a model is kept while the model lives (the same schur tuple on
-    the second call, a new terms buffer each time) and dropped when the model is collected."""
+    """The compiled workspace of a model is kept while the model lives (the same layout on the
+    second call, scratch arrays of its own each time) and dropped when the model is collected."""
     import gc
 
+    from cmbs.dynamics import kkt
+
     model = cmbs.load("chain", links=5, closed=True)
-    first, second = compiled.workspace(model), compiled.workspace(model)
-    assert first[5] is second[5] and first[3] is not second[3]
+    first, second = kkt.packed_workspace(model), kkt.packed_workspace(model)
+    assert first[2] is second[2] and first[0] is not second[0]
+    np.testing.assert_array_equal(first[0], second[0])
     key = id(model)
-    assert key in compiled._WORKSPACES
+    assert key in kkt._WORKSPACES
     del model, first, second
     gc.collect()
-    assert key not in compiled._WORKSPACES
+    assert key not in kkt._WORKSPACES

@@ -1,4 +1,4 @@
-"""The compiled matrix-R RK4 loop (cmbs.fast_matrix_r) against the Python loop and conservation."""
+"""The compiled matrix-R RK4 loop (cmbs.integrate.compiled_matrix_r) against the Python loop and conservation."""
 
 import numpy as np
 import pytest
@@ -122,7 +122,7 @@ def test_condition_bound_brackets_the_two_norm_partition_condition():
     """The step-end test's filter: κ₂ ≤ sqrt(κ₁ κ_∞) ≤ (r n)^¼ √r κ₂ (κ_p = ‖A_r‖_p ‖A_d⁻¹‖_p;
     ‖B‖₁ ≤ √rows ‖B‖₂ and ‖B‖∞ ≤ √columns ‖B‖₂), on random and nearly singular partitions (the
     bound comes from the LU factors of A_d, the reference from numpy's norms and inverse)."""
-    from cmbs.fast_matrix_r import _condition_two_bound, _factor_dependent
+    from cmbs.integrate.compiled_matrix_r import _condition_two_bound, _factor_dependent
 
     generator = np.random.default_rng(7)
     n, m = 7, 5

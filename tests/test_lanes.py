@@ -1,6 +1,6 @@
-"""cmbs.fast_lanes: blocks of variants in lanes give, bit for bit, the one-variant compiled loop's
-numbers (cmbs.fast.rk4_batch, itself cmbs.fast.rk4 per variant), including variants that leave
-their lanes at a singular position or when the motion diverges."""
+"""cmbs.integrate.compiled_lanes: blocks of variants in lanes give, bit for bit, the one-variant
+compiled loop's numbers (cmbs.integrate.compiled_rk4.rk4_batch, itself its rk4 per variant),
+including variants that leave their lanes at a singular position or when the motion diverges."""
 
 import functools
 from pathlib import Path
@@ -9,7 +9,10 @@ import numpy as np
 import pytest
 
 import cmbs
-from cmbs import fast, fast_lanes
+from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
+from cmbs.integrate import compiled_lanes
+from cmbs.integrate.compiled_plan import compiled_run
+from cmbs.integrate.compiled_rk4 import rk4_batch
 from cmbs.dynamics import Baumgarte, formulation as make_formulation
 from cmbs.simulate import simulate
 from cmbs.sweep import Variant, sweep
@@ -26,22 +29,19 @@ def _initial_velocities(model, speeds, coordinate):
 def _both(model, QD0, chosen, steps, every, h=1e-3, U0=None):
     """(lanes, one variant at a time): each (q, q̇, |Φ|max records, statuses, records reached)."""
     count = QD0.shape[0]
-    _, method, parameters, _, _ = fast.compiled_plan(model, chosen, "rk4", None, False, steps * h, h)
-    parameters = fast.bound_parameters(method, parameters, chosen.bind(model))
-    kind, ints, reals, buffer, mass, schur = fast.workspace(model)
-    plan = fast_lanes.lane_plan(kind, method, schur, model.m, model.n)
-    assert plan is not None
+    model_part, formulation, inputs = compiled_run(model, chosen, chosen.bind(model), "rk4", None, False, steps * h, h)
+    setup = compiled_lanes.lane_setup(model_part, formulation, model.m, model.n)
+    assert setup is not None
     Q0 = np.tile(model.q0, (count, 1))
     U0 = np.zeros((count, model.n_u)) if U0 is None else U0
-    row_scale, law = np.ascontiguousarray(chosen.bind(model).row_scale), fast.law_arrays(None, model)
+    buffer_size = model.new_terms().buffer.size
     results = []
     for lanes in (True, False):
         records = steps // every + 1
         out = (np.full((count, records, model.n), np.nan), np.full((count, records, model.n), np.nan),
                np.full((count, records), np.nan), np.full(count, -9, dtype=np.int64), np.zeros(count, dtype=np.int64))
-        run = functools.partial(fast_lanes.rk4_lanes, plan=plan) if lanes else fast.rk4_batch
-        run(kind, method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, buffer.size, mass, row_scale, model.m,
-            law, schur, *out)
+        run = functools.partial(compiled_lanes.rk4_lanes, lanes=setup) if lanes else rk4_batch
+        run(model_part, formulation, inputs, Q0, QD0, U0, h, steps, every, buffer_size, model.m, *out)
         results.append(out)
     return results
 
@@ -57,7 +57,7 @@ def test_four_bar_lanes_equal_the_one_variant_loop_bit_for_bit(formulation):
     model = cmbs.load("four-bar").without_drivers()
     QD0 = _initial_velocities(model, np.linspace(-2.0, 2.0, 11), "alpha")
     lanes, single = _both(model, QD0, make_formulation(formulation), steps=300, every=7)
-    assert set(lanes[3]) == {fast.OK} and set(lanes[4]) == {300 // 7 + 1}
+    assert set(lanes[3]) == {OK} and set(lanes[4]) == {300 // 7 + 1}
     assert np.ptp(lanes[0][:, -1, -1]) > 0.5          # the variants really differ
     _assert_identical(lanes, single)
 
@@ -69,7 +69,7 @@ def test_driven_four_bar_with_inputs_in_lanes():
     QD0 = np.tile(model.qd0, (5, 1))
     U0 = np.linspace(-3.0, 3.0, 5).reshape(5, model.n_u)
     lanes, single = _both(model, QD0, make_formulation("lagrange"), steps=200, every=10, U0=U0)
-    assert set(lanes[3]) == {fast.OK}
+    assert set(lanes[3]) == {OK}
     _assert_identical(lanes, single)
 
 
@@ -84,7 +84,7 @@ def test_other_natural_models_in_lanes(name, options):
     rng = np.random.default_rng(3)
     QD0 = np.array([cmbs.velocities(model, model.q0, qd=rng.normal(size=model.n)) for _ in range(9)])
     lanes, single = _both(model, QD0, make_formulation("baumgarte"), steps=250, every=25)
-    assert set(lanes[3]) == {fast.OK}
+    assert set(lanes[3]) == {OK}
     _assert_identical(lanes, single)
 
 
@@ -96,8 +96,8 @@ def test_variants_reaching_the_singular_position_leave_their_lanes():
     QD0 = _initial_velocities(model, np.linspace(1.0, 3.0, 9), "theta1")
     lanes, single = _both(model, QD0, make_formulation("lagrange"), steps=600, every=5)
     statuses = lanes[3]
-    assert fast.SINGULAR in statuses and fast.OK in statuses
-    assert np.all(lanes[4][statuses == fast.SINGULAR] < 600 // 5 + 1)
+    assert SINGULAR in statuses and OK in statuses
+    assert np.all(lanes[4][statuses == SINGULAR] < 600 // 5 + 1)
     _assert_identical(lanes, single)
 
 
@@ -107,7 +107,7 @@ def test_projection_variants_leave_their_lanes_for_the_svd_through_the_singular_
     model = cmbs.load("slider-crank").without_drivers()
     QD0 = _initial_velocities(model, np.linspace(1.0, 3.0, 9), "theta1")
     lanes, single = _both(model, QD0, make_formulation("projection"), steps=600, every=5)
-    assert set(lanes[3]) == {fast.OK} and set(lanes[4]) == {600 // 5 + 1}
+    assert set(lanes[3]) == {OK} and set(lanes[4]) == {600 // 5 + 1}
     assert np.sum(lanes[0][:, -1, 4] > np.pi / 2) >= 5      # from 45° through 90°
     _assert_identical(lanes, single)
 
@@ -117,20 +117,20 @@ def test_a_diverging_run_leaves_its_lanes_as_non_finite():
     model = cmbs.load("four-bar").without_drivers()
     QD0 = _initial_velocities(model, np.linspace(-1.0, 1.0, 3), "alpha")
     lanes, single = _both(model, QD0, Baumgarte(xi=1.0, omega=5000.0), steps=400, every=1)
-    assert set(lanes[3]) == {fast.NON_FINITE}
+    assert set(lanes[3]) == {NON_FINITE}
     _assert_identical(lanes, single)
 
 
 def test_lanes_take_small_natural_models_only():
+    def setup(model, name="lagrange"):
+        chosen = make_formulation(name)
+        model_part, formulation, _ = compiled_run(model, chosen, chosen.bind(model), "rk4", None, False, 1.0, 1e-3)
+        return compiled_lanes.lane_setup(model_part, formulation, model.m, model.n)
+
     four_bar = cmbs.load("four-bar")
-    kind, _, _, _, _, schur = fast.workspace(four_bar)
-    assert fast_lanes.lane_plan(kind, fast.LAGRANGE, schur, four_bar.m, four_bar.n) is not None
-    joint = cmbs.load("slider-crank-joint")
-    kind, _, _, _, _, schur = fast.workspace(joint)
-    assert fast_lanes.lane_plan(kind, fast.LAGRANGE, schur, joint.m, joint.n) is None
-    chain = cmbs.load("chain", links=14, closed=True)     # solved by band LU
-    kind, _, _, _, _, schur = fast.workspace(chain)
-    assert fast_lanes.lane_plan(kind, fast.LAGRANGE, schur, chain.m, chain.n) is None
+    assert setup(four_bar) is not None and setup(four_bar, "projection") is not None
+    assert setup(cmbs.load("slider-crank-joint")) is None
+    assert setup(cmbs.load("chain", links=14, closed=True)) is None     # solved by band LU
 
 
 def test_sweep_in_lanes_equals_single_simulations_exactly():

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from cmbs.lazy import lazy_module, on_first_use
+from cmbs.lazy import on_first_use
 
 PROBE = """
 import sys
@@ -25,25 +25,6 @@ def test_import_cmbs_defers_scipy_submodules_until_first_use():
     output = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True, check=True).stdout
     assert "executed before use: []" in output
     assert "after use: True 6.25" in output            # the cubic through x² is x² itself
-
-
-def test_a_lazy_submodule_is_bound_to_its_package_and_executed_at_first_use():
-    """``import cmbs.model.joints`` after cmbs.fast made it lazy: the attribute path works."""
-    probe = ("import sys, cmbs, cmbs.fast; lazy = type(sys.modules['cmbs.model.joints']).__name__; "
-             "import cmbs.model.joints; print(lazy, cmbs.model.joints.JointModelBuilder.__name__, "
-             "type(sys.modules['cmbs.model.joints']).__name__)")
-    output = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
-    assert output.split() == ["_LazyModule", "JointModelBuilder", "module"]
-
-
-def test_lazy_module_returns_an_imported_module_and_rejects_unknown_and_foreign_names():
-    import cmbs.units
-
-    assert lazy_module("cmbs.units") is cmbs.units
-    with pytest.raises(ImportError, match="no_such_module"):
-        lazy_module("cmbs.no_such_module")
-    with pytest.raises(ValueError, match="'math'.*on_first_use"):
-        lazy_module("math")                  # another package's module: sys.modules is not cmbs's
 
 
 def test_on_first_use_imports_the_module_the_usual_way_at_the_first_attribute_read():

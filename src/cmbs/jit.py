@@ -66,6 +66,35 @@ def interpreted(kernel: Callable) -> Callable:
     return getattr(kernel, "py_func", kernel)
 
 
+def type_dispatch(attribute: str, borrowing: bool = True) -> Callable:
+    """A function ``f(data, *args)`` that calls ``type(data).<attribute>(data, *args)``.
+
+    ``data`` is a :class:`typing.NamedTuple` whose class carries the kernel as a static attribute
+    (a model's terms kernel, a formulation's solve, an input law).  Compiled, the choice is made
+    by numba when the caller is compiled (``numba.extending.overload`` on the tuple's class), so
+    a loop taking ``data`` compiles only the kernel of that class and its specialisation is
+    cached like any other; interpreted, it is a plain attribute lookup.  Adding a kind of model
+    or a formulation is adding a class and its kernel: no code of the loops changes.  The call
+    borrows its arguments as :func:`njit_borrowing` kernels do, unless ``borrowing`` is False
+    (a kernel that returns new arrays)."""
+
+    def dispatch(data, *args):
+        return getattr(type(data), attribute)(data, *args)
+
+    dispatch.__name__ = dispatch.__qualname__ = f"dispatch_{attribute}"
+    if _numba is not None:
+        from numba.extending import overload
+
+        @overload(dispatch, jit_options={"cache": True, **({"_nrt": False} if borrowing else {})})
+        def _resolved(data, *args):
+            kernel = getattr(data.instance_class, attribute)
+
+            def call(data, *args):
+                return kernel(data, *args)
+            return call
+    return dispatch
+
+
 #: ``numba.prange`` (parallel loop over independent iterations) with numba, else ``range``.
 prange = _numba.prange if _numba is not None else range
 

@@ -4,17 +4,14 @@ compiled 10 s simulation of a small mechanism).
 
 :func:`on_first_use` stands for a module of another package inside cmbs: its first attribute read
 imports the module in the usual way, so a program that imports cmbs finds in ``sys.modules`` and on
-the parent package exactly what a plain import puts there.  :func:`lazy_module` is the recipe of
-the Python documentation for :class:`importlib.util.LazyLoader`, for cmbs's own modules only (a
-module object in ``sys.modules`` at once, its code run at the first attribute access), where
-numba needs a module global.
+the parent package exactly what a plain import puts there.  :func:`submodule` serves a package's
+module ``__getattr__``.
 """
 
 from __future__ import annotations
 
 import importlib
 import importlib.util
-import sys
 from types import ModuleType
 
 
@@ -34,29 +31,6 @@ class on_first_use:  # noqa: N801 -- used like a module: ``linalg = on_first_use
 
     def __repr__(self) -> str:
         return f"<{self._name}, imported on first use>"
-
-
-def lazy_module(name: str) -> ModuleType:
-    """The cmbs module ``name``, imported when one of its attributes is first read (at once if it
-    was already imported).  Only for cmbs's own modules: the module is put in ``sys.modules`` and
-    bound to its package as the import system does; for another package's modules use
-    :class:`on_first_use`, which leaves both to the import system."""
-    if name.partition(".")[0] != "cmbs":
-        raise ValueError(f"lazy_module is for cmbs's own modules, not {name!r}: use on_first_use")
-    module = sys.modules.get(name)
-    if module is not None:
-        return module
-    spec = importlib.util.find_spec(name)
-    if spec is None or spec.loader is None:
-        raise ImportError(f"no module named {name!r}")
-    loader = importlib.util.LazyLoader(spec.loader)
-    spec.loader = loader
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    loader.exec_module(module)
-    parent, _, child = name.rpartition(".")
-    setattr(sys.modules[parent], child, module)  # bound to its package, as the import system binds a submodule
-    return module
 
 
 def submodule(package: str, name: str) -> ModuleType:

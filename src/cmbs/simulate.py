@@ -220,13 +220,14 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     newton_tolerance
         Convergence of the implicit integrators' Newton iterations.
     compiled
-        Run the whole loop compiled (:mod:`cmbs.fast`): None chooses it when the run allows it
-        (rk4; lagrange, baumgarte or standard projection; constant inputs, or a
-        :class:`~cmbs.control.ComputedTorque` law alone or in a
-        :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; or matrix-r with constant inputs
-        on a holonomic model (:mod:`cmbs.fast_matrix_r`); rk45/rk23/dop853 with lagrange, baumgarte or
-        standard projection and constant inputs (:mod:`cmbs.fast_adaptive`); no projection; no
-        Python time functions), True requires it, False keeps the Python loop.
+        Run the whole loop compiled: None chooses it when the run allows it
+        (:mod:`cmbs.integrate.compiled_plan`: a model, formulation and inputs with compiled
+        kernels, i.e. no Python time functions, lagrange, baumgarte or standard projection, constant
+        inputs or a :class:`~cmbs.control.ComputedTorque` law alone or in a
+        :class:`~cmbs.control.ZeroOrderHold` with period ``dt``, with rk4 or, constant inputs only,
+        rk45/rk23/dop853; or matrix-r with constant inputs on a holonomic model and rk4,
+        :mod:`cmbs.integrate.compiled_matrix_r`; no projection), True requires it, False keeps
+        the Python loop.
 
     Returns
     -------
@@ -283,26 +284,26 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
             raise CmbsError(f"{label} must have shape ({n},) for model {model.name!r}, got {value.shape}")
     check_start(model, q_start, qd_start)
     steps = whole_steps(t_end, dt)
-    from cmbs import fast
+    from cmbs.integrate.compiled_plan import compiled_run
 
-    fast_plan = fast.compiled_plan(model, chosen, integrator, u, project, t_end, dt)
+    plan = compiled_run(model, chosen, solver, integrator, u, project, t_end, dt)
     velocity_loop = False
-    if fast_plan is None:
-        from cmbs import fast_matrix_r      # imported only for the runs the first plan turned down
+    if plan is None:
+        from cmbs.integrate import compiled_matrix_r      # imported only for the runs the first plan turned down
 
-        velocity_loop = fast_matrix_r.runs(model, chosen, integrator, u, project, steps is not None)
-    if compiled and fast_plan is None and not velocity_loop:
+        velocity_loop = compiled_matrix_r.runs(model, chosen, integrator, u, project, steps is not None)
+    if compiled and plan is None and not velocity_loop:
         raise CmbsError(f"the compiled loop cannot run this simulation (it needs integrator rk4 with t_end a "
                         "multiple of dt, formulation lagrange, baumgarte or projection with the standard inertia, "
                         "constant inputs or a ComputedTorque law (alone or in a ZeroOrderHold with period dt) on "
                         "a compiled model, or matrix-r with constant inputs on a holonomic compiled model; no "
                         f"--project and no Python time functions; model {model.name!r})")
     run_options = {"integrator": integrator, "dt": dt, "every": every, "rtol": rtol, "atol": atol, "project": project}
-    if fast_plan is not None and compiled is not False and integrator != "rk4":
-        trajectory = _run_compiled_adaptive(model, solver, chosen, fast_plan, inputs, q_start, qd_start, times,
-                                            started, run_options)
-    elif fast_plan is not None and compiled is not False:
-        trajectory = _run_compiled(model, solver, chosen, fast_plan, inputs, q_start, qd_start, steps, dt, started,
+    if plan is not None and compiled is not False and integrator != "rk4":
+        trajectory = _run_compiled_adaptive(model, solver, chosen, plan, inputs, q_start, qd_start, times, started,
+                                            run_options)
+    elif plan is not None and compiled is not False:
+        trajectory = _run_compiled(model, solver, chosen, plan, inputs, q_start, qd_start, steps, dt, started,
                                    run_options)
     elif velocity_loop and compiled is not False:
         trajectory = _run_compiled_matrix_r(model, solver, chosen, inputs, q_start, qd_start, steps, dt, started,
@@ -342,7 +343,7 @@ def _run_python(model: Model, solver, chosen: Formulation, inputs: Inputs, q_sta
                                      "project": project, "loop_wall_time": loop_wall})
     trajectory.info["wall_time"] = time.perf_counter() - started
     if integrator == "rk4":                 # before the energy note, which the recording may have made
-        _add_note(trajectory.info, _python_loop_note(model, chosen, u, project, compiled), first=True)
+        _add_note(trajectory.info, _python_loop_note(model, chosen, solver, u, project, compiled), first=True)
     _note_rounding(trajectory.info, solver)
     solver_note = getattr(solver, "run_note", str)()
     if solver_note:
@@ -383,21 +384,24 @@ def _add_note(info: dict, text: str, *, first: bool = False) -> None:
     info["note"] = "; ".join(part for part in parts if part)
 
 
-def _python_loop_note(model: Model, chosen: Formulation, u: object, project: bool, compiled: bool | None) -> str:
+def _python_loop_note(model: Model, chosen: Formulation, solver: object, u: object, project: bool,
+                      compiled: bool | None) -> str:
     """Why an rk4 run took the Python loop (tens of µs per step more than the compiled one)."""
-    from cmbs import fast, jit
+    from cmbs import jit
+    from cmbs.dynamics.field import formulation_kernel
+    from cmbs.model.compiled import model_kernel
 
     if compiled is False:
         reason = "compiled=False"
     elif not jit.COMPILED:
         reason = "numba is not installed, the kernels run as Python"
-    elif fast.supported(model) is None:
+    elif model_kernel(model) is None:
         reason = f"model {model.name!r} has Python-callable terms or time functions"
     elif project:
         reason = "drift projection (project=True) runs in Python"
     elif callable(u):
         reason = "the inputs are a Python callable (only a plain ComputedTorque law is compiled)"
-    elif fast.method_of(chosen) is None and chosen.name != "matrix-r":
+    elif chosen.name != "matrix-r" and formulation_kernel(chosen, solver, model) is None:
         reason = f"formulation {chosen.name!r} has no compiled loop (lagrange, baumgarte, projection, matrix-r have)"
     else:
         reason = "t_end is not a multiple of dt, or the model has nonholonomic rows (matrix-r)"
@@ -708,30 +712,27 @@ def _singular_message(model: Model, solver, q: np.ndarray, qd: np.ndarray, t: fl
 
 def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs: Inputs, q0: np.ndarray,
                   qd0: np.ndarray, steps: int, dt: float, started: float, options: dict) -> Trajectory:
-    """The whole RK4 loop in :func:`cmbs.fast.rk4`, ``steps`` steps of dt; outputs at every
-    ``options["every"]``-th step.  A
-    computed-torque law runs compiled (:func:`cmbs.fast.computed_torque`), recorded as
-    :func:`_record` records a callable input."""
-    from cmbs import fast
+    """The whole RK4 loop in :func:`cmbs.integrate.compiled_rk4.rk4`, ``steps`` steps of dt;
+    outputs at every ``options["every"]``-th step.  A computed-torque law runs compiled
+    (:mod:`cmbs.control.compiled_torque`), recorded as :func:`_record` records a callable input."""
+    from cmbs.dynamics.base import OK, SINGULAR
+    from cmbs.integrate.compiled_rk4 import ConstantInputs, rk4
 
-    kind, method, parameters, mode, law = plan
-    parameters = fast.bound_parameters(method, parameters, solver)
-    _, ints, reals, buffer, mass, schur = fast.workspace(model)
-    u0 = np.array(inputs(0.0, q0, qd0), dtype=float) if mode == fast.CONSTANT else np.zeros(model.n_u)
+    model_part, formulation, law = plan
+    u0 = np.array(inputs(0.0, q0, qd0), dtype=float) if isinstance(law, ConstantInputs) else np.zeros(model.n_u)
     loop_started = time.perf_counter()
-    T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, done, q_fail, qd_fail, u_fail = fast.rk4(
-        kind, method, parameters, np.array(q0), np.array(qd0), dt, steps, options["every"], u0, ints, reals,
-        buffer.size, mass,
-        np.ascontiguousarray(solver.row_scale), model.m, mode, fast.law_arrays(law, model), schur)
+    T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, done, q_fail, qd_fail, u_fail = rk4(
+        model_part, formulation, law, np.array(q0), np.array(qd0), dt, steps, options["every"], u0,
+        model.new_terms().buffer.size, model.m)
     loop_wall = time.perf_counter() - loop_started
     message = ""
-    if status == fast.SINGULAR:
+    if status == SINGULAR:
         message = _singular_message(model, solver, q_fail, qd_fail, t_fail, u_fail)
-    elif status != fast.OK:
+    elif status != OK:
         message = (f"non-finite state or accelerations at t={t_fail:.6g}: the motion diverged; try a smaller "
                    "step, drift projection (project=True) or another formulation")
     info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall}, "success" if status ==
-                 fast.OK else "failed", message, {"steps": done, "evaluations": 4 * done})
+                 OK else "failed", message, {"steps": done, "evaluations": 4 * done})
     k = recorded
     trajectory = _trajectory(model, T[:k], Q[:k], QD[:k], QDD[:k], LAM[:k], U[:k], PHI[:k], PHID[:k], info,
                              FORCE[:k])
@@ -741,13 +742,13 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs
 
 def _run_compiled_matrix_r(model: Model, solver, chosen: Formulation, inputs: Inputs, q0: np.ndarray,
                            qd0: np.ndarray, steps: int, dt: float, started: float, options: dict) -> Trajectory:
-    """The matrix-R RK4 loop of :mod:`cmbs.fast_matrix_r`; outputs at every ``options["every"]``-th
-    step."""
-    from cmbs import fast_matrix_r
+    """The matrix-R RK4 loop of :mod:`cmbs.integrate.compiled_matrix_r`; outputs at every
+    ``options["every"]``-th step."""
+    from cmbs.integrate import compiled_matrix_r
 
     u = np.array(inputs(0.0, q0, qd0), dtype=float)
     loop_started = time.perf_counter()
-    records, recorded, reached, message, repartitions = fast_matrix_r.run(model, solver, u, q0, qd0, dt, steps,
+    records, recorded, reached, message, repartitions = compiled_matrix_r.run(model, solver, u, q0, qd0, dt, steps,
                                                                           options["every"])
     loop_wall = time.perf_counter() - loop_started
     T, Q, QD, QDD, LAM, PHI, PHID, FORCE = (array[:recorded] for array in records)
@@ -763,7 +764,7 @@ def _run_compiled_matrix_r(model: Model, solver, chosen: Formulation, inputs: In
 
 def _tableau_extras(tableau) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The second error estimate and the continuous extension (a, c, d) of ``tableau`` as arrays
-    for :func:`cmbs.fast_adaptive.adaptive`, empty where the method has none."""
+    for :func:`cmbs.integrate.compiled_adaptive.adaptive`, empty where the method has none."""
     low = tableau.b_error_low if tableau.b_error_low is not None else np.zeros(0)
     if tableau.dense is None:
         return low, np.zeros((0, 0)), np.zeros(0), np.zeros((0, 0))
@@ -772,31 +773,29 @@ def _tableau_extras(tableau) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
 
 def _run_compiled_adaptive(model: Model, solver, chosen: Formulation, plan: tuple, inputs: Inputs, q0: np.ndarray,
                            qd0: np.ndarray, times: np.ndarray, started: float, options: dict) -> Trajectory:
-    """The rk45/rk23/dop853 loop of :mod:`cmbs.fast_adaptive`; outputs at ``times``."""
-    from cmbs import fast, fast_adaptive
+    """The rk45/rk23/dop853 loop of :mod:`cmbs.integrate.compiled_adaptive`; outputs at ``times``."""
+    from cmbs.dynamics.base import OK, SINGULAR
+    from cmbs.integrate import compiled_adaptive
 
-    kind, method, parameters, _, _ = plan
-    parameters = fast.bound_parameters(method, parameters, solver)
+    model_part, formulation, _ = plan
     tableau = explicit_method(options["integrator"])
-    _, ints, reals, buffer, mass, schur = fast.workspace(model)
     u = np.array(inputs(0.0, q0, qd0), dtype=float)
     loop_started = time.perf_counter()
     (T, Q, QD, QDD, LAM, PHI, PHID, FORCE, recorded, status, t_stop, steps, rejected, evaluations,
-     unsolved, state) = fast_adaptive.adaptive(
-        kind, method, parameters, np.array(q0), np.array(qd0), np.ascontiguousarray(times, dtype=float),
-        options["rtol"], options["atol"], u, ints, reals, buffer.size, mass, np.ascontiguousarray(solver.row_scale),
-        model.m, schur, tableau.c, tableau.a, tableau.b, tableau.b_error,
-        1.0 / (min(tableau.order, tableau.error_order) + 1), 1.0 / (tableau.order + 1), tableau.first_same_as_last,
-        10_000_000, *_tableau_extras(tableau))
+     unsolved, state) = compiled_adaptive.adaptive(
+        model_part, formulation, np.array(q0), np.array(qd0), np.ascontiguousarray(times, dtype=float),
+        options["rtol"], options["atol"], u, model.new_terms().buffer.size, model.m, tableau.c, tableau.a, tableau.b,
+        tableau.b_error, 1.0 / (min(tableau.order, tableau.error_order) + 1), 1.0 / (tableau.order + 1),
+        tableau.first_same_as_last, 10_000_000, *_tableau_extras(tableau))
     loop_wall = time.perf_counter() - loop_started
     message = ""
-    if status == fast.SINGULAR:
+    if status == SINGULAR:
         message = _singular_message(model, solver, state[:model.n], state[model.n:], t_stop, u)
-    elif status != fast.OK:
-        message = f"{fast_adaptive.REASONS.get(status, 'failed')} at t={t_stop:.6g}"
+    elif status != OK:
+        message = f"{compiled_adaptive.REASONS.get(status, 'failed')} at t={t_stop:.6g}"
     counters = {"steps": int(steps), "rejected": int(rejected), "evaluations": int(evaluations)}
     info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall},
-                 "success" if status == fast.OK else "failed", message, counters)
+                 "success" if status == OK else "failed", message, counters)
     if unsolved:
         info["outputs_from_integrator"] = int(unsolved)
     k = recorded

@@ -5,11 +5,12 @@ with a leading variant dimension, on one common time grid).  It chooses how to r
 
 ``batched``
     Variants that differ only in the initial state and constant inputs, on a run the compiled
-    loop takes (:mod:`cmbs.fast`: rk4; lagrange, baumgarte or standard projection), run as one
-    compiled call parallel over the variants (numba threads): natural-coordinate models under
-    lagrange, baumgarte or projection in blocks of eight variants that share each stage's bookkeeping
-    (:func:`cmbs.fast_lanes.rk4_lanes`), other runs one variant at a time
-    (:func:`cmbs.fast.rk4_batch`); both give the numbers of :func:`cmbs.fast.rk4` bit for bit.
+    loop takes (:mod:`cmbs.integrate.compiled_plan` with rk4), run as one compiled call parallel
+    over the variants (numba threads): natural-coordinate models under lagrange, baumgarte or
+    projection in blocks of eight variants that share each stage's bookkeeping
+    (:func:`cmbs.integrate.compiled_lanes.rk4_lanes`), other runs one variant at a time
+    (:func:`cmbs.integrate.compiled_rk4.rk4_batch`); both give the numbers of
+    :func:`cmbs.integrate.compiled_rk4.rk4` bit for bit.
 ``processes``
     Anything else (library-model parameters, mass faults, other formulations and integrators)
     runs :func:`cmbs.simulate` once per variant, in a local pool of worker processes
@@ -419,20 +420,17 @@ def _await_with_workers(client, futures: list, bar: tqdm, worker_timeout: float)
 
 # ---------------------------------------------------------------------------------- batched path
 def _batch_plan(model: Model, settings: RunSettings, variants: list[Variant]) -> tuple | None:
-    """(method, parameters, solver, steps) of the batched path, or None: state-only variants and
-    a run :func:`cmbs.fast.rk4` takes (:func:`cmbs.fast.compiled_plan` with constant inputs)."""
-    from cmbs import fast
+    """(model, formulation and inputs kernels, steps) of the batched path, or None: state-only
+    variants and a run the compiled RK4 loop takes with constant inputs
+    (:func:`cmbs.integrate.compiled_plan.compiled_run`)."""
     from cmbs.dynamics import formulation as make_formulation
+    from cmbs.integrate.compiled_plan import compiled_run
 
     if not all(variant.state_only for variant in variants) or settings.integrator != "rk4":
         return None
     chosen = make_formulation(settings.formulation, **settings.formulation_options)
-    plan = fast.compiled_plan(model, chosen, "rk4", None, settings.project, settings.t_end, settings.dt)
-    if plan is None:
-        return None
-    _, method, parameters, _, _ = plan
-    solver = chosen.bind(model)
-    return method, fast.bound_parameters(method, parameters, solver), solver, round(settings.t_end / settings.dt)
+    plan = compiled_run(model, chosen, chosen.bind(model), "rk4", None, settings.project, settings.t_end, settings.dt)
+    return None if plan is None else (*plan, round(settings.t_end / settings.dt))
 
 
 def _threads() -> int:
@@ -447,11 +445,12 @@ PROGRESS_BLOCKS = 50
 
 def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], plan: tuple,
                  bar: tqdm) -> list[dict]:
-    from cmbs import fast, fast_lanes
+    from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
+    from cmbs.integrate.compiled_lanes import lane_setup, rk4_lanes
+    from cmbs.integrate.compiled_rk4 import rk4_batch
     from cmbs.simulate import energy_drift
 
-    method, parameters, solver, steps = plan
-    kind, ints, reals, buffer, mass, schur = fast.workspace(model)
+    model_part, formulation, inputs, steps = plan
     count = len(variants)
     Q0 = np.array([model.q0 if v.q0 is None else v.q0 for v in variants], dtype=float).reshape(count, model.n)
     QD0 = np.array([model.qd0 if v.qd0 is None else v.qd0 for v in variants], dtype=float).reshape(count, model.n)
@@ -461,22 +460,21 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
     Qs, QDs = np.full((count, records, model.n), np.nan), np.full((count, records, model.n), np.nan)
     PHIs = np.full((count, records), np.nan)
     statuses, recorded = np.zeros(count, dtype=np.int64), np.zeros(count, dtype=np.int64)
-    row_scale, law = np.ascontiguousarray(solver.row_scale), fast.law_arrays(None, model)
     block = count if bar.disable else max(-(-count // PROGRESS_BLOCKS), 4 * _threads())
-    lanes = fast_lanes.lane_plan(kind, method, schur, model.m, model.n)
-    run = fast.rk4_batch if lanes is None else functools.partial(fast_lanes.rk4_lanes, plan=lanes)
+    lanes = lane_setup(model_part, formulation, model.m, model.n)
+    run = rk4_batch if lanes is None else functools.partial(rk4_lanes, lanes=lanes)
+    buffer_size = model.new_terms().buffer.size
     for a in range(0, count, block):        # each variant is independent: blocks change nothing
         b = min(a + block, count)
-        run(kind, method, parameters, Q0[a:b], QD0[a:b], U0[a:b], settings.dt, steps, settings.every, ints, reals,
-            buffer.size, mass, row_scale, model.m, law, schur, Qs[a:b], QDs[a:b], PHIs[a:b], statuses[a:b],
-            recorded[a:b])
+        run(model_part, formulation, inputs, Q0[a:b], QD0[a:b], U0[a:b], settings.dt, steps, settings.every,
+            buffer_size, model.m, Qs[a:b], QDs[a:b], PHIs[a:b], statuses[a:b], recorded[a:b])
         bar.update(b - a)
-    reasons = {fast.SINGULAR: "singular system (rank of A)", fast.NON_FINITE: "the motion diverged"}
+    reasons = {SINGULAR: "singular system (rank of A)", NON_FINITE: "the motion diverged"}
     sources = model.work_sources
     outputs = []
     for v in range(count):
         k = int(recorded[v])
-        failed = statuses[v] != fast.OK or k < records
+        failed = statuses[v] != OK or k < records
         message = f"{reasons.get(int(statuses[v]), 'failed')} at t={k * settings.every * settings.dt:.6g}"
         kinetic, potential = model.energy_parts(Qs[v, :k], QDs[v, :k])
         energy = kinetic + potential

@@ -9,7 +9,7 @@ generalized force on z that produces a chosen z̈_c is
 so that with an exact model the error obeys ë + K_d ė + K_p e = 0.  Q is the model's force with
 zero inputs; the inputs u realise τ_z through the model's actuators on z.  z, τ_z and the gains
 follow the order of the reference's coordinates (R's columns are taken in that order).
-:func:`cmbs.simulate` runs this law compiled (:func:`cmbs.fast.computed_torque`) when it can.
+:func:`cmbs.simulate` runs this law compiled (:mod:`cmbs.control.compiled_torque`) when it can.
 """
 
 from __future__ import annotations

@@ -18,6 +18,11 @@ import numpy as np
 
 from cmbs.model.model import Model, Terms
 
+#: Status codes of the compiled solves (:func:`cmbs.dynamics.field.field`): the accelerations were
+#: found; the system is singular (the formulation cannot go on at this state); a term or an
+#: acceleration is not finite (the motion diverged).
+OK, SINGULAR, NON_FINITE = 0, 1, 2
+
 
 @dataclass(frozen=True)
 class Accelerations:

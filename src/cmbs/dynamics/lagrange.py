@@ -14,12 +14,15 @@ constraints, unless ``least_squares`` asks for the minimum-norm least-squares so
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters, constraint_velocity
+from cmbs.dynamics.base import OK, SINGULAR, Accelerations, StatelessSolver, check_parameters, constraint_velocity
+from cmbs.dynamics.kkt import band_kkt, certify, full_system, gram_singular, packed_workspace, schur_solve, \
+    unpack_workspace
 from cmbs.errors import SingularSystemError
+from cmbs.jit import njit, njit_borrowing
 from cmbs.lazy import on_first_use
 from cmbs.model.model import Model, Terms
 
@@ -51,6 +54,10 @@ class Lagrange:
     def bind(self, model: Model) -> "KKTSolver":
         return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=0.0, omega=0.0)
 
+    def compiled(self, solver: "KKTSolver", model: Model) -> "LagrangeKernel | None":
+        """The solve of the compiled loops (None for ``least_squares``)."""
+        return None if self.least_squares else lagrange_kernel(solver, model)
+
 
 @dataclass(frozen=True)
 class Baumgarte:
@@ -71,6 +78,10 @@ class Baumgarte:
 
     def bind(self, model: Model) -> "KKTSolver":
         return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=self.xi, omega=self.omega)
+
+    def compiled(self, solver: "KKTSolver", model: Model) -> "LagrangeKernel | None":
+        """The solve of the compiled loops (None for ``least_squares``)."""
+        return None if self.least_squares else lagrange_kernel(solver, model)
 
 
 class KKTSolver(StatelessSolver):
@@ -119,3 +130,76 @@ class KKTSolver(StatelessSolver):
                 f"model {self.model.name!r} at t={t:.6g}: the constraint Jacobian has rank {rank} < {A.shape[0]} "
                 f"(redundant constraints or a singular configuration); dependent: {', '.join(dependent)}. "
                 "Use formulation 'projection', 'udwadia-kalaba' or 'penalty', or least_squares=True")
+
+
+class LagrangeKernel(NamedTuple):
+    """Lagrange's or Baumgarte's equations as the compiled loops take them (ξ = ω = 0: Lagrange):
+    the singularity tolerance on σ_min/σ_max of the row-scaled A, the row scale, the packed
+    :func:`cmbs.dynamics.kkt.schur_workspace` and the augmented system's work arrays."""
+
+    xi: float
+    omega: float
+    tolerance: float
+    row_scale: np.ndarray
+    floats: np.ndarray
+    integers: np.ndarray
+    layout: np.ndarray
+    K: np.ndarray
+    rhs: np.ndarray
+
+
+def lagrange_kernel(solver: KKTSolver, model: Model) -> LagrangeKernel:
+    """The :class:`LagrangeKernel` of a bound solver, with work arrays of its own."""
+    n, m = model.n, model.m
+    return LagrangeKernel(float(solver.xi), float(solver.omega), float(solver.singular_tolerance),
+                          np.ascontiguousarray(solver.row_scale, dtype=float), *packed_workspace(model),
+                          np.empty((n + m, n + m)), np.empty(n + m))
+
+
+@njit_borrowing(cache=True)
+def _solve(kernel, terms, qd, qdd, lam):
+    """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c], c = γ (Lagrange) or γ - 2ξωΦ̇ - ω²Φ with
+    Φ̇ = Aq̇ + Φ_t (Baumgarte), at the terms (Q, Φ, A, γ, Φ_t, M); SINGULAR when σ_min/σ_max of
+    the row-scaled A is below the tolerance (:func:`~cmbs.dynamics.kkt.certify`, then the
+    Gram matrix's eigenvalues where its bounds are inconclusive), as :meth:`KKTSolver._check_rank`
+    tests it.  Band LU for large natural models (when the workspace chose it), the Schur
+    complement when A is certified regular and M's block positive definite, else the full system.
+    """
+    Q, phi, A, gamma, phi_t, M = terms
+    schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
+    singular, certified, decided = certify(A, kernel.row_scale, kernel.tolerance, schur[27], schur[28], schur[7],
+                                           schur[8], schur[13], schur[14], schur[15])
+    if not decided:
+        singular = gram_singular(schur[7], kernel.tolerance)
+    if singular:
+        return SINGULAR
+    n = Q.shape[0]
+    m = gamma.shape[0]
+    rhs = kernel.rhs
+    xi, omega = kernel.xi, kernel.omega
+    for r in range(m):
+        value = gamma[r]
+        if omega != 0.0:
+            rate = phi_t[r]
+            for j in range(n):
+                rate += A[r, j] * qd[j]
+            value -= 2.0 * xi * omega * rate + omega * omega * phi[r]
+        rhs[n + r] = value
+    c = rhs[n:n + m]
+    if schur[16] == 1:                      # large natural model: band LU of the KKT matrix
+        solved = band_kkt(Q, A, c, schur, qdd, lam)
+    else:
+        solved = (certified and schur_solve(M, Q, A, c, schur, qdd, lam)) or \
+            full_system(M, Q, A, kernel.K, rhs, qdd, lam)
+    return OK if solved else SINGULAR
+
+
+@njit(cache=True)
+def _fresh(kernel):
+    """A copy of ``kernel`` with work arrays of its own (for runs beside each other)."""
+    return LagrangeKernel(kernel.xi, kernel.omega, kernel.tolerance, kernel.row_scale, kernel.floats.copy(),
+                          kernel.integers.copy(), kernel.layout, np.empty_like(kernel.K), np.empty_like(kernel.rhs))
+
+
+LagrangeKernel.solve = staticmethod(_solve)
+LagrangeKernel.fresh = staticmethod(_fresh)

@@ -24,12 +24,15 @@ the solution is unchanged, while M_c and M̄ become regular.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters
+from cmbs.dynamics.base import OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
+from cmbs.dynamics.kkt import band_kkt, bounds_meeting, packed_workspace, schur_solve, solve_in_place, \
+    unpack_workspace
 from cmbs.errors import CmbsError
+from cmbs.jit import njit, njit_borrowing
 from cmbs.model.model import Model, Terms
 
 INERTIAS = ("standard", "symmetric", "parameterised")
@@ -65,6 +68,13 @@ class Projection:
 
     def bind(self, model: Model) -> "ProjectionSolver":
         return ProjectionSolver(model, self)
+
+    def compiled(self, solver: "ProjectionSolver", model: Model) -> "ProjectionKernel | None":
+        """The solve of the compiled loops (the standard inertia; None for the others)."""
+        if self.inertia != "standard":
+            return None
+        return ProjectionKernel(float(self.threshold), float(solver.scale), bool(solver.semi_definite),
+                                np.ascontiguousarray(solver.row_scale, dtype=float), *packed_workspace(model))
 
 
 def pseudo_inverse(A: np.ndarray, threshold: float, row_scale: np.ndarray | None = None
@@ -127,3 +137,103 @@ class ProjectionSolver(StatelessSolver):
         force = I_P @ (M @ qdd - Q)
         lam = -pinv.T @ force
         return Accelerations(qdd, lam, force)
+
+
+class ProjectionKernel(NamedTuple):
+    """The projection with the standard inertia as the compiled loops take it: the SVD
+    threshold, the mass-regularisation scale s and whether M is semi-definite, the row scale and
+    the packed :func:`cmbs.dynamics.kkt.schur_workspace`."""
+
+    threshold: float
+    scale: float
+    semi_definite: bool
+    row_scale: np.ndarray
+    floats: np.ndarray
+    integers: np.ndarray
+    layout: np.ndarray
+
+
+@njit_borrowing(cache=True)
+def _solve(kernel, terms, qd, qdd, lam):
+    """Aghili's standard projection at the terms (Q, Φ, A, γ, Φ_t, M): by the augmented system
+    where A is certified regular (:func:`_by_schur`, the same solution there), else by the SVD
+    (:func:`_by_svd`); SINGULAR only when the constraint inertia matrix is exactly singular."""
+    Q, phi, A, gamma, phi_t, M = terms
+    schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
+    if _by_schur(M, Q, A, gamma, kernel.row_scale, kernel.threshold, schur, qdd, lam):
+        return OK
+    if _by_svd(M, Q, A, gamma, kernel.row_scale, kernel.threshold, kernel.scale, kernel.semi_definite, qdd, lam):
+        return OK
+    return SINGULAR
+
+
+#: The projection formulation takes the Schur-complement path when the row-scaled A is certified
+#: to have σ_min >= this (times max(σ_max, 1)) and above the formulation's SVD threshold.
+PROJECTION_REGULAR = 1e-4
+
+
+@njit_borrowing(cache=True, inline="always")
+def _by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
+    """Aghili's standard projection solution at a regular configuration, by the augmented system.
+
+    When A has full row rank and no singular value of the row-scaled DA falls below the SVD
+    ``threshold``, the pseudo-inverse discards nothing, A⁺ = Aᵀ(AAᵀ)⁻¹ and P = I - A⁺A, and
+    (M̂ + PM - M̂P) q̈ = PQ + M̂A⁺γ holds exactly when P(Mq̈ - Q) = 0 and Aq̈ = γ (Aghili 2005,
+    §IV: the two projections of the equation), i.e. when Mq̈ + Aᵀλ = Q, Aq̈ = γ for some λ: the
+    Lagrange solution, unique here, with the same multipliers (λ = -(Aᵀ)⁺f_c and f_c = -Aᵀλ).
+    Taken only when the Gram-matrix bounds of :func:`~cmbs.dynamics.kkt.bounds` certify σ_min(DA) >=
+    PROJECTION_REGULAR·max(σ_max, 1) and σ_min > ``threshold``; returns False otherwise (near
+    singular positions, redundant constraints), and the caller takes the SVD path.  Solved by
+    band LU when the workspace chose it (schur[16] == 1), else by the Schur complement."""
+    m = A.shape[0]
+    if m == 0 or m > A.shape[1]:
+        return False
+    low, high = bounds_meeting(A, row_scale, PROJECTION_REGULAR, threshold, schur[27], schur[28], schur[7], schur[8],
+                                schur[13], schur[14], schur[15])
+    if low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold:
+        return False
+    if schur[16] == 1:
+        return band_kkt(Q, A, gamma, schur, qdd, lam)
+    return schur_solve(M, Q, A, gamma, schur, qdd, lam)
+
+
+
+@njit(cache=True)
+def _by_svd(M, Q, A, gamma, row_scale, threshold, scale, semi_definite, qdd, lam):
+    """Aghili's standard projection solution with the SVD pseudo-inverse of the row-scaled A,
+    singular values up to the threshold ``threshold`` discarded (any rank of A); M̂ = M + s(I - P)
+    when ``semi_definite`` flags a semi-definite M (s = ``scale``).  Returns False when
+    the constraint inertia matrix is exactly singular."""
+    n = M.shape[0]
+    m = A.shape[0]
+    pinv = np.zeros((n, m))
+    P = np.eye(n)
+    if m > 0:
+        scaled = A * row_scale.reshape((m, 1))
+        U, sigma, Vt = np.linalg.svd(scaled, full_matrices=False)
+        for k in range(sigma.shape[0]):
+            if sigma[k] > threshold:
+                v = Vt[k]
+                P -= np.outer(v, v)
+                pinv += np.outer(v / sigma[k], U[:, k] * row_scale)
+    I_P = np.eye(n) - P
+    M_hat = M + scale * I_P if semi_definite else M.copy()
+    matrix = M_hat + P @ M - M_hat @ P
+    solution = P @ Q + M_hat @ (pinv @ gamma)
+    if not solve_in_place(matrix, solution):
+        return False
+    qdd[:] = solution
+    force = I_P @ (M @ qdd - Q)
+    lam[:] = -(pinv.T @ force)
+    return True
+
+
+@njit(cache=True)
+def _fresh(kernel):
+    """A copy of ``kernel`` with work arrays of its own (for runs beside each other)."""
+    return ProjectionKernel(kernel.threshold, kernel.scale, kernel.semi_definite, kernel.row_scale,
+                            kernel.floats.copy(), kernel.integers.copy(), kernel.layout)
+
+
+ProjectionKernel.solve = staticmethod(_solve)
+ProjectionKernel.fresh = staticmethod(_fresh)

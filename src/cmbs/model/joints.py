@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 from cmbs.jit import njit, njit_borrowing
 import numpy as np
@@ -452,6 +452,11 @@ class JointEquations:
     def new_terms(self) -> Terms:
         """A workspace sized for this model (scratch included)."""
         return Terms(self.n, self.m, scratch=self.scratch_size)
+
+    def compiled_kernel(self) -> "JointKernel | None":
+        """The model's data for the compiled loops, or None when a time function is a Python
+        callable."""
+        return None if self.python else JointKernel(self.ip, self.rp, np.zeros((0, 0)))
 
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
         """Fill ``terms`` with M, Q, Φ, A, γ, Φ_t at (q, q̇, t, u) (see the module docstring)."""
@@ -1169,3 +1174,21 @@ class JointModelBuilder:
             constant_mass=False,
             segment_masses=tuple((link.name, link.mass) for link in links),
         )
+
+
+class JointKernel(NamedTuple):
+    """A joint-coordinate model as the compiled loops take it (:mod:`cmbs.model.compiled`): its
+    index and parameter arrays; ``mass`` is empty (M depends on q and is in the terms buffer)."""
+
+    ints: np.ndarray
+    reals: np.ndarray
+    mass: np.ndarray
+
+
+@njit_borrowing(cache=True)
+def _evaluate_joints(kernel, q, qd, t, u, buffer):
+    """:func:`_evaluate_kernel` for a :class:`JointKernel`."""
+    _evaluate_kernel(kernel.ints, kernel.reals, q, qd, t, u, buffer)
+
+
+JointKernel.evaluate = staticmethod(_evaluate_joints)

@@ -57,7 +57,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Mapping, NamedTuple, Sequence
 
 from cmbs.jit import njit_borrowing
 import numpy as np
@@ -912,6 +912,13 @@ class NaturalEquations:
         return dataclasses.replace(self, m=self.m - drivers, ints=new_ints, reals=new_reals,
                                    time_functions=time_functions)
 
+    def compiled_kernel(self) -> "NaturalKernel | None":
+        """The model's data for the compiled loops, or None when a time function is a Python
+        callable (the loops then cannot evaluate the terms alone)."""
+        if self.time_functions.python:
+            return None
+        return NaturalKernel(self.ints, self.reals, np.ascontiguousarray(self.mass, dtype=float))
+
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
         for k, function in self.time_functions.python:
             terms.scratch[3 * k:3 * k + 3] = function(t)
@@ -1217,3 +1224,21 @@ def _segment_force(x, xi, zi, xj, zj, first, second, frame):
 def _add_force(Q, index, value, n):
     if index < n:
         Q[index] += value
+
+
+class NaturalKernel(NamedTuple):
+    """A natural-coordinate model as the compiled loops take it (:mod:`cmbs.model.compiled`):
+    its index and parameter arrays and its constant mass matrix."""
+
+    ints: np.ndarray
+    reals: np.ndarray
+    mass: np.ndarray
+
+
+@njit_borrowing(cache=True)
+def _evaluate_natural(kernel, q, qd, t, u, buffer):
+    """:func:`_evaluate` for a :class:`NaturalKernel`."""
+    _evaluate(q, qd, t, u, kernel.ints, kernel.reals, buffer)
+
+
+NaturalKernel.evaluate = staticmethod(_evaluate_natural)

@@ -1,6 +1,7 @@
 """Compiled adaptive Runge-Kutta loop: the rk45 (Dormand-Prince), rk23 (Bogacki-Shampine) and
 dop853 (Dormand-Prince, 8th order) runs of :func:`cmbs.simulate` with the formulations of
-:func:`cmbs.fast.field`, constant inputs.
+:func:`cmbs.dynamics.field.field` (any model and formulation with a compiled kernel), constant
+inputs.
 
 The algorithm is that of :func:`cmbs.integrate.explicit.integrate`, step for step: the same
 tableau (passed as arrays from :mod:`cmbs.integrate.tableaus`), Hairer's starting step, the
@@ -20,19 +21,21 @@ import math
 
 import numpy as np
 
-from cmbs.fast import NON_FINITE, OK, SINGULAR, _private_copy, field, record_constraints
+from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
+from cmbs.dynamics.field import field
+from cmbs.integrate.compiled_rk4 import record_constraints
+from cmbs.model.compiled import terms_views
 from cmbs.jit import njit
 
-#: statuses besides fast.OK and SINGULAR
+#: statuses besides OK, SINGULAR and NON_FINITE
 UNDERFLOW, TOO_MANY_STEPS = 5, 6
 
 
 @njit(cache=True)
-def _rhs(kind, method, parameters, y, t, u, ints, reals, buffer, mass, row_scale, lam, K, rhs, schur, out):
+def _rhs(model, formulation, y, t, u, buffer, terms, lam, out):
     """dy/dt = (q̇, q̈) into ``out``; returns the field's status."""
     n = y.shape[0] // 2
-    status = field(kind, method, parameters, y[:n], y[n:], t, u, ints, reals, buffer, mass, row_scale, out[n:], lam,
-                   K, rhs, True, schur)
+    status = field(model, formulation, y[:n], y[n:], t, u, buffer, terms, out[n:], lam)
     out[:n] = y[n:]
     return status
 
@@ -46,16 +49,14 @@ def _rms(values, scale):
 
 
 @njit(cache=True)
-def _record(kind, method, parameters, t, y, slope, u, ints, reals, buffer, mass, row_scale, K, rhs, schur, k,
-            T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE):
+def _record(model, formulation, t, y, slope, u, buffer, terms, k, T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE):
     """Row ``k`` of the outputs at (t, y); returns 1 when the state was singular (q̈ from the
     interpolant's slope, λ = 0), else 0."""
     n = y.shape[0] // 2
     m = LAMs.shape[1]
     lam = np.zeros(m)
     qdd = np.empty(n)
-    status = field(kind, method, parameters, y[:n], y[n:], t, u, ints, reals, buffer, mass, row_scale, qdd, lam,
-                   K, rhs, True, schur)
+    status = field(model, formulation, y[:n], y[n:], t, u, buffer, terms, qdd, lam)
     unsolved = 0
     if status != OK:                         # the terms at the state are in the buffer all the same
         qdd[:] = slope[n:]
@@ -66,7 +67,7 @@ def _record(kind, method, parameters, t, y, slope, u, ints, reals, buffer, mass,
     QDs[k] = y[n:]
     QDDs[k] = qdd
     LAMs[k] = lam
-    record_constraints(buffer, n, m, y[n:], lam, PHI, PHID, FORCE, k)
+    record_constraints(terms, y[n:], lam, PHI, PHID, FORCE, k)
     return unsolved
 
 
@@ -119,8 +120,7 @@ def _dense_value(F, y, x, h, value, slope):
 
 
 @njit(cache=True)
-def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, reals, buffer_size, mass, row_scale, m,
-             schur, c, a, b, b_error, exponent, start_exponent, first_same_as_last, max_steps, b_error_low, dense_a,
+def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, c, a, b, b_error, exponent, start_exponent, first_same_as_last, max_steps, b_error_low, dense_a,
              dense_c, dense_d):
     """Integrate from t_out[0] to t_out[-1] with the tableau (c, a, b, b_error), the controller's
     exponent 1/(min(p, p̂) + 1) and the starting step's 1/(p + 1); ``b_error_low`` (empty if
@@ -129,15 +129,13 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
     outputs (t, q, q̇, q̈, λ, |Φ|, |Φ̇|, -Aᵀλ), the number recorded, the status, the time
     reached, the counters (steps, rejected, evaluations, outputs from the interpolant) and the
     state (q, q̇) the status refers to (where a stage failed, for a failed run)."""
-    schur = _private_copy(schur)
     n = q0.shape[0]
     d = 2 * n
     count = t_out.shape[0]
     T, Qs, QDs, QDDs = np.zeros(count), np.zeros((count, n)), np.zeros((count, n)), np.zeros((count, n))
     LAMs, PHI, PHID, FORCE = np.zeros((count, m)), np.zeros(count), np.zeros(count), np.zeros((count, n))
     buffer = np.zeros(buffer_size)
-    K = np.empty((n + m, n + m))
-    rhs = np.empty(n + m)
+    terms = terms_views(model, n, m, buffer)
     lam = np.empty(m)
     s = c.shape[0]
     extra = dense_c.shape[0]
@@ -152,11 +150,11 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
     k1 = np.empty(d)
     steps, rejected, evaluations, unsolved = 0, 0, 0, 0
     t = t_out[0]
-    status = _rhs(kind, method, parameters, y, t, u, ints, reals, buffer, mass, row_scale, lam, K, rhs, schur, k1)
+    status = _rhs(model, formulation, y, t, u, buffer, terms, lam, k1)
     evaluations += 1
     if status != OK:
         return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, 0, status, t, steps, rejected, evaluations, unsolved, y
-    unsolved += _record(kind, method, parameters, t, y, k1, u, ints, reals, buffer, mass, row_scale, K, rhs, schur,
+    unsolved += _record(model, formulation, t, y, k1, u, buffer, terms,
                         0, T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE)
     next_out = 1
     t_end = t_out[count - 1]
@@ -166,8 +164,7 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
     h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
     h0 = min(h0, t_end - t)
     probe = np.empty(d)
-    status = _rhs(kind, method, parameters, y + h0 * k1, t + h0, u, ints, reals, buffer, mass, row_scale, lam, K,
-                  rhs, schur, probe)
+    status = _rhs(model, formulation, y + h0 * k1, t + h0, u, buffer, terms, lam, probe)
     evaluations += 1
     d2 = _rms(probe - k1, scale) / h0
     h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** start_exponent
@@ -185,8 +182,7 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
         finite = True
         for i in range(1, s):
             _combination(y, h_try, a[i], stages, i, work)
-            status = _rhs(kind, method, parameters, work, t + c[i] * h_try, u, ints, reals, buffer, mass, row_scale,
-                          lam, K, rhs, schur, stages[i])
+            status = _rhs(model, formulation, work, t + c[i] * h_try, u, buffer, terms, lam, stages[i])
             evaluations += 1
             if status == SINGULAR:
                 return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, SINGULAR, t + c[i] * h_try, steps, \
@@ -235,8 +231,7 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
         if first_same_as_last:
             k_new[:] = stages[s - 1]
         else:
-            status = _rhs(kind, method, parameters, y_new, t_new, u, ints, reals, buffer, mass, row_scale, lam, K,
-                          rhs, schur, k_new)
+            status = _rhs(model, formulation, y_new, t_new, u, buffer, terms, lam, k_new)
             evaluations += 1
             if status == SINGULAR:
                 return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, SINGULAR, t_new, steps, rejected, \
@@ -245,8 +240,8 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
         if extra > 0 and next_out < count and t_out[next_out] <= t_new + 1e-12 * max(1.0, abs(t_new)):
             for i in range(extra):              # the continuous extension's stages
                 _combination(y, h_try, dense_a[i], stages, s + i, work)
-                status = _rhs(kind, method, parameters, work, t + dense_c[i] * h_try, u, ints, reals, buffer, mass,
-                              row_scale, lam, K, rhs, schur, stages[s + i])
+                status = _rhs(model, formulation, work, t + dense_c[i] * h_try, u, buffer, terms, lam,
+                              stages[s + i])
                 evaluations += 1
                 if status != OK:
                     return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, status, t + dense_c[i] * h_try, \
@@ -264,8 +259,8 @@ def adaptive(kind, method, parameters, q0, qd0, t_out, rtol, atol, u, ints, real
                 for i in range(d):
                     value[i] = h00 * y[i] + h10 * h_try * k1[i] + h01 * y_new[i] + h11 * h_try * k_new[i]
                     slope[i] = d00 * y[i] + d10 * k1[i] + d01 * y_new[i] + d11 * k_new[i]
-            unsolved += _record(kind, method, parameters, t_out[next_out], value, slope, u, ints, reals, buffer,
-                                mass, row_scale, K, rhs, schur, next_out, T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE)
+            unsolved += _record(model, formulation, t_out[next_out], value, slope, u, buffer, terms, next_out, T, Qs,
+                                QDs, QDDs, LAMs, PHI, PHID, FORCE)
             next_out += 1
         t = t_new
         y[:] = y_new

@@ -31,11 +31,13 @@ import numpy as np
 
 from cmbs.dynamics.matrix_r import MatrixR, MatrixRSolver
 from cmbs.errors import CmbsError
-from cmbs.fast import NON_FINITE, OK, SINGULAR, _evaluate, _lu_in_place, _lu_solve, _lu_solve_transposed, \
-    _solve_in_place, kernel, record_constraints, supported
+from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
+from cmbs.dynamics.kkt import lu_in_place, lu_solve, lu_solve_transposed, solve_in_place
+from cmbs.integrate.compiled_rk4 import record_constraints
+from cmbs.model.compiled import evaluate, model_kernel, terms_views
 from cmbs.model.model import Model
 
-#: status codes besides fast.OK, SINGULAR and NON_FINITE
+#: status codes besides OK, SINGULAR and NON_FINITE
 REPARTITION, NOT_CONVERGED, VELOCITIES_KEPT = 3, 4, 5
 #: κ₂ above which every partition is handed back to Python (which raises for a user's)
 SINGULAR_CONDITION = 1e12
@@ -44,7 +46,7 @@ SINGULAR_CONDITION = 1e12
 def runs(model: Model, chosen: object, integrator: str, u: object, project: bool, steps_exact: bool) -> bool:
     """True when this loop can run the simulation: rk4 with t_end a multiple of dt, matrix R,
     a compiled holonomic model, constant inputs, no drift projection (matrix R needs none)."""
-    return (integrator == "rk4" and isinstance(chosen, MatrixR) and supported(model) is not None
+    return (integrator == "rk4" and isinstance(chosen, MatrixR) and model_kernel(model) is not None
             and not model.nonholonomic.any() and not callable(u) and not project and steps_exact)
 
 
@@ -56,7 +58,7 @@ def _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots):
     for a in range(rows.shape[0]):
         for j in range(rows.shape[0]):
             Ad[a, j] = A[rows[a], dependent[j]]
-    return _lu_in_place(Ad, pivots)
+    return lu_in_place(Ad, pivots)
 
 
 @njit(cache=True)
@@ -84,7 +86,7 @@ def _norms(buffer, n, m, rows, dependent, Ad, pivots, side, rows_too):
         for a in range(r):
             side[a] = 0.0
         side[j] = 1.0
-        _lu_solve(Ad, pivots, side)
+        lu_solve(Ad, pivots, side)
         column = 0.0
         for a in range(r):
             column += abs(side[a])
@@ -118,7 +120,7 @@ def _condition_two_bound(buffer, n, m, rows, dependent, Ad, pivots, side):
 
 
 @njit(cache=True)
-def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent, independent, tolerance,
+def _recover(model, q, qd, t, u_zero, buffer, n, m, rows, dependent, independent, tolerance,
              iterations, limit, Ad, pivots, side, worst):
     """Dependent coordinates (Newton, in place in ``q``) and velocities (in place in ``qd``);
     leaves A at the recovered q in ``buffer`` and A_d's LU factors there in ``Ad``, ``pivots``.
@@ -131,7 +133,7 @@ def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent,
     converged = False
     velocities_kept = False
     for iteration in range(iterations):
-        _evaluate(kind, q, zeros, t, u_zero, ints, reals, buffer)
+        evaluate(model, q, zeros, t, u_zero, buffer)
         largest = 0.0
         for a in range(r):
             value = abs(buffer[n + rows[a]])
@@ -150,7 +152,7 @@ def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent,
             break
         for a in range(r):
             side[a] = buffer[n + rows[a]]
-        _lu_solve(Ad, pivots, side)
+        lu_solve(Ad, pivots, side)
         for j in range(r):
             q[dependent[j]] -= side[j]
     if not converged:
@@ -164,40 +166,40 @@ def _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent,
         for j in range(independent.shape[0]):
             total -= A[rows[a], independent[j]] * qd[independent[j]]
         side[a] = total
-    _lu_solve(Ad, pivots, side)
+    lu_solve(Ad, pivots, side)
     for j in range(r):
         qd[dependent[j]] = side[j]
     return OK
 
 
 @njit(cache=True)
-def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent, independent, tolerance,
+def _stage(model, q, qd, t, u, u_zero, buffer, n, m, rows, dependent, independent, tolerance,
            iterations, limit, qdd, lam, work, worst):
     """Recover (q, q̇) in place (q only where :func:`_recover` keeps the velocities), then q̈ and λ
     by matrix R at that state (``worst`` as in :func:`_recover`)."""
     Ad, pivots, side, R, reduced, zrhs, S, MR, force = work
-    status = _recover(kind, q, qd, t, u_zero, ints, reals, buffer, n, m, rows, dependent, independent, tolerance,
+    status = _recover(model, q, qd, t, u_zero, buffer, n, m, rows, dependent, independent, tolerance,
                       iterations, limit, Ad, pivots, side, worst)
     if status != OK and status != VELOCITIES_KEPT:
         return status
-    _evaluate(kind, q, qd, t, u, ints, reals, buffer)
+    evaluate(model, q, qd, t, u, buffer)
     Q = buffer[:n]
     A = buffer[n + m:n + m + m * n].reshape((m, n))
     gamma = buffer[n + m + m * n:n + 2 * m + m * n]
-    M = mass if kind == 0 else buffer[n + 3 * m + m * n:n + 3 * m + m * n + n * n].reshape((n, n))
+    M = terms_views(model, n, m, buffer)[5]
     r, k = rows.shape[0], independent.shape[0]
     R[:, :] = 0.0                            # A_d's factors at this q are in Ad, pivots (_recover)
     for b in range(k):                       # R's column b: e_z(b) - A_d⁻¹ A_z e_b on the dependent rows
         R[independent[b], b] = 1.0
         for a in range(r):
             side[a] = A[rows[a], independent[b]]
-        _lu_solve(Ad, pivots, side)
+        lu_solve(Ad, pivots, side)
         for j in range(r):
             R[dependent[j], b] = -side[j]
     S[:] = 0.0
     for a in range(r):
         side[a] = gamma[rows[a]]
-    _lu_solve(Ad, pivots, side)
+    lu_solve(Ad, pivots, side)
     for j in range(r):
         S[dependent[j]] = side[j]
     for i in range(n):                       # M R (skipping M's zeros: a natural model's M is sparse) and Q - M S
@@ -221,7 +223,7 @@ def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dep
         for i in range(n):
             total += R[i, b] * force[i]
         zrhs[b] = total
-    if not _solve_in_place(reduced, zrhs):
+    if not solve_in_place(reduced, zrhs):
         return SINGULAR
     for i in range(n):
         total = S[i]
@@ -236,7 +238,7 @@ def _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dep
         for i in range(n):
             total += M[c, i] * qdd[i]
         side[j] = -total
-    _lu_solve_transposed(Ad, pivots, side)
+    lu_solve_transposed(Ad, pivots, side)
     for a in range(r):
         lam[rows[a]] = side[a]
     for i in range(n):
@@ -265,7 +267,7 @@ def _condition(buffer, n, m, rows, dependent):
 
 
 @njit(cache=True)
-def rk4(kind, q0, qd0, u, h, first, steps, every, ints, reals, buffer_size, mass, m, rows, dependent, independent,
+def rk4(model, q0, qd0, u, h, first, steps, every, buffer_size, m, rows, dependent, independent,
         tolerance, iterations, limit, reference_condition, growth, automatic, worst, T, Qs, QDs, QDDs, LAMs, PHI, PHID,
         FORCE):
     """RK4 steps ``first`` .. ``steps`` (t = step·h) from the state (q0, q̇0) at step ``first``,
@@ -277,6 +279,7 @@ def rk4(kind, q0, qd0, u, h, first, steps, every, ints, reals, buffer_size, mass
     n = q0.shape[0]
     r, k = rows.shape[0], independent.shape[0]
     buffer = np.zeros(buffer_size)
+    terms = terms_views(model, n, m, buffer)
     u_zero = np.zeros(u.shape[0])
     work = (np.empty((max(r, 1), max(r, 1))), np.empty(max(r, 1), dtype=np.int64), np.empty(max(r, 1)),
             np.empty((n, k)), np.empty((k, k)), np.empty(k), np.empty(n), np.empty((n, k)), np.empty(n))
@@ -286,7 +289,7 @@ def rk4(kind, q0, qd0, u, h, first, steps, every, ints, reals, buffer_size, mass
     recorded = first // every + 1 if first > 0 else 0
     for step in range(first, steps + 1):
         t = step * h
-        status = _stage(kind, q, qd, t, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent, independent,
+        status = _stage(model, q, qd, t, u, u_zero, buffer, n, m, rows, dependent, independent,
                         tolerance, iterations, limit, k1v, lam, work, worst)
         if status != OK:
             return status, step, recorded, q, qd
@@ -298,7 +301,7 @@ def rk4(kind, q0, qd0, u, h, first, steps, every, ints, reals, buffer_size, mass
                 QDs[row] = qd
                 QDDs[row] = k1v
                 LAMs[row] = lam
-                record_constraints(buffer, n, m, qd, lam, PHI, PHID, FORCE, row)
+                record_constraints(terms, qd, lam, PHI, PHID, FORCE, row)
                 recorded = row + 1
             limit_two = min(growth * reference_condition, SINGULAR_CONDITION) if automatic else SINGULAR_CONDITION
             # the SVD only where the bound from the recovery's LU factors cannot rule the test out
@@ -309,19 +312,19 @@ def rk4(kind, q0, qd0, u, h, first, steps, every, ints, reals, buffer_size, mass
             break
         k1q = qd.copy()                      # the recovered velocities are dq/dt
         sq, sv = q + 0.5 * h * k1q, qd + 0.5 * h * k1v
-        status = _stage(kind, sq, sv, t + 0.5 * h, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent,
+        status = _stage(model, sq, sv, t + 0.5 * h, u, u_zero, buffer, n, m, rows, dependent,
                         independent, tolerance, iterations, limit, k2v, stage_lam, work, worst)
         if status != OK:
             return status, step, recorded, q, qd
         k2q = sv.copy()
         sq, sv = q + 0.5 * h * k2q, qd + 0.5 * h * k2v
-        status = _stage(kind, sq, sv, t + 0.5 * h, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent,
+        status = _stage(model, sq, sv, t + 0.5 * h, u, u_zero, buffer, n, m, rows, dependent,
                         independent, tolerance, iterations, limit, k3v, stage_lam, work, worst)
         if status != OK:
             return status, step, recorded, q, qd
         k3q = sv.copy()
         sq, sv = q + h * k3q, qd + h * k3v
-        status = _stage(kind, sq, sv, t + h, u, u_zero, ints, reals, buffer, mass, n, m, rows, dependent,
+        status = _stage(model, sq, sv, t + h, u, u_zero, buffer, n, m, rows, dependent,
                         independent, tolerance, iterations, limit, k4v, stage_lam, work, worst)
         if status != OK:
             return status, step, recorded, q, qd
@@ -338,7 +341,7 @@ def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0:
     (t, q, q̇, q̈, λ, |Φ|max, |Φ̇|max, f_c) of every ``every``-th step, the number recorded, the
     steps completed, the failure message ("" on success) and the number of re-partitions; the
     largest stage κ₁ goes to ``solver.note_condition``."""
-    kind, ints, reals, buffer, mass = kernel(model)
+    kernel = model_kernel(model)
     n, m = model.n, model.m
     size = steps // every + 1
     records = (np.zeros(size), np.zeros((size, n)), np.zeros((size, n)), np.zeros((size, n)),
@@ -353,7 +356,7 @@ def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0:
     while True:
         part = solver.partition
         status, reached, recorded, q, qd = rk4(
-            kind, q, qd, np.ascontiguousarray(u, dtype=float), dt, first, steps, every, ints, reals, buffer.size, mass, m,
+            kernel, q, qd, np.ascontiguousarray(u, dtype=float), dt, first, steps, every, model.new_terms().buffer.size, m,
             part.rows.astype(np.int64), part.dependent.astype(np.int64), part.independent.astype(np.int64),
             parameters.position_tolerance, parameters.max_iterations, solver.recovery_limit,
             float(solver.reference_condition),

@@ -9,47 +9,73 @@ right-hand side and the Schur-complement solve run once for the block with the l
 innermost, on lane-major arrays (..., LANES), over the structural non-zeros of A known in
 advance.
 
-Every lane performs the operations :func:`cmbs.fast.rk4` performs for its variant (Lagrange,
-Baumgarte or the standard projection), in the same order: the results are bit for bit those of
-the one-variant loop (tests/test_lanes.py).  The common path of a stage is that of
-:func:`cmbs.fast.field` where the rank certificate of A holds (:func:`cmbs.fast._certify`, or the
-projection's regularity test of :func:`cmbs.fast._projection_by_schur`, with the reference bounds
-kept per lane exactly as the one-variant loop keeps them) and M_pp⁻¹ is constant (natural
-coordinates): the block elimination of :func:`cmbs.fast._schur_solve`.  A variant whose stage
-leaves that path (terms or q̈ not finite, a certificate that does not hold, a factorisation that
-fails) leaves its lanes at that step and finishes in :func:`cmbs.fast._rk4_steps` from the start
-of the step, with the state and certificate reference it had then: the same stages again, the
-same results, including a stop at a singular position or the projection's SVD through it.
+Every lane performs the operations :func:`cmbs.integrate.compiled_rk4.rk4` performs for its
+variant (Lagrange, Baumgarte or the standard projection), in the same order: the results are bit
+for bit those of the one-variant loop (tests/test_lanes.py).  The common path of a stage is that
+of :func:`cmbs.dynamics.field.field` where the rank certificate of A holds
+(:func:`cmbs.dynamics.kkt.certify`, or the projection's regularity test, with the reference
+bounds kept per lane exactly as the one-variant loop keeps them) and M_pp⁻¹ is constant
+(natural coordinates): the block elimination of :func:`cmbs.dynamics.kkt.schur_solve`.  A
+variant whose stage leaves that path (terms or q̈ not finite, a certificate that does not hold,
+a factorisation that fails) leaves its lanes at that step and finishes in the one-variant loop
+from the start of the step, with the state and certificate reference it had then: the same
+stages again, the same results, including a stop at a singular position or the projection's SVD
+through it.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
-from cmbs.fast import (BAUMGARTE, CONSTANT, KIND_NATURAL, LAGRANGE, OK, PROJECTION, PROJECTION_REGULAR, _gram_bounds,
-                       _private_copy, _rk4_arrays, _rk4_steps, _structured)
+from cmbs.dynamics.base import OK
+from cmbs.dynamics.kkt import gram_bounds, has_structure, workspace_views
+from cmbs.dynamics.lagrange import LagrangeKernel
+from cmbs.dynamics.projection import PROJECTION_REGULAR, ProjectionKernel
+from cmbs.integrate.compiled_rk4 import _rk4_arrays, _rk4_steps, fresh
 from cmbs.jit import interpreted, njit, njit_borrowing, prange
-from cmbs.model.natural import layout
+from cmbs.model.natural import NaturalKernel, layout
 from cmbs.model.natural_lanes import LANES, evaluate_lanes
 
 #: Lane states.
 RUNNING, LEAVING, LEFT = 0, 1, 2
+#: The formulations the lanes run.
+LAGRANGE, BAUMGARTE, PROJECTION = 0, 1, 2
 
 
-def lane_plan(kind: int, method: int, schur: tuple, m: int, n: int) -> tuple | None:
+def lane_setup(model: NamedTuple, formulation: NamedTuple, m: int, n: int) -> tuple | None:
+    """(method, parameters, schur, plan) of :func:`rk4_lanes` for a model's and a formulation's
+    kernels, or None when lanes cannot run the batch: a natural-coordinate model under Lagrange,
+    Baumgarte or the standard projection (``parameters`` = (ξ, ω, tolerance or threshold, s,
+    semi-definite flag); ``schur`` the formulation's unpacked workspace), with :func:`lane_plan`."""
+    if not isinstance(model, NaturalKernel):
+        return None
+    if isinstance(formulation, LagrangeKernel):
+        method = BAUMGARTE if formulation.omega != 0.0 else LAGRANGE
+        parameters = np.array([formulation.xi, formulation.omega, formulation.tolerance, 0.0, 0.0])
+    elif isinstance(formulation, ProjectionKernel):
+        method = PROJECTION
+        parameters = np.array([0.0, 0.0, formulation.threshold, formulation.scale, float(formulation.semi_definite)])
+    else:
+        return None
+    schur = workspace_views(formulation.floats, formulation.integers, formulation.layout)
+    plan = lane_plan(schur, m, n)
+    return None if plan is None else (method, parameters, schur, plan)
+
+
+def lane_plan(schur: tuple, m: int, n: int) -> tuple | None:
     """The sparsity plan of :func:`_schur_lanes` for :func:`rk4_lanes`, or None when lanes cannot
     run the batch.
 
-    Lanes take natural-coordinate models (kind) under Lagrange, Baumgarte or the standard
-    projection (the compiled field's methods) whose massive block M_pp is positive definite (the
-    Schur path's flag 1), that are not solved by band LU, with 1 <= m <= n constraints and A's
-    structural pattern known (``schur`` of :func:`cmbs.fast.schur_workspace` built with it).
+    Lanes take models whose massive block M_pp is positive definite (the Schur path's flag 1),
+    that are not solved by band LU, with 1 <= m <= n constraints and A's structural pattern known
+    (``schur`` of :func:`cmbs.dynamics.kkt.schur_workspace` built with it).
 
     The plan lists, each as [count, items...] along its last axis: the massive non-zeros of each
     row of A, as positions in M_pp's coordinates in increasing order (where
-    :func:`cmbs.fast._schur_solve` finds them by scanning A's values); for each entry of
+    :func:`cmbs.dynamics.kkt.schur_solve` finds them by scanning A's values); for each entry of
     X = M_pp⁻¹A_pᵀ, the non-zeros of its row of A whose M_pp⁻¹ entry is not zero; for each entry
     of y = M_pp⁻¹Q_p, the non-zero entries of its row of M_pp⁻¹; for each entry (a, b <= a) of
     A_pX, the non-zeros of row a of A whose X[b] is not structurally zero; for each massive q̈,
@@ -57,10 +83,10 @@ def lane_plan(kind: int, method: int, schur: tuple, m: int, n: int) -> tuple | N
     zero, ±0, and the sums they leave start at +0 (or at y, itself such a sum): a sum that starts
     at +0 never becomes -0, and adding ±0 to it changes nothing, so the sums over the plan are
     bit for bit the dense ones (for finite A and Q, which a running lane has)."""
-    if kind != KIND_NATURAL or method not in (LAGRANGE, BAUMGARTE, PROJECTION) or schur[1] != 1 or schur[16] == 1:
+    if schur[1] != 1 or schur[16] == 1:
         return None
     inverse, rows_of, massive = schur[0], schur[13], schur[9]
-    if m == 0 or m > n or not _structured(rows_of, n) or schur[28].shape[0] != m:
+    if m == 0 or m > n or not has_structure(rows_of, n) or schur[28].shape[0] != m:
         return None
     n_p = massive.size
     rows = [[] for _ in range(m)]
@@ -89,39 +115,51 @@ def _lists(nested: list, shape: int | tuple, longest: int) -> np.ndarray:
     return table
 
 
-def rk4_lanes(kind: int, method: int, parameters: np.ndarray, Q0: np.ndarray, QD0: np.ndarray, U0: np.ndarray,
-              h: float, steps: int, every: int, ints: np.ndarray, reals: np.ndarray, buffer_size: int,
-              mass: np.ndarray, row_scale: np.ndarray, m: int, law: tuple, schur: tuple, Qs: np.ndarray,
-              QDs: np.ndarray, PHIs: np.ndarray, statuses: np.ndarray, recorded: np.ndarray, plan: tuple) -> None:
-    """:func:`cmbs.fast.rk4_batch` (same arguments, then the :func:`lane_plan` made for ``kind``;
-    same outputs, bit for bit) in blocks of LANES variants, parallel over the
-    blocks (numba threads, :func:`_run_blocks`); then each variant that left its lanes goes on in
-    :func:`cmbs.fast._rk4_steps` from the step it left at, one after the other (a sweep in which
-    none leaves never loads that loop)."""
+def rk4_lanes(model: NamedTuple, formulation: NamedTuple, inputs: NamedTuple, Q0: np.ndarray, QD0: np.ndarray,
+              U0: np.ndarray, h: float, steps: int, every: int, buffer_size: int, m: int, Qs: np.ndarray,
+              QDs: np.ndarray, PHIs: np.ndarray, statuses: np.ndarray, recorded: np.ndarray, lanes: tuple) -> None:
+    """:func:`cmbs.integrate.compiled_rk4.rk4_batch` (same arguments, then the :func:`lane_setup`
+    made for the model and formulation; same outputs, bit for bit) in blocks of LANES variants,
+    parallel over the blocks (numba threads, :func:`_run_blocks`); then each variant that left its
+    lanes goes on in the one-variant loop from the step it left at, one after the other (a sweep
+    in which none leaves never loads that loop)."""
+    method, parameters, schur, plan = lanes
     N, n = Q0.shape
     exits = (np.full(N, RUNNING, dtype=np.int64), np.zeros(N, dtype=np.int64), np.zeros(N, dtype=np.int64),
              np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, 3)), np.zeros((N, m, n)))
-    _run_blocks(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, buffer_size, row_scale, m, schur, plan,
-                Qs, QDs, PHIs, *exits)
-    lanes, left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0 = exits
+    _run_blocks(method, parameters, Q0, QD0, U0, h, steps, every, model.ints, model.reals, buffer_size,
+                np.ascontiguousarray(formulation.row_scale), m, schur, plan, Qs, QDs, PHIs, *exits)
+    states, left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0 = exits
     records_total = steps // every + 1
-    statuses[lanes != LEFT] = OK
-    recorded[lanes != LEFT] = records_total
-    for v in np.flatnonzero(lanes == LEFT):
+    statuses[states != LEFT] = OK
+    recorded[states != LEFT] = records_total
+    for v in np.flatnonzero(states == LEFT):
         single, records, work = interpreted(_rk4_arrays)(resume_q[v], resume_qd[v], U0[v], m, records_total,
-                                                         buffer_size, law[8].shape[0])
-        own = interpreted(_private_copy)(schur)
-        own[27][:] = resume_reference[v]
-        own[28][:, :] = resume_A0[v]
-        done, status, _, _, _ = _rk4_steps(kind, method, parameters, h, steps, every, ints, reals, mass,
-                                           row_scale, CONSTANT, law, own, *single, work, records, left_at[v], 0,
-                                           records_before[v])
+                                                         buffer_size)
+        own = fresh(formulation)
+        own_schur = workspace_views(own.floats, own.integers, own.layout)
+        own_schur[27][:] = resume_reference[v]
+        own_schur[28][:, :] = resume_A0[v]
+        done, status, _, _ = _rk4_steps(model, own, inputs, h, steps, every, *single, work, records, left_at[v],
+                                        records_before[v])
         first = records_before[v]
         Qs[v, first:done] = records[1][first:done]
         QDs[v, first:done] = records[2][first:done]
         PHIs[v, first:done] = records[6][first:done]
         statuses[v] = status
         recorded[v] = done
+
+
+@njit(cache=True)
+def _private_copy(schur):
+    """The unpacked workspace tuple with fresh copies of its scratch arrays (the constant M_pp⁻¹,
+    its flag and the index arrays are shared), so that blocks running at the same time do not
+    write into each other's workspace."""
+    return (schur[0].copy() if schur[1] == 0 else schur[0], schur[1], schur[2].copy(), schur[3].copy(),
+            schur[4].copy(), schur[5].copy(), schur[6].copy(), schur[7].copy(), schur[8].copy(), schur[9],
+            schur[10], schur[11].copy(), schur[12], schur[13].copy(), schur[14], schur[15].copy(), schur[16],
+            schur[17], schur[18].copy(), schur[19].copy(), schur[20].copy(), schur[21], schur[22], schur[23],
+            schur[24], schur[25], schur[26], schur[27].copy(), schur[28].copy())
 
 
 @njit(cache=True, parallel=True)
@@ -175,7 +213,7 @@ def _lane_arrays(n, m, n_p, n_a, n_u, buffer_size, n_ext):
 @njit_borrowing(cache=True, error_model="numpy")
 def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, schur, plan, state, work, lanes, exits,
                 base, count, Qs, QDs, PHIs):
-    """The RK4 loop of :func:`cmbs.fast._rk4_loop` (constant inputs, the whole run from t = 0)
+    """The RK4 loop of :func:`cmbs.integrate.compiled_rk4._rk4_steps` (constant inputs, the whole run from t = 0)
     for the block's lanes; writes the records of lanes ``0..count-1`` (variants ``base + w``)
     while they run, the lane states in ``lanes``, and for each of those variants that leaves, its
     step, records and resume state in the per-variant ``exits`` (:func:`_leave`).  Borrowing: the
@@ -265,19 +303,19 @@ def _copy(source, target):
 @njit_borrowing(cache=True, error_model="numpy", inline="always")
 def _certify_lanes(A, row_scale, ratio, floor, projection, reference, A0, schur, lanes, single_A, scratch):
     """The rank certificate per running lane (1 <= m <= n): the bounds of
-    :func:`cmbs.fast._bounds_meeting` on σ(SA), reused from the lane's reference while
-    ‖S(A - A₀)‖_F <= √λ₀_low / 10, else fresh (:func:`cmbs.fast._gram_bounds` on the lane's A)
+    :func:`cmbs.dynamics.kkt.bounds_meeting` on σ(SA), reused from the lane's reference while
+    ‖S(A - A₀)‖_F <= √λ₀_low / 10, else fresh (:func:`cmbs.dynamics.kkt.gram_bounds` on the lane's A)
     with the reference renewed, exactly as the one-variant field keeps it.  A lane leaves unless
-    its bounds certify σ_min >= ratio·max(σ_max, 1): the test of :func:`cmbs.fast._certify`
+    its bounds certify σ_min >= ratio·max(σ_max, 1): the test of :func:`cmbs.dynamics.kkt.certify`
     (Lagrange and Baumgarte: ``ratio`` their tolerance, ``floor`` 0) or, with ``projection``,
-    that of :func:`cmbs.fast._projection_by_schur` (``ratio`` PROJECTION_REGULAR, and σ_min above
+    that of :func:`cmbs.dynamics.projection._by_schur` (``ratio`` PROJECTION_REGULAR, and σ_min above
     the SVD threshold ``floor``)."""
     m, n, _ = A.shape
     rows_of = schur[13]
     total = scratch[4]
     for w in range(LANES):
         total[w] = 0.0
-    for j in range(n):                      # δ² over the structural non-zeros, in _bounds's order
+    for j in range(n):                      # δ² over the structural non-zeros, in bounds's order
         for a in range(rows_of[j, 0]):
             i = rows_of[j, 1 + a]
             for w in range(LANES):
@@ -300,7 +338,7 @@ def _certify_lanes(A, row_scale, ratio, floor, projection, reference, A0, schur,
             for i in range(m):
                 for j in range(n):
                     single_A[i, j] = A[i, j, w]
-            low, high = _gram_bounds(single_A, row_scale, schur[7], schur[8], rows_of, schur[14], schur[15])
+            low, high = gram_bounds(single_A, row_scale, schur[7], schur[8], rows_of, schur[14], schur[15])
             reference[0, w] = 0.0
             if low > 0.0:
                 for j in range(n):
@@ -318,7 +356,7 @@ def _certify_lanes(A, row_scale, ratio, floor, projection, reference, A0, schur,
 
 @njit_borrowing(cache=True, error_model="numpy", inline="always")
 def _baumgarte_lanes(parameters, sv, phi, A, phi_t, c):
-    """c -= 2ξωΦ̇ + ω²Φ with Φ̇ = Aq̇ + Φ_t, per lane (:func:`cmbs.fast._constrained_solve`)."""
+    """c -= 2ξωΦ̇ + ω²Φ with Φ̇ = Aq̇ + Φ_t, per lane (Baumgarte's solve in :mod:`cmbs.dynamics.lagrange`)."""
     m, n, _ = A.shape
     for r in range(m):
         for w in range(LANES):
@@ -331,7 +369,7 @@ def _baumgarte_lanes(parameters, sv, phi, A, phi_t, c):
 @njit_borrowing(cache=True, error_model="numpy", inline="always")
 def _schur_lanes(inverse, Q, A, c, massive, massless, plan, X, y, reduced, z, qdd, lam, lanes, pivot):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c] per lane by the block elimination of
-    :func:`cmbs.fast._schur_solve` with the constant ``inverse`` = M_pp⁻¹ (its flag 1), the same
+    :func:`cmbs.dynamics.kkt.schur_solve` with the constant ``inverse`` = M_pp⁻¹ (its flag 1), the same
     operations in the same order, less the products with a structural zero (``plan`` of
     :func:`lane_plan`: bit for bit the same sums); the reduced system by Cholesky without
     massless coordinates, else by :func:`_eliminate_lanes`.  A lane whose factorisation fails
@@ -403,8 +441,8 @@ def _schur_lanes(inverse, Q, A, c, massive, massless, plan, X, y, reduced, z, qd
 @njit_borrowing(cache=True, error_model="numpy", inline="always")
 def _cholesky_lanes(L, b, lanes, pivot):
     """Solve L Lᵀ x = b per lane in place, the dense Cholesky factorisation and the two triangular
-    solves of :func:`cmbs.fast._cholesky_in_place`, :func:`cmbs.fast._forward` and
-    :func:`cmbs.fast._backward` (a dense profile); a lane with a non-positive pivot leaves."""
+    solves of :func:`cmbs.dynamics.kkt.cholesky_in_place`, :func:`cmbs.dynamics.kkt.solve_lower` and
+    :func:`cmbs.dynamics.kkt.solve_lower_transposed` (a dense profile); a lane with a non-positive pivot leaves."""
     size = b.shape[0]
     for j in range(size):
         for w in range(LANES):
@@ -438,7 +476,7 @@ def _cholesky_lanes(L, b, lanes, pivot):
 
 @njit_borrowing(cache=True, error_model="numpy", inline="always")
 def _eliminate_lanes(K, rhs, lanes, largest, chosen, scale):
-    """:func:`cmbs.fast._solve_in_place` per lane on the lane-major K (size, size, LANES) and rhs
+    """:func:`cmbs.dynamics.kkt.solve_in_place` per lane on the lane-major K (size, size, LANES) and rhs
     (size, LANES): Gaussian elimination with partial pivoting, each lane choosing its own pivot
     rows, and the same operations in the same order (an update whose factor is 0, which the
     one-lane code skips, leaves the entries as they are).  A lane with an exactly singular
@@ -483,8 +521,8 @@ def _eliminate_lanes(K, rhs, lanes, largest, chosen, scale):
 @njit_borrowing(cache=True, error_model="numpy", inline="always")
 def _finite_lanes(values, lanes, bad):
     """A running lane with a value (rows of the lane-major ``values``) that is not finite leaves:
-    the terms, as :func:`cmbs.fast._field_borrowed` checks them before any factorisation, and
-    q̈ (:func:`cmbs.fast._finite`)."""
+    the terms, as :func:`cmbs.dynamics.field.field` checks them before any factorisation, and
+    q̈ (:func:`cmbs.dynamics.field.field`)."""
     for w in range(LANES):
         bad[w] = 0.0
     for i in range(values.shape[0]):

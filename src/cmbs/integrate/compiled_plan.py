@@ -1,0 +1,60 @@
+"""Which runs the compiled loops take, and the kernel tuples they take them with.
+
+A run is compiled when its model, formulation and inputs each have a compiled kernel
+(:func:`cmbs.model.compiled.model_kernel`, :func:`cmbs.dynamics.field.formulation_kernel`,
+:func:`inputs_kernel`) and its integrator has a compiled loop for them: rk4 (t_end a multiple of
+dt) with any inputs kernel, rk45/rk23/dop853 with constant inputs; drift projection runs in
+Python.  :func:`cmbs.simulate` and :func:`cmbs.sweep` ask here.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from cmbs.dynamics.base import Formulation
+from cmbs.dynamics.field import formulation_kernel
+from cmbs.integrate.compiled_rk4 import ConstantInputs
+from cmbs.integrate.grid import whole_steps
+from cmbs.model.compiled import model_kernel
+from cmbs.model.model import Model
+
+#: The integrators with a compiled adaptive loop (:mod:`cmbs.integrate.compiled_adaptive`).
+ADAPTIVE = ("rk45", "rk23", "dop853")
+
+
+def inputs_kernel(u: object, model: Model, dt: float) -> NamedTuple | None:
+    """The inputs of a run of ``model`` with step ``dt`` as the compiled loop takes them:
+    :class:`~cmbs.integrate.compiled_rk4.ConstantInputs` for an array or None; a
+    :class:`~cmbs.control.compiled_torque.ComputedTorqueKernel` for a
+    :class:`~cmbs.control.ComputedTorque` law, alone or in a :class:`~cmbs.control.ZeroOrderHold`
+    of period ``dt`` exactly, whose model has a compiled kernel and the plant's coordinate and
+    input counts; None for anything else (a fault wrapper, another law, another period)."""
+    if not callable(u):
+        return ConstantInputs()
+    from cmbs.control.base import ZeroOrderHold   # here: a run with constant inputs does not import
+    from cmbs.control.computed_torque import ComputedTorque   # the control package
+    from cmbs.control.compiled_torque import computed_torque_kernel
+
+    held = type(u) is ZeroOrderHold and u.period == dt
+    law = u.law if held else u
+    if type(law) is not ComputedTorque or law.model.n != model.n or law.model.n_u != model.n_u:
+        return None
+    return computed_torque_kernel(law, held)
+
+
+def compiled_run(model: Model, chosen: Formulation, solver: object, integrator: str, u: object, project: bool,
+                 t_end: float, dt: float) -> tuple[NamedTuple, NamedTuple, NamedTuple] | None:
+    """(model, formulation, inputs) kernel tuples when a compiled loop can run the simulation of
+    ``model`` under ``chosen`` (bound as ``solver``) with ``integrator``, else None."""
+    if project or (integrator != "rk4" and integrator not in ADAPTIVE):
+        return None
+    if integrator == "rk4" and whole_steps(t_end, dt) is None:
+        return None
+    model_part = model_kernel(model)
+    if model_part is None:
+        return None
+    inputs = inputs_kernel(u, model, dt)
+    if inputs is None or (integrator in ADAPTIVE and not isinstance(inputs, ConstantInputs)):
+        return None
+    formulation = formulation_kernel(chosen, solver, model)
+    return None if formulation is None else (model_part, formulation, inputs)
