@@ -2,16 +2,22 @@
 Baumgarte's and Lagrange's KKT solutions, the penalty's linear system and Udwadia-Kalaba's
 symmetric-square-root formula written here with numpy, the minimum-norm multipliers of
 redundant constraints; and what they do with a matrix that is not positive definite or a
-non-finite term."""
+non-finite term; and that the penalty's allocates nothing per call."""
 
 from __future__ import annotations
 
+import json
 import math
+import os
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
 
 import cmbs
+from cmbs import jit
 from cmbs.dynamics import Baumgarte, Lagrange, Penalty, UdwadiaKalaba
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.model.equations import from_callables
@@ -248,3 +254,72 @@ def test_udwadia_kalaba_nonideal_of_the_wrong_size_is_named(value):
     solver = UdwadiaKalaba(nonideal=lambda t, q, qd: value).bind(model)
     with pytest.raises(CmbsError, match=r"nonideal\(t, q, qd\) must return 2 values .*, got shape"):
         solver.accelerations(terms, model.q0, model.qd0, 0.0)
+
+
+ALLOCATIONS = textwrap.dedent("""
+    import gc
+    import json
+
+    import numpy as np
+    from numba import njit
+    from numba.core.runtime import rtsys
+
+    import cmbs
+    from cmbs.dynamics.penalty import penalty_solve
+    from cmbs.dynamics.udwadia_kalaba import udwadia_kalaba_solve
+
+    @njit
+    def repeat_penalty(count, arguments):
+        for _ in range(count):
+            penalty_solve(*arguments)
+
+    @njit
+    def repeat_udwadia_kalaba(count, arguments):
+        for _ in range(count):
+            udwadia_kalaba_solve(*arguments)
+
+    def allocations(repeat, count, arguments):
+        gc.collect()
+        before = rtsys.get_allocation_stats()
+        repeat(count, arguments)
+        gc.collect()
+        after = rtsys.get_allocation_stats()
+        return [after.alloc - before.alloc, after.free - before.free]
+
+    model = cmbs.load("human")
+    q, qd = model.q0, model.qd0 + 0.1
+    terms = model.evaluate(q, qd, 0.0)
+    outputs = (np.empty(model.n), np.empty(model.m), np.empty(model.n))
+    penalty = cmbs.Penalty().bind(model)
+    uk = cmbs.UdwadiaKalaba().bind(model)
+    calls = {
+        "penalty": (repeat_penalty, (terms.M, terms.Q, terms.A, terms.gamma, terms.phi, terms.phi_t, qd, penalty.alpha,
+                                     1.0, 10.0, 20, 1e-12, penalty.lam_star, penalty.factor, penalty.vectors_n,
+                                     penalty.vectors_m) + outputs),
+        "udwadia-kalaba": (repeat_udwadia_kalaba, (terms.M, terms.Q, terms.A, terms.gamma, np.ones(model.n),
+                                                   uk.augmentation, uk.factored, 1e-9, uk.row_scale, uk.mass_scale,
+                                                   uk.factor, uk.work_matrix, uk.vectors_n, uk.vectors_m) + outputs),
+    }
+    result = {}
+    for name, (repeat, arguments) in calls.items():
+        repeat(1, arguments)
+        result[name] = [allocations(repeat, 10, arguments), allocations(repeat, 20, arguments)]
+    print(json.dumps(result))
+""")
+
+
+@pytest.mark.skipif(not jit.COMPILED, reason="numba's statistics: numba is not installed")
+def test_penalty_solve_allocates_nothing_per_call_and_udwadia_kalaba_frees_its_svds():
+    """Called 10 and 20 times from compiled code (numba's allocation statistics, switched on at
+    interpreter start, hence the subprocess), the penalty's solve allocates the same: only the
+    adaptation of its array arguments, once; Udwadia-Kalaba's SVDs allocate per call and free
+    all of it."""
+    environment = {**os.environ, "NUMBA_NRT_STATS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    done = subprocess.run([sys.executable, "-c", ALLOCATIONS], capture_output=True, text=True, env=environment,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    (ten, ten_freed), (twenty, twenty_freed) = result["penalty"]
+    assert ten == twenty and ten == ten_freed and twenty == twenty_freed, result
+    (ten, ten_freed), (twenty, twenty_freed) = result["udwadia-kalaba"]
+    assert twenty > ten and ten == ten_freed and twenty == twenty_freed, result

@@ -28,6 +28,9 @@ The default α is scaled to the model (:data:`ALPHA_SCALE` · max diag M / max d
 centimetres it makes M + αAᵀA so ill-conditioned (cond ≈ 4e10 on Andrews' squeezer) that q̈
 loses six digits to rounding.  The scaled α keeps cond(M + αAᵀA) near 1e6 on the library models
 and the iteration converges in two to four steps.
+
+The whole solve is one compiled kernel, :func:`penalty_solve`, which :class:`PenaltySolver` calls
+on work arrays allocated once per run.
 """
 
 from __future__ import annotations
@@ -38,8 +41,8 @@ from typing import ClassVar
 import numpy as np
 
 from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters
-from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, cholesky_in_place, cholesky_solve,
-                                 fill_nan, max_abs, multiply, multiply_transposed)
+from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, cholesky_in_place,
+                                 cholesky_solve, fill_nan, max_abs, multiply, multiply_transposed)
 from cmbs.errors import SingularSystemError
 from cmbs.jit import njit
 from cmbs.model.model import Model, Terms
@@ -111,9 +114,9 @@ class PenaltySolver(StatelessSolver):
                                          self.factor, self.vectors_n, self.vectors_m, qdd, lam, force)
         if status == NOT_POSITIVE_DEFINITE:
             raise SingularSystemError(
-                f"model {self.model.name!r} at t={t:.6g}: the penalty matrix M + alpha AᵀA (alpha = {self.alpha:.3g}) "
-                "is not positive definite: a motion that the constraints allow has no mass, or alpha is so large "
-                "that M is lost to rounding")
+                f"model {self.model.name!r} at t={t:.6g}: the penalty matrix M + alpha AᵀA "
+                f"(alpha = {self.alpha:.3g}) is not positive definite: a motion that the constraints allow has no "
+                "mass, or alpha is so large that M is lost to rounding")
         if relative > self.worst_residual:
             self.worst_residual, self.worst_time = relative, t
         return Accelerations(qdd, lam, force)

@@ -17,6 +17,9 @@ When M is only semi-definite (natural coordinates with massless angle coordinate
 augmented mass M̂ = M + s AᵀA, Q̂ = Q + s Aᵀγ (s = trace(M)/n) is used (Udwadia & Phohomsiri
 2006): since s AᵀA q̈ = s Aᵀγ on the constraint manifold, the motion is unchanged and M̂ is
 positive definite when M is definite on null(A).  λ is recovered from Q_c = -Aᵀλ (minimum norm).
+
+The whole solve is one compiled kernel, :func:`udwadia_kalaba_solve`, which
+:class:`UdwadiaKalabaSolver` calls on work arrays allocated once per run.
 """
 
 from __future__ import annotations
@@ -27,8 +30,9 @@ from typing import Callable, ClassVar
 import numpy as np
 
 from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters
-from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, backward_substitution, cholesky_in_place,
-                                 cholesky_solve, fill_nan, forward_substitution, multiply, multiply_transposed)
+from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, backward_substitution,
+                                 cholesky_in_place, cholesky_solve, fill_nan, forward_substitution, multiply,
+                                 multiply_transposed)
 from cmbs.dynamics.projection import reference_row_scale
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.jit import njit
@@ -67,6 +71,7 @@ class UdwadiaKalabaSolver(StatelessSolver):
         self.factored = False
         if model.constant_mass and not self.semi_definite:
             self.factored = cholesky_in_place(self.factor)    # else factored at each evaluation
+        self.augmentation = self.scale if self.semi_definite else 0.0
         self.work_matrix = np.zeros((model.m, model.n))
         self.vectors_n = np.zeros((3, model.n))
         self.vectors_m = np.zeros((2, model.m))
@@ -85,11 +90,11 @@ class UdwadiaKalabaSolver(StatelessSolver):
                              f"(m = {self.model.m}, n = {self.model.n})")
         c = self.no_nonideal if self.p.nonideal is None else self._nonideal(t, q, qd)
         qdd, lam, force = np.empty(n), np.empty(m), np.empty(n)
-        status = udwadia_kalaba_solve(terms.M, terms.Q, terms.A, terms.gamma, c, self.scale if self.semi_definite
-                                      else 0.0, self.factored, self.p.threshold, self.row_scale, self.mass_scale,
-                                      self.factor, self.work_matrix, self.vectors_n, self.vectors_m, qdd, lam, force)
+        status = udwadia_kalaba_solve(terms.M, terms.Q, terms.A, terms.gamma, c, self.augmentation, self.factored,
+                                      self.p.threshold, self.row_scale, self.mass_scale, self.factor,
+                                      self.work_matrix, self.vectors_n, self.vectors_m, qdd, lam, force)
         if status == NOT_POSITIVE_DEFINITE:
-            matrix = "M + s AᵀA" if self.semi_definite else "the mass matrix M"
+            matrix = f"M + s AᵀA (s = {self.scale:.3g})" if self.semi_definite else "the mass matrix M"
             raise SingularSystemError(f"model {self.model.name!r} at t={t:.6g}: {matrix} is not positive definite "
                                       "(Udwadia-Kalaba needs a mass matrix that is positive definite on the motions "
                                       "the constraints allow)")
