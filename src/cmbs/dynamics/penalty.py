@@ -92,7 +92,10 @@ class PenaltySolver(StatelessSolver):
     def __init__(self, model: Model, parameters: Penalty):
         super().__init__(model)
         self.p = parameters
-        self.alpha = parameters.alpha if parameters.alpha is not None else scaled_alpha(model)
+        self.alpha = float(parameters.alpha) if parameters.alpha is not None else scaled_alpha(model)
+        # the kernel's argument types (an integer option would compile another specialisation)
+        self.mu, self.Omega = float(parameters.mu), float(parameters.Omega)
+        self.iterations, self.tolerance = int(parameters.iterations), float(parameters.tolerance)
         self.lam_star = np.zeros(model.m)
         self.worst_residual, self.worst_time = 0.0, 0.0
         self.factor = np.zeros((model.n, model.n))
@@ -104,14 +107,14 @@ class PenaltySolver(StatelessSolver):
 
         Raises :class:`~cmbs.errors.SingularSystemError` when M + αAᵀA is not positive definite;
         a non-finite term gives NaN accelerations (the integrator reports the non-finite state)."""
-        p, (m, n) = self.p, terms.A.shape
+        m, n = terms.A.shape
         if (m, n) != (self.model.m, self.model.n):
             raise ValueError(f"terms of shape A {terms.A.shape} for model {self.model.name!r} "
                              f"(m = {self.model.m}, n = {self.model.n})")
         qdd, lam, force = np.empty(n), np.empty(m), np.empty(n)
         status, relative = penalty_solve(terms.M, terms.Q, terms.A, terms.gamma, terms.phi, terms.phi_t, qd,
-                                         self.alpha, p.mu, p.Omega, p.iterations, p.tolerance, self.lam_star,
-                                         self.factor, self.vectors_n, self.vectors_m, qdd, lam, force)
+                                         self.alpha, self.mu, self.Omega, self.iterations, self.tolerance,
+                                         self.lam_star, self.factor, self.vectors_n, self.vectors_m, qdd, lam, force)
         if status == NOT_POSITIVE_DEFINITE:
             raise SingularSystemError(
                 f"model {self.model.name!r} at t={t:.6g}: the penalty matrix M + alpha AᵀA "

@@ -72,6 +72,7 @@ class UdwadiaKalabaSolver(StatelessSolver):
         if model.constant_mass and not self.semi_definite:
             self.factored = cholesky_in_place(self.factor)    # else factored at each evaluation
         self.augmentation = self.scale if self.semi_definite else 0.0
+        self.threshold = float(parameters.threshold)    # the kernel's argument type
         self.work_matrix = np.zeros((model.m, model.n))
         self.vectors_n = np.zeros((3, model.n))
         self.vectors_m = np.zeros((2, model.m))
@@ -91,7 +92,7 @@ class UdwadiaKalabaSolver(StatelessSolver):
         c = self.no_nonideal if self.p.nonideal is None else self._nonideal(t, q, qd)
         qdd, lam, force = np.empty(n), np.empty(m), np.empty(n)
         status = udwadia_kalaba_solve(terms.M, terms.Q, terms.A, terms.gamma, c, self.augmentation, self.factored,
-                                      self.p.threshold, self.row_scale, self.mass_scale, self.factor,
+                                      self.threshold, self.row_scale, self.mass_scale, self.factor,
                                       self.work_matrix, self.vectors_n, self.vectors_m, qdd, lam, force)
         if status == NOT_POSITIVE_DEFINITE:
             matrix = f"M + s AᵀA (s = {self.scale:.3g})" if self.semi_definite else "the mass matrix M"
