@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -323,3 +324,25 @@ def test_penalty_solve_allocates_nothing_per_call_and_udwadia_kalaba_frees_its_s
     assert ten == twenty and ten == ten_freed and twenty == twenty_freed, result
     (ten, ten_freed), (twenty, twenty_freed) = result["udwadia-kalaba"]
     assert twenty > ten and ten == ten_freed and twenty == twenty_freed, result
+
+
+def particle_losing_its_mass() -> cmbs.Model:
+    """A particle on the line z = 0 pushed along x by a unit force, whose x-mass 1 - x vanishes at
+    x = 1: a mass matrix that stops being positive definite in a run.  From ẍ = 1 / (1 - x),
+    ẋ²/2 = -ln(1 - x), so x = 1 at t = ∫₀^∞ e^{-u} (2u)^{-1/2} du = √(π/2) = 1.2533 s."""
+    return from_callables("particle-losing-its-mass", coordinate_names=["x", "z"],
+                          mass_matrix=lambda q: np.diag([1.0 - q[0], 1.0]),
+                          forces=lambda q, qd, t, u: np.array([1.0, -9.81]),
+                          constraints=lambda q, t: np.array([q[1]]), jacobian=lambda q, t: np.array([[0.0, 1.0]]),
+                          gamma=lambda q, qd, t: np.zeros(1), q0=[0.0, 0.0])
+
+
+@pytest.mark.parametrize("name, problem", [
+    ("penalty", r"the penalty matrix M \+ alpha AᵀA \(alpha = .*\) is not positive definite"),
+    ("udwadia-kalaba", r"the mass matrix M is not positive definite \(Udwadia-Kalaba needs"),
+])
+def test_a_run_whose_matrix_stops_being_positive_definite_fails_with_the_message(name, problem):
+    run = cmbs.simulate(particle_losing_its_mass(), t_end=2.0, integrator="rk4", dt=1e-2, formulation=name)
+    assert run.info["status"] == "failed"
+    assert re.search(r"model 'particle-losing-its-mass' at t=1\.25\d*: " + problem, run.info["message"]), \
+        run.info["message"]
