@@ -4,7 +4,7 @@ The matrices of one evaluation are small (n ≤ a few dozen), where a call of LA
 costs more than the arithmetic.  These kernels work in place on arrays their caller owns (work
 arrays allocated once per bound solver), compiled by :func:`cmbs.jit.njit` (plain Python
 without numba).  Cholesky column by column (Golub & Van Loan, *Matrix Computations*, 4th ed.,
-§4.2.5).
+§4.2).
 """
 
 from __future__ import annotations
