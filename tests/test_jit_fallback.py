@@ -20,8 +20,8 @@ np.savez(sys.argv[1], **__import__("test_jit_fallback").results())
 
 def results() -> dict:
     """Runs through every kind of kernel: natural and joint models, the compiled RK4 loop
-    (Lagrange, projection), the matrix-R loop, the Python path (rk45), the human's terms, and
-    the batched sweep in lanes."""
+    (Lagrange, projection), the matrix-R loop, the Python path (rk45; penalty and Udwadia-Kalaba,
+    whose solves are compiled kernels), the human's terms, and the batched sweep in lanes."""
     four_bar = cmbs.load("four-bar").without_drivers()
     speeds = [cmbs.velocities(four_bar, four_bar.q0, qd=np.eye(four_bar.n)[-1] * s, fixed=["alpha"])
               for s in (-1.0, 0.5, 2.0)]
@@ -30,6 +30,9 @@ def results() -> dict:
     return {
         "lagrange": cmbs.simulate(four_bar, t_end=0.05, integrator="rk4", dt=1e-3, formulation="lagrange").q,
         "projection": cmbs.simulate(four_bar, t_end=0.05, integrator="rk4", dt=1e-3, formulation="projection").q,
+        "penalty": cmbs.simulate(four_bar, t_end=0.05, integrator="rk4", dt=1e-3, formulation="penalty").q,
+        "udwadia_kalaba": cmbs.simulate(four_bar, t_end=0.05, integrator="rk4", dt=1e-3,
+                                        formulation="udwadia-kalaba").q,
         "matrix_r": cmbs.simulate(cmbs.load("slider-crank"), t_end=0.05, integrator="rk4", dt=1e-3,
                                   formulation="matrix-r").q,
         "joint_rk45": cmbs.simulate(cmbs.load("slider-crank-joint", gravity=9.81), t_end=0.05).q,

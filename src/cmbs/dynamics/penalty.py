@@ -28,6 +28,9 @@ The default α is scaled to the model (:data:`ALPHA_SCALE` · max diag M / max d
 centimetres it makes M + αAᵀA so ill-conditioned (cond ≈ 4e10 on Andrews' squeezer) that q̈
 loses six digits to rounding.  The scaled α keeps cond(M + αAᵀA) near 1e6 on the library models
 and the iteration converges in two to four steps.
+
+The whole solve is one compiled kernel, :func:`penalty_solve`, which :class:`PenaltySolver` calls
+on work arrays allocated once per run.
 """
 
 from __future__ import annotations
@@ -37,11 +40,12 @@ from typing import ClassVar
 
 import numpy as np
 
-from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters, constraint_velocity
-from cmbs.lazy import on_first_use
+from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters
+from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, cholesky_in_place,
+                                 cholesky_solve, fill_nan, max_abs, multiply, multiply_transposed)
+from cmbs.errors import SingularSystemError
+from cmbs.jit import njit
 from cmbs.model.model import Model, Terms
-
-linalg = on_first_use("scipy.linalg")
 
 #: α = ALPHA_SCALE · max diag M / max diag AᵀA (at q0) when no α is given.
 ALPHA_SCALE = 1e4
@@ -82,39 +86,43 @@ def scaled_alpha(model: Model) -> float:
 
 class PenaltySolver(StatelessSolver):
     """The penalty of one run; it keeps λ* between evaluations and the largest relative
-    constraint-acceleration residual met (``worst_residual`` at ``worst_time``)."""
+    constraint-acceleration residual met (``worst_residual`` at ``worst_time``).  Each evaluation
+    is one call of the compiled :func:`penalty_solve` on work arrays allocated here."""
 
     def __init__(self, model: Model, parameters: Penalty):
         super().__init__(model)
         self.p = parameters
-        self.alpha = parameters.alpha if parameters.alpha is not None else scaled_alpha(model)
+        self.alpha = float(parameters.alpha) if parameters.alpha is not None else scaled_alpha(model)
+        # the kernel's argument types (an integer option would compile another specialisation)
+        self.mu, self.Omega = float(parameters.mu), float(parameters.Omega)
+        self.iterations, self.tolerance = int(parameters.iterations), float(parameters.tolerance)
         self.lam_star = np.zeros(model.m)
         self.worst_residual, self.worst_time = 0.0, 0.0
+        self.factor = np.zeros((model.n, model.n))
+        self.vectors_n = np.zeros((3, model.n))
+        self.vectors_m = np.zeros((4, model.m))
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
-        p, A, alpha = self.p, terms.A, self.alpha
-        target = terms.gamma - 2.0 * p.mu * p.Omega * constraint_velocity(terms, qd) - p.Omega**2 * terms.phi
-        factor = linalg.cho_factor(terms.M + alpha * (A.T @ A), check_finite=False)
-        base = terms.Q + alpha * (A.T @ target)
-        lam_star = self.lam_star if p.iterations else np.zeros(self.model.m)
-        qdd = linalg.cho_solve(factor, base - A.T @ lam_star, check_finite=False)
-        residual = A @ qdd - target
-        relative = _relative(residual, A, qdd, target)
-        for _ in range(p.iterations):
-            if relative < p.tolerance:
-                break
-            trial_lam_star = lam_star + alpha * residual
-            trial = linalg.cho_solve(factor, base - A.T @ trial_lam_star, check_finite=False)
-            trial_residual = A @ trial - target
-            trial_relative = _relative(trial_residual, A, trial, target)
-            if trial_relative > 0.5 * relative:     # no longer contracting: the best this state allows
-                break
-            lam_star, qdd, residual, relative = trial_lam_star, trial, trial_residual, trial_relative
-        self.lam_star = lam_star
+        """The penalty's accelerations at one state.
+
+        Raises :class:`~cmbs.errors.SingularSystemError` when M + αAᵀA is not positive definite;
+        a non-finite term gives NaN accelerations (the integrator reports the non-finite state)."""
+        m, n = terms.A.shape
+        if (m, n) != (self.model.m, self.model.n):
+            raise ValueError(f"terms of shape A {terms.A.shape} for model {self.model.name!r} "
+                             f"(m = {self.model.m}, n = {self.model.n})")
+        qdd, lam, force = np.empty(n), np.empty(m), np.empty(n)
+        status, relative = penalty_solve(terms.M, terms.Q, terms.A, terms.gamma, terms.phi, terms.phi_t, qd,
+                                         self.alpha, self.mu, self.Omega, self.iterations, self.tolerance,
+                                         self.lam_star, self.factor, self.vectors_n, self.vectors_m, qdd, lam, force)
+        if status == NOT_POSITIVE_DEFINITE:
+            raise SingularSystemError(
+                f"model {self.model.name!r} at t={t:.6g}: the penalty matrix M + alpha AᵀA "
+                f"(alpha = {self.alpha:.3g}) is not positive definite: a motion that the constraints allow has no "
+                "mass, or alpha is so large that M is lost to rounding")
         if relative > self.worst_residual:
             self.worst_residual, self.worst_time = relative, t
-        lam = lam_star + alpha * residual
-        return Accelerations(qdd, lam, -A.T @ lam)
+        return Accelerations(qdd, lam, force)
 
     def run_note(self) -> str:
         """A warning when the constraint accelerations missed the exact ones by more than
@@ -127,8 +135,81 @@ class PenaltySolver(StatelessSolver):
                 "equations have no exact solution)")
 
 
-def _relative(residual: np.ndarray, A: np.ndarray, qdd: np.ndarray, target: np.ndarray) -> float:
-    """max |r| / (max|A| max|q̈| + max|target|): the residual relative to the terms it is made of."""
-    scale = np.max(np.abs(A), initial=0.0) * np.max(np.abs(qdd), initial=0.0) + np.max(np.abs(target), initial=0.0)
-    size = np.max(np.abs(residual), initial=0.0)
-    return float(size / scale) if scale > 0 else float(size > 0)
+@njit(cache=True)
+def penalty_solve(M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.ndarray, phi: np.ndarray,
+                  phi_t: np.ndarray, qd: np.ndarray, alpha: float, mu: float, Omega: float, iterations: int,
+                  tolerance: float, lam_star: np.ndarray, factor: np.ndarray, vectors_n: np.ndarray,
+                  vectors_m: np.ndarray, qdd: np.ndarray, lam: np.ndarray, force: np.ndarray) -> tuple[int, float]:
+    """The penalty's q̈, λ and constraint force -Aᵀλ at one state, written into ``qdd`` (n,),
+    ``lam`` (m,) and ``force`` (n,); the augmented Lagrangian's λ* (m,) is updated in place (set to
+    zero when ``iterations`` is 0).  Returns (status, relative residual): status
+    :data:`~cmbs.dynamics.dense.OK`, ``NOT_POSITIVE_DEFINITE`` (M + αAᵀA; outputs not written) or
+    ``NON_FINITE`` (outputs NaN); the residual of the kept iterate as the module docstring
+    defines it.
+
+    Work arrays: ``factor`` (n, n) for the Cholesky factor of M + αAᵀA; ``vectors_n`` (3, n) and
+    ``vectors_m`` (4, m).
+
+    The iteration (module docstring): q̈ₖ = (M + αAᵀA)⁻¹ (b - Aᵀλ*ₖ), b = Q + αAᵀ target,
+    target = γ - 2μΩΦ̇ - Ω²Φ; rₖ = A q̈ₖ - target; λ*ₖ₊₁ = λ*ₖ + α rₖ while the relative residual is
+    above ``tolerance`` and each step at least halves it; λ = λ* + α r of the kept iterate.
+    """
+    base, rhs, trial = vectors_n[0], vectors_n[1], vectors_n[2]
+    target, residual, trial_residual, trial_lam_star = vectors_m[0], vectors_m[1], vectors_m[2], vectors_m[3]
+    multiply(A, qd, target)                                   # Φ̇ - Φ_t = A q̇
+    for i in range(target.size):
+        target[i] = gamma[i] - 2.0 * mu * Omega * (target[i] + phi_t[i]) - Omega**2 * phi[i]
+    add_scaled_gram(M, A, alpha, factor)
+    if not cholesky_in_place(factor):
+        if all_finite(M) and all_finite(A) and np.isfinite(alpha):
+            return NOT_POSITIVE_DEFINITE, np.nan
+        return fill_nan(qdd, lam, force), np.nan
+    multiply_transposed(A, target, base)
+    for j in range(base.size):
+        base[j] = Q[j] + alpha * base[j]
+    if iterations == 0:
+        lam_star[:] = 0.0
+    size_A = max_abs(A)
+    relative = _solve_and_measure(factor, base, A, lam_star, target, size_A, rhs, qdd, residual)
+    if not np.isfinite(relative):
+        return fill_nan(qdd, lam, force), np.nan
+    for _ in range(iterations):
+        if relative < tolerance:
+            break
+        for i in range(trial_lam_star.size):
+            trial_lam_star[i] = lam_star[i] + alpha * residual[i]
+        trial_relative = _solve_and_measure(factor, base, A, trial_lam_star, target, size_A, rhs, trial,
+                                            trial_residual)
+        if trial_relative > 0.5 * relative:     # no longer contracting: the best this state allows
+            break
+        lam_star[:] = trial_lam_star
+        qdd[:] = trial
+        residual[:] = trial_residual
+        relative = trial_relative
+    for i in range(lam.size):
+        lam[i] = lam_star[i] + alpha * residual[i]
+    multiply_transposed(A, lam, force)
+    force *= -1.0
+    if not (all_finite(qdd) and all_finite(lam) and np.isfinite(relative)):
+        return fill_nan(qdd, lam, force), np.nan
+    return OK, relative
+
+
+@njit(cache=True)
+def _solve_and_measure(factor: np.ndarray, base: np.ndarray, A: np.ndarray, lam_star: np.ndarray,
+                       target: np.ndarray, size_A: float, rhs: np.ndarray, qdd: np.ndarray,
+                       residual: np.ndarray) -> float:
+    """q̈ = (L Lᵀ)⁻¹ (base - Aᵀλ*) into ``qdd`` and r = A q̈ - target into ``residual``; returns
+    the relative residual max|r| / (max|A| max|q̈| + max|target|) (``size_A`` = max|A|), or
+    whether r ≠ 0 when that scale is zero."""
+    multiply_transposed(A, lam_star, rhs)
+    for j in range(qdd.size):
+        qdd[j] = base[j] - rhs[j]
+    cholesky_solve(factor, qdd)
+    multiply(A, qdd, residual)
+    residual -= target
+    scale = size_A * max_abs(qdd) + max_abs(target)
+    size = max_abs(residual)
+    if scale > 0.0:
+        return size / scale
+    return 1.0 if size > 0.0 else 0.0

@@ -17,6 +17,9 @@ When M is only semi-definite (natural coordinates with massless angle coordinate
 augmented mass M̂ = M + s AᵀA, Q̂ = Q + s Aᵀγ (s = trace(M)/n) is used (Udwadia & Phohomsiri
 2006): since s AᵀA q̈ = s Aᵀγ on the constraint manifold, the motion is unchanged and M̂ is
 positive definite when M is definite on null(A).  λ is recovered from Q_c = -Aᵀλ (minimum norm).
+
+The whole solve is one compiled kernel, :func:`udwadia_kalaba_solve`, which
+:class:`UdwadiaKalabaSolver` calls on work arrays allocated once per run.
 """
 
 from __future__ import annotations
@@ -27,11 +30,13 @@ from typing import Callable, ClassVar
 import numpy as np
 
 from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters
-from cmbs.dynamics.projection import pseudo_inverse, reference_row_scale
-from cmbs.lazy import on_first_use
+from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, backward_substitution,
+                                 cholesky_in_place, cholesky_solve, fill_nan, forward_substitution, multiply,
+                                 multiply_transposed)
+from cmbs.dynamics.projection import reference_row_scale
+from cmbs.errors import CmbsError, SingularSystemError
+from cmbs.jit import njit
 from cmbs.model.model import Model, Terms
-
-linalg = on_first_use("scipy.linalg")
 
 
 @dataclass(frozen=True)
@@ -50,6 +55,10 @@ class UdwadiaKalaba:
 
 
 class UdwadiaKalabaSolver(StatelessSolver):
+    """Udwadia-Kalaba for one run: each evaluation is one call of the compiled
+    :func:`udwadia_kalaba_solve` on work arrays allocated here.  A constant, definite mass matrix
+    is factored once, here."""
+
     def __init__(self, model: Model, parameters: UdwadiaKalaba):
         super().__init__(model)
         self.p = parameters
@@ -57,28 +66,174 @@ class UdwadiaKalabaSolver(StatelessSolver):
         self.scale = float(np.trace(M0)) / model.n
         self.mass_scale = np.sqrt(self.scale)  # B = A L⁻ᵀ: rows of A scaled by about 1/√m
         self.semi_definite = bool(np.linalg.eigvalsh(M0)[0] <= 1e-12 * max(np.abs(M0).max(), 1.0))
-        self._constant_factor = np.linalg.cholesky(M0) if model.constant_mass and not self.semi_definite else None
         self.row_scale = reference_row_scale(model)
+        self.factor = np.array(M0, dtype=float)
+        self.factored = False
+        if model.constant_mass and not self.semi_definite:
+            self.factored = cholesky_in_place(self.factor)    # else factored at each evaluation
+        self.augmentation = self.scale if self.semi_definite else 0.0
+        self.threshold = float(parameters.threshold)    # the kernel's argument type
+        self.work_matrix = np.zeros((model.m, model.n))
+        self.vectors_n = np.zeros((3, model.n))
+        self.vectors_m = np.zeros((2, model.m))
+        self.no_nonideal = np.zeros(0)
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
-        A, gamma = terms.A, terms.gamma
-        if self.semi_definite:
-            M = terms.M + self.scale * (A.T @ A)
-            Q = terms.Q + self.scale * (A.T @ gamma)
-            L = np.linalg.cholesky(M)
-        else:
-            Q = terms.Q
-            L = self._constant_factor if self._constant_factor is not None else np.linalg.cholesky(terms.M)
-        a = linalg.cho_solve((L, True), Q, check_finite=False)
-        B = linalg.solve_triangular(L, A.T, lower=True, check_finite=False).T  # A L⁻ᵀ
-        B_pinv, null_projector = pseudo_inverse(B, self.p.threshold, self.row_scale * self.mass_scale)
-        scaled_force = B_pinv @ (gamma - A @ a)
-        if self.p.nonideal is not None:
-            c = np.asarray(self.p.nonideal(t, q, qd), dtype=float)
-            scaled_force = scaled_force + null_projector @ linalg.solve_triangular(L, c, lower=True,
-                                                                                          check_finite=False)
-        qdd = a + linalg.solve_triangular(L, scaled_force, lower=True, trans="T", check_finite=False)
-        force = terms.M @ qdd - terms.Q  # = Q_c of the original system (ideal + non-ideal)
-        A_pinv, _ = pseudo_inverse(A, self.p.threshold, self.row_scale)
-        lam = -A_pinv.T @ force
+        """Udwadia-Kalaba's accelerations at one state.
+
+        Raises :class:`~cmbs.errors.SingularSystemError` when the mass matrix (M + sAᵀA for a
+        semi-definite M) is not positive definite, :class:`~cmbs.errors.CmbsError` when
+        ``nonideal`` does not return n values; a non-finite term gives NaN accelerations (the
+        integrator reports the non-finite state)."""
+        m, n = terms.A.shape
+        if (m, n) != (self.model.m, self.model.n):
+            raise ValueError(f"terms of shape A {terms.A.shape} for model {self.model.name!r} "
+                             f"(m = {self.model.m}, n = {self.model.n})")
+        c = self.no_nonideal if self.p.nonideal is None else self._nonideal(t, q, qd)
+        qdd, lam, force = np.empty(n), np.empty(m), np.empty(n)
+        status = udwadia_kalaba_solve(terms.M, terms.Q, terms.A, terms.gamma, c, self.augmentation, self.factored,
+                                      self.threshold, self.row_scale, self.mass_scale, self.factor,
+                                      self.work_matrix, self.vectors_n, self.vectors_m, qdd, lam, force)
+        if status == NOT_POSITIVE_DEFINITE:
+            matrix = f"M + s AᵀA (s = {self.scale:.3g})" if self.semi_definite else "the mass matrix M"
+            raise SingularSystemError(f"model {self.model.name!r} at t={t:.6g}: {matrix} is not positive definite "
+                                      "(Udwadia-Kalaba needs a mass matrix that is positive definite on the motions "
+                                      "the constraints allow)")
         return Accelerations(qdd, lam, force)
+
+    def _nonideal(self, t: float, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+        """c = nonideal(t, q, q̇) as n floats (CmbsError naming its shape otherwise)."""
+        c = np.asarray(self.p.nonideal(t, q, qd), dtype=float)
+        if c.shape != (self.model.n,):
+            raise CmbsError(f"udwadia-kalaba: nonideal(t, q, qd) must return {self.model.n} values (one per "
+                            f"coordinate of model {self.model.name!r}), got shape {c.shape}")
+        return c
+
+
+@njit(cache=True)
+def udwadia_kalaba_solve(M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.ndarray, c: np.ndarray,
+                         augmentation: float, factored: bool, threshold: float, row_scale: np.ndarray,
+                         mass_scale: float, factor: np.ndarray, work_matrix: np.ndarray, vectors_n: np.ndarray,
+                         vectors_m: np.ndarray, qdd: np.ndarray, lam: np.ndarray, force: np.ndarray) -> int:
+    """Udwadia-Kalaba's q̈, λ and constraint force Q_c = M q̈ - Q (module docstring) at one state,
+    written into ``qdd`` (n,), ``lam`` (m,) and ``force`` (n,).  Returns the status:
+    :data:`~cmbs.dynamics.dense.OK`, ``NOT_POSITIVE_DEFINITE`` (outputs not written) or
+    ``NON_FINITE`` (outputs NaN).
+
+    ``c`` is the non-ideal vector (n,), or empty for none.  ``augmentation`` s > 0 factors
+    M̂ = M + sAᵀA with Q̂ = Q + sAᵀγ (semi-definite M), 0 factors M itself, unless ``factored``:
+    ``factor`` then already holds the Cholesky factor L of the constant M.  B = A L⁻ᵀ; its
+    pseudo-inverse is that of :func:`cmbs.dynamics.projection.pseudo_inverse` with rows scaled
+    by D = diag(``row_scale`` · ``mass_scale``) (SVD of D B, singular values ≤ ``threshold``
+    discarded, B⁺ = (D B)⁺ D), and λ = -(Aᵀ)⁺ Q_c with A's rows scaled by ``row_scale``.
+
+    Work arrays: ``factor`` (n, n), ``work_matrix`` (m, n), ``vectors_n`` (3, n), ``vectors_m``
+    (2, m).
+    """
+    m, n = A.shape
+    a, scaled_force, extra = vectors_n[0], vectors_n[1], vectors_n[2]
+    residual, coefficients = vectors_m[0], vectors_m[1]
+    for j in range(n):
+        a[j] = Q[j]
+    if augmentation > 0.0:                                  # M̂ = M + sAᵀA, Q̂ = Q + sAᵀγ
+        add_scaled_gram(M, A, augmentation, factor)
+        multiply_transposed(A, gamma, scaled_force)
+        for j in range(n):
+            a[j] += augmentation * scaled_force[j]
+    elif not factored:
+        factor[:, :] = M
+    if not (factored or cholesky_in_place(factor)):
+        if all_finite(M) and all_finite(A) and (augmentation == 0.0 or all_finite(gamma)):
+            return NOT_POSITIVE_DEFINITE
+        return fill_nan(qdd, lam, force)
+    cholesky_solve(factor, a)                               # a = M̂⁻¹ Q̂
+    multiply(A, a, residual)
+    for i in range(m):
+        residual[i] = gamma[i] - residual[i]                # γ - A a
+    scaled_B = work_matrix
+    for i in range(m):                                      # row i of D B = d_i (L⁻¹ A[i])ᵀ
+        row = scaled_B[i]
+        row[:] = A[i]
+        forward_substitution(factor, row)
+        row *= row_scale[i] * mass_scale
+    if not (all_finite(a) and all_finite(scaled_B) and all_finite(residual) and all_finite(c)):
+        return fill_nan(qdd, lam, force)
+    scaled_force[:] = 0.0
+    if m:
+        U, sigma, Vt = np.linalg.svd(scaled_B, full_matrices=False)
+        rank = _rank(sigma, threshold)
+        for i in range(m):
+            residual[i] *= row_scale[i] * mass_scale        # D (γ - A a)
+        _apply_pseudo_inverse(U, sigma, Vt, rank, residual, coefficients, scaled_force)    # B⁺ (γ - A a)
+    if c.size:                                              # + (I - B⁺B) L⁻¹ c
+        extra[:] = c
+        forward_substitution(factor, extra)
+        if m:
+            _remove_range(Vt, rank, extra)
+        scaled_force += extra
+    backward_substitution(factor, scaled_force)             # L⁻ᵀ (...)
+    for j in range(n):
+        qdd[j] = a[j] + scaled_force[j]
+    multiply(M, qdd, force)
+    force -= Q                                              # Q_c = M q̈ - Q (ideal + non-ideal)
+    if m:
+        for i in range(m):
+            for j in range(n):
+                scaled_B[i, j] = A[i, j] * row_scale[i]
+        U, sigma, Vt = np.linalg.svd(scaled_B, full_matrices=False)
+        _apply_transposed_pseudo_inverse(U, sigma, Vt, _rank(sigma, threshold), force, coefficients, lam)
+        for i in range(m):
+            lam[i] *= -row_scale[i]                         # λ = -(Aᵀ)⁺ Q_c = -D (D A)ᵀ⁺ Q_c
+    if not (all_finite(qdd) and all_finite(lam) and all_finite(force)):
+        return fill_nan(qdd, lam, force)
+    return OK
+
+
+@njit(cache=True)
+def _rank(sigma: np.ndarray, threshold: float) -> int:
+    """How many singular values are above ``threshold`` (they come in decreasing order)."""
+    rank = 0
+    while rank < sigma.size and sigma[rank] > threshold:
+        rank += 1
+    return rank
+
+
+@njit(cache=True)
+def _apply_pseudo_inverse(U: np.ndarray, sigma: np.ndarray, Vt: np.ndarray, rank: int, x: np.ndarray,
+                          coefficients: np.ndarray, out: np.ndarray) -> None:
+    """out ← V Σ⁻¹ Uᵀ x over the first ``rank`` singular triplets (X⁺ x for X = U Σ Vᵀ)."""
+    for k in range(rank):
+        total = 0.0
+        for i in range(U.shape[0]):
+            total += U[i, k] * x[i]
+        coefficients[k] = total / sigma[k]
+    out[:] = 0.0
+    for k in range(rank):
+        for j in range(Vt.shape[1]):
+            out[j] += Vt[k, j] * coefficients[k]
+
+
+@njit(cache=True)
+def _apply_transposed_pseudo_inverse(U: np.ndarray, sigma: np.ndarray, Vt: np.ndarray, rank: int, x: np.ndarray,
+                                     coefficients: np.ndarray, out: np.ndarray) -> None:
+    """out ← U Σ⁻¹ Vᵀ x over the first ``rank`` singular triplets ((X⁺)ᵀ x for X = U Σ Vᵀ)."""
+    for k in range(rank):
+        total = 0.0
+        for j in range(Vt.shape[1]):
+            total += Vt[k, j] * x[j]
+        coefficients[k] = total / sigma[k]
+    out[:] = 0.0
+    for k in range(rank):
+        for i in range(U.shape[0]):
+            out[i] += U[i, k] * coefficients[k]
+
+
+@njit(cache=True)
+def _remove_range(Vt: np.ndarray, rank: int, x: np.ndarray) -> None:
+    """x ← (I - V Vᵀ) x over the first ``rank`` right singular vectors (I - X⁺X for X = U Σ Vᵀ)."""
+    for k in range(rank):
+        projection = 0.0
+        for j in range(x.size):
+            projection += Vt[k, j] * x[j]
+        for j in range(x.size):
+            x[j] -= projection * Vt[k, j]
