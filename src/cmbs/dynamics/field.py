@@ -2,7 +2,7 @@
 
 A formulation that runs in the compiled loops gives its dataclass a ``compiled(solver, model)``
 method returning a :class:`typing.NamedTuple` of its parameters and work arrays whose class
-carries ``solve(kernel, terms, q̇, q̈, λ) -> status`` (:class:`cmbs.dynamics.lagrange.LagrangeKernel`,
+carries ``solve(kernel, terms, t, q̇, q̈, λ) -> status`` (:class:`cmbs.dynamics.lagrange.LagrangeKernel`,
 :class:`cmbs.dynamics.projection.ProjectionKernel`); a model gives its kernel tuple
 (:mod:`cmbs.model.compiled`).  :func:`field` evaluates the one and solves with the other, each
 chosen by its tuple's class when the caller is compiled (:func:`cmbs.jit.type_dispatch`): the
@@ -24,7 +24,7 @@ from cmbs.jit import COMPILED, njit, njit_borrowing, type_dispatch
 from cmbs.model.compiled import evaluate, model_kernel, terms_finite, terms_views
 from cmbs.model.model import Model
 
-#: ``solve(kernel, terms, qd, qdd, lam) -> status``: the solve of the formulation ``kernel`` describes.
+#: ``solve(kernel, terms, t, qd, qdd, lam) -> status``: the solve of the formulation ``kernel`` describes.
 solve = type_dispatch("solve")
 
 
@@ -46,7 +46,7 @@ def field(model, formulation, q, qd, t, u, buffer, terms, qdd, lam):
     n = q.shape[0]
     if not terms_finite(model, n, lam.shape[0], buffer):
         return NON_FINITE
-    status = solve(formulation, terms, qd, qdd, lam)
+    status = solve(formulation, terms, t, qd, qdd, lam)
     if status != OK:
         return status
     for k in range(n):

@@ -157,7 +157,7 @@ def lagrange_kernel(solver: KKTSolver, model: Model) -> LagrangeKernel:
 
 
 @njit_borrowing(cache=True)
-def _solve(kernel, terms, qd, qdd, lam):
+def _solve(kernel, terms, t, qd, qdd, lam):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c], c = γ (Lagrange) or γ - 2ξωΦ̇ - ω²Φ with
     Φ̇ = Aq̇ + Φ_t (Baumgarte), at the terms (Q, Φ, A, γ, Φ_t, M); SINGULAR when σ_min/σ_max of
     the row-scaled A is below the tolerance (:func:`~cmbs.dynamics.kkt.certify`, then the

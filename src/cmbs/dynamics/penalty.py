@@ -30,17 +30,17 @@ loses six digits to rounding.  The scaled α keeps cond(M + αAᵀA) near 1e6 on
 and the iteration converges in two to four steps.
 
 The whole solve is one compiled kernel, :func:`penalty_solve`, which :class:`PenaltySolver` calls
-on work arrays allocated once per run.
+on work arrays allocated once per run, and the compiled loops through :class:`PenaltyKernel`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters
+from cmbs.dynamics.base import SINGULAR, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, cholesky_in_place,
                                  cholesky_solve, fill_nan, max_abs, multiply, multiply_transposed)
 from cmbs.errors import SingularSystemError
@@ -75,6 +75,13 @@ class Penalty:
     def bind(self, model: Model) -> "PenaltySolver":
         return PenaltySolver(model, self)
 
+    def compiled(self, solver: "PenaltySolver", model: Model) -> "PenaltyKernel":
+        """The solve of the compiled loops, on the solver's own λ*, work arrays and worst
+        residual (so that :meth:`PenaltySolver.run_note` reports a compiled run too)."""
+        return PenaltyKernel(solver.alpha, solver.mu, solver.Omega, solver.iterations, solver.tolerance,
+                             solver.lam_star, solver.factor, solver.vectors_n, solver.vectors_m, np.zeros(model.n),
+                             solver.worst)
+
 
 def scaled_alpha(model: Model) -> float:
     """ALPHA_SCALE · max diag M / max diag AᵀA at the model's q0 (1 without constraints)."""
@@ -97,7 +104,8 @@ class PenaltySolver(StatelessSolver):
         self.mu, self.Omega = float(parameters.mu), float(parameters.Omega)
         self.iterations, self.tolerance = int(parameters.iterations), float(parameters.tolerance)
         self.lam_star = np.zeros(model.m)
-        self.worst_residual, self.worst_time = 0.0, 0.0
+        #: the largest relative residual met and its time (shared with the compiled kernel)
+        self.worst = np.zeros(2)
         self.factor = np.zeros((model.n, model.n))
         self.vectors_n = np.zeros((3, model.n))
         self.vectors_m = np.zeros((4, model.m))
@@ -120,9 +128,19 @@ class PenaltySolver(StatelessSolver):
                 f"model {self.model.name!r} at t={t:.6g}: the penalty matrix M + alpha AᵀA "
                 f"(alpha = {self.alpha:.3g}) is not positive definite: a motion that the constraints allow has no "
                 "mass, or alpha is so large that M is lost to rounding")
-        if relative > self.worst_residual:
-            self.worst_residual, self.worst_time = relative, t
+        if relative > self.worst[0]:
+            self.worst[0], self.worst[1] = relative, t
         return Accelerations(qdd, lam, force)
+
+    @property
+    def worst_residual(self) -> float:
+        """The largest relative constraint-acceleration residual of the run so far."""
+        return float(self.worst[0])
+
+    @property
+    def worst_time(self) -> float:
+        """The time of :attr:`worst_residual`."""
+        return float(self.worst[1])
 
     def run_note(self) -> str:
         """A warning when the constraint accelerations missed the exact ones by more than
@@ -213,3 +231,49 @@ def _solve_and_measure(factor: np.ndarray, base: np.ndarray, A: np.ndarray, lam_
     if scale > 0.0:
         return size / scale
     return 1.0 if size > 0.0 else 0.0
+
+
+class PenaltyKernel(NamedTuple):
+    """The penalty as the compiled loops take it (:mod:`cmbs.dynamics.field`): its parameters,
+    λ*, the work arrays of :func:`penalty_solve`, a constraint-force vector and the largest
+    relative residual met with its time."""
+
+    alpha: float
+    mu: float
+    Omega: float
+    iterations: int
+    tolerance: float
+    lam_star: np.ndarray
+    factor: np.ndarray
+    vectors_n: np.ndarray
+    vectors_m: np.ndarray
+    force: np.ndarray
+    worst: np.ndarray
+
+
+@njit(cache=True)
+def _kernel_solve(kernel, terms, t, qd, qdd, lam):
+    """:func:`penalty_solve` at the terms (Q, Φ, A, γ, Φ_t, M); status OK, SINGULAR (M + αAᵀA
+    not positive definite) or NON_FINITE; the largest residual is kept with its time."""
+    Q, phi, A, gamma, phi_t, M = terms
+    status, relative = penalty_solve(M, Q, A, gamma, phi, phi_t, qd, kernel.alpha, kernel.mu, kernel.Omega,
+                                     kernel.iterations, kernel.tolerance, kernel.lam_star, kernel.factor,
+                                     kernel.vectors_n, kernel.vectors_m, qdd, lam, kernel.force)
+    if status == NOT_POSITIVE_DEFINITE:
+        return SINGULAR
+    if status == OK and relative > kernel.worst[0]:
+        kernel.worst[0] = relative
+        kernel.worst[1] = t
+    return status
+
+
+@njit(cache=True)
+def _fresh(kernel):
+    """A copy of ``kernel`` with λ*, work arrays and worst residual of its own."""
+    return PenaltyKernel(kernel.alpha, kernel.mu, kernel.Omega, kernel.iterations, kernel.tolerance,
+                         kernel.lam_star.copy(), kernel.factor.copy(), kernel.vectors_n.copy(), kernel.vectors_m.copy(),
+                         kernel.force.copy(), kernel.worst.copy())
+
+
+PenaltyKernel.solve = staticmethod(_kernel_solve)
+PenaltyKernel.fresh = staticmethod(_fresh)

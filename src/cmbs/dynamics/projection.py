@@ -154,7 +154,7 @@ class ProjectionKernel(NamedTuple):
 
 
 @njit_borrowing(cache=True)
-def _solve(kernel, terms, qd, qdd, lam):
+def _solve(kernel, terms, t, qd, qdd, lam):
     """Aghili's standard projection at the terms (Q, Φ, A, γ, Φ_t, M): by the augmented system
     where A is certified regular (:func:`_by_schur`, the same solution there), else by the SVD
     (:func:`_by_svd`); SINGULAR only when the constraint inertia matrix is exactly singular."""

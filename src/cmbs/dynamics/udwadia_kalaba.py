@@ -19,17 +19,18 @@ augmented mass M̂ = M + s AᵀA, Q̂ = Q + s Aᵀγ (s = trace(M)/n) is used (U
 positive definite when M is definite on null(A).  λ is recovered from Q_c = -Aᵀλ (minimum norm).
 
 The whole solve is one compiled kernel, :func:`udwadia_kalaba_solve`, which
-:class:`UdwadiaKalabaSolver` calls on work arrays allocated once per run.
+:class:`UdwadiaKalabaSolver` calls on work arrays allocated once per run, and the compiled loops
+through :class:`UdwadiaKalabaKernel`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, ClassVar
+from typing import Callable, ClassVar, NamedTuple
 
 import numpy as np
 
-from cmbs.dynamics.base import Accelerations, StatelessSolver, check_parameters
+from cmbs.dynamics.base import SINGULAR, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, backward_substitution,
                                  cholesky_in_place, cholesky_solve, fill_nan, forward_substitution, multiply,
                                  multiply_transposed)
@@ -52,6 +53,15 @@ class UdwadiaKalaba:
 
     def bind(self, model: Model) -> "UdwadiaKalabaSolver":
         return UdwadiaKalabaSolver(model, self)
+
+    def compiled(self, solver: "UdwadiaKalabaSolver", model: Model) -> "UdwadiaKalabaKernel | None":
+        """The solve of the compiled loops on the solver's factor and work arrays (None with a
+        ``nonideal`` term: a Python callable)."""
+        if self.nonideal is not None:
+            return None
+        return UdwadiaKalabaKernel(solver.augmentation, solver.factored, solver.threshold, solver.row_scale,
+                                   float(solver.mass_scale), solver.factor, solver.work_matrix, solver.vectors_n,
+                                   solver.vectors_m, np.zeros(model.n), solver.no_nonideal)
 
 
 class UdwadiaKalabaSolver(StatelessSolver):
@@ -237,3 +247,44 @@ def _remove_range(Vt: np.ndarray, rank: int, x: np.ndarray) -> None:
             projection += Vt[k, j] * x[j]
         for j in range(x.size):
             x[j] -= projection * Vt[k, j]
+
+
+class UdwadiaKalabaKernel(NamedTuple):
+    """Udwadia-Kalaba without a non-ideal term as the compiled loops take it
+    (:mod:`cmbs.dynamics.field`): the arguments and work arrays of :func:`udwadia_kalaba_solve`."""
+
+    augmentation: float
+    factored: bool
+    threshold: float
+    row_scale: np.ndarray
+    mass_scale: float
+    factor: np.ndarray
+    work_matrix: np.ndarray
+    vectors_n: np.ndarray
+    vectors_m: np.ndarray
+    force: np.ndarray
+    no_nonideal: np.ndarray
+
+
+@njit(cache=True)
+def _kernel_solve(kernel, terms, t, qd, qdd, lam):
+    """:func:`udwadia_kalaba_solve` at the terms (Q, Φ, A, γ, Φ_t, M); status OK, SINGULAR (the
+    mass matrix to factor is not positive definite) or NON_FINITE."""
+    Q, phi, A, gamma, phi_t, M = terms
+    status = udwadia_kalaba_solve(M, Q, A, gamma, kernel.no_nonideal, kernel.augmentation, kernel.factored,
+                                  kernel.threshold, kernel.row_scale, kernel.mass_scale, kernel.factor,
+                                  kernel.work_matrix, kernel.vectors_n, kernel.vectors_m, qdd, lam, kernel.force)
+    return SINGULAR if status == NOT_POSITIVE_DEFINITE else status
+
+
+@njit(cache=True)
+def _fresh(kernel):
+    """A copy of ``kernel`` with work arrays of its own (the constant factor copied too)."""
+    return UdwadiaKalabaKernel(kernel.augmentation, kernel.factored, kernel.threshold, kernel.row_scale,
+                               kernel.mass_scale, kernel.factor.copy(), kernel.work_matrix.copy(),
+                               kernel.vectors_n.copy(), kernel.vectors_m.copy(), kernel.force.copy(),
+                               kernel.no_nonideal)
+
+
+UdwadiaKalabaKernel.solve = staticmethod(_kernel_solve)
+UdwadiaKalabaKernel.fresh = staticmethod(_fresh)
