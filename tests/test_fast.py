@@ -12,7 +12,7 @@ from helpers import kitchen_sink
 
 
 @pytest.mark.parametrize("name", ["four-bar", "slider-crank-joint"])
-@pytest.mark.parametrize("formulation", ["lagrange", "baumgarte", "projection"])
+@pytest.mark.parametrize("formulation", ["lagrange", "baumgarte", "projection", "penalty", "udwadia-kalaba"])
 def test_compiled_loop_equals_python_loop(name, formulation):
     model = cmbs.load(name, gravity=9.81) if name == "slider-crank-joint" else cmbs.load(name).without_drivers()
     runs = [simulate(model, t_end=0.3, integrator="rk4", dt=1e-3, formulation=formulation, compiled=flag)
@@ -43,7 +43,36 @@ def test_compiled_loop_refuses_what_it_cannot_run():
     with pytest.raises(CmbsError, match="compiled loop cannot run"):
         simulate(model, t_end=0.1, integrator="rk45", u=lambda t, q, qd: np.zeros(model.n_u), compiled=True)
     with pytest.raises(CmbsError, match="compiled loop cannot run"):
-        simulate(model, t_end=0.1, integrator="rk4", formulation="penalty", compiled=True)
+        simulate(model, t_end=0.1, integrator="rk4", formulation="projection",
+                 formulation_options={"inertia": "symmetric"}, compiled=True)
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "dop853"])
+def test_compiled_penalty_and_udwadia_kalaba_move_as_the_other_formulations(integrator):
+    """In the compiled loops, Udwadia-Kalaba's ideal constraints give Lagrange's motion, and the
+    converged augmented Lagrangian Baumgarte's with ξ = μ, ω = Ω (the same stabilised
+    constraint accelerations): independent formulations, one answer."""
+    model = cmbs.load("four-bar").without_drivers()
+    options = dict(t_end=1.0, integrator=integrator, dt=1e-3, rtol=1e-10, atol=1e-10)
+    runs = {name: simulate(model, formulation=name, **options) for name in ("lagrange", "udwadia-kalaba")}
+    runs["baumgarte"] = simulate(model, formulation="baumgarte", formulation_options={"xi": 0.7, "omega": 3.0},
+                                 **options)
+    runs["penalty"] = simulate(model, formulation="penalty", formulation_options={"mu": 0.7, "Omega": 3.0}, **options)
+    assert all(run.info["compiled"] and run.info["status"] == "success" for run in runs.values())
+    np.testing.assert_allclose(runs["udwadia-kalaba"].q, runs["lagrange"].q, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(runs["udwadia-kalaba"]["lam"], runs["lagrange"]["lam"], rtol=1e-7, atol=1e-7)
+    np.testing.assert_allclose(runs["penalty"].q, runs["baumgarte"].q, rtol=0, atol=1e-9)
+
+
+def test_compiled_plain_penalty_run_says_its_constraints_are_soft():
+    """The plain penalty (no augmented-Lagrangian iteration) leaves λ/α in the constraint
+    accelerations; a compiled run reports it as the Python loop does."""
+    model = cmbs.load("four-bar").without_drivers()
+    runs = [simulate(model, t_end=0.2, integrator="rk4", dt=1e-3, formulation="penalty",
+                     formulation_options={"iterations": 0}, compiled=flag) for flag in (True, False)]
+    assert runs[0].info["compiled"] and not runs[1].info.get("compiled")
+    for run in runs:
+        assert "penalty: the constraint accelerations missed the exact ones" in run.info["note"]
 
 
 def test_jacobi_extreme_eigenvalues_match_lapack():
@@ -262,7 +291,7 @@ def test_compiled_dynamics_names_the_constraints_at_a_singular_position_and_chec
     with pytest.raises(CmbsError, match="non-finite"):
         CompiledDynamics(model, "projection").accelerations(q * np.nan, np.zeros(model.n))
     with pytest.raises(CmbsError, match="cannot run"):
-        CompiledDynamics(model, "penalty")
+        CompiledDynamics(model, cmbs.formulation("projection", inertia="symmetric"))
 
 
 def test_a_diverging_compiled_run_fails_with_a_message_not_an_exception():
@@ -280,13 +309,14 @@ def test_a_diverging_compiled_run_fails_with_a_message_not_an_exception():
 def test_runs_on_the_python_loop_say_why():
     model = cmbs.load("four-bar").without_drivers()
     notes = {
-        "penalty": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, formulation="penalty").info["note"],
+        "symmetric": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, formulation="projection",
+                              formulation_options={"inertia": "symmetric"}).info["note"],
         "callable": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3,
                              u=lambda t, q, qd: np.zeros(model.n_u)).info["note"],
         "project": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, project=True).info["note"],
         "off": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, compiled=False).info["note"],
     }
-    assert "'penalty' has no compiled loop" in notes["penalty"]
+    assert "'projection' with these options has no compiled solve" in notes["symmetric"]
     assert "Python callable" in notes["callable"] and "project=True" in notes["project"]
     assert notes["off"] == "Python loop: compiled=False"
     compiled = simulate(model, t_end=0.01, integrator="rk4", dt=1e-3)

@@ -38,6 +38,9 @@ from cmbs.trajectory import Trajectory
 
 Inputs = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
 INDEX3 = {"backward-euler": BACKWARD_EULER, "generalized-alpha": generalized_alpha(0.9)}
+#: The formulations whose solve the compiled loops run, with the options they need.
+COMPILED_FORMULATIONS = ("lagrange, baumgarte, penalty, projection with the standard inertia, udwadia-kalaba without "
+                         "a nonideal term")
 INTEGRATORS = (*EXPLICIT, "trapezoidal", *INDEX3)
 #: integrators whose dissipation of energy is part of their design (high-frequency damping)
 NUMERICALLY_DAMPED = tuple(INDEX3)
@@ -222,12 +225,12 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     compiled
         Run the whole loop compiled: None chooses it when the run allows it
         (:mod:`cmbs.integrate.compiled_plan`: a model, formulation and inputs with compiled
-        kernels, i.e. no Python time functions, lagrange, baumgarte or standard projection, constant
-        inputs or a :class:`~cmbs.control.ComputedTorque` law alone or in a
-        :class:`~cmbs.control.ZeroOrderHold` with period ``dt``, with rk4 or, constant inputs only,
-        rk45/rk23/dop853; or matrix-r with constant inputs on a holonomic model and rk4,
-        :mod:`cmbs.integrate.compiled_matrix_r`; no projection), True requires it, False keeps
-        the Python loop.
+        kernels, i.e. no Python callables: no Python time functions, the formulations of
+        :data:`COMPILED_FORMULATIONS`, constant inputs or a :class:`~cmbs.control.ComputedTorque`
+        law alone or in a :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; with rk4 or,
+        constant inputs only, rk45/rk23/dop853; or matrix-r with constant inputs on a holonomic
+        model and rk4, :mod:`cmbs.integrate.compiled_matrix_r`; no projection), True requires it,
+        False keeps the Python loop.
 
     Returns
     -------
@@ -293,11 +296,11 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
 
         velocity_loop = compiled_matrix_r.runs(model, chosen, integrator, u, project, steps is not None)
     if compiled and plan is None and not velocity_loop:
-        raise CmbsError(f"the compiled loop cannot run this simulation (it needs integrator rk4 with t_end a "
-                        "multiple of dt, formulation lagrange, baumgarte or projection with the standard inertia, "
-                        "constant inputs or a ComputedTorque law (alone or in a ZeroOrderHold with period dt) on "
-                        "a compiled model, or matrix-r with constant inputs on a holonomic compiled model; no "
-                        f"--project and no Python time functions; model {model.name!r})")
+        raise CmbsError(f"the compiled loop cannot run this simulation of model {model.name!r}: it needs a model, "
+                        f"formulation and inputs without Python callables (formulations {COMPILED_FORMULATIONS}; "
+                        "constant inputs or a ComputedTorque law, alone or in a ZeroOrderHold with period dt), "
+                        "integrator rk4 with t_end a multiple of dt or, with constant inputs, rk45, rk23 or dop853, "
+                        "and no --project; or matrix-r with rk4 and constant inputs on a holonomic model")
     run_options = {"integrator": integrator, "dt": dt, "every": every, "rtol": rtol, "atol": atol, "project": project}
     if plan is not None and compiled is not False and integrator != "rk4":
         trajectory = _run_compiled_adaptive(model, solver, chosen, plan, inputs, q_start, qd_start, times, started,
@@ -313,6 +316,9 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
             trajectory = _run_python(model, solver, chosen, inputs, q_start, qd_start, grid, every, integrator, u,
                                      dt, rtol, atol, project, projection_tolerance, newton_tolerance, compiled,
                                      progress, started)
+    solver_note = getattr(solver, "run_note", str)()   # the formulation's own, compiled loop or not
+    if solver_note:
+        _add_note(trajectory.info, solver_note)
     trajectory.info["compile_time"] = compile_seconds() - compiled_before
     _explain_failure(model, trajectory, grid)
     return trajectory
@@ -345,9 +351,6 @@ def _run_python(model: Model, solver, chosen: Formulation, inputs: Inputs, q_sta
     if integrator == "rk4":                 # before the energy note, which the recording may have made
         _add_note(trajectory.info, _python_loop_note(model, chosen, solver, u, project, compiled), first=True)
     _note_rounding(trajectory.info, solver)
-    solver_note = getattr(solver, "run_note", str)()
-    if solver_note:
-        _add_note(trajectory.info, solver_note)
     return trajectory
 
 
@@ -402,7 +405,7 @@ def _python_loop_note(model: Model, chosen: Formulation, solver: object, u: obje
     elif callable(u):
         reason = "the inputs are a Python callable (only a plain ComputedTorque law is compiled)"
     elif chosen.name != "matrix-r" and formulation_kernel(chosen, solver, model) is None:
-        reason = f"formulation {chosen.name!r} has no compiled loop (lagrange, baumgarte, projection, matrix-r have)"
+        reason = f"formulation {chosen.name!r} with these options has no compiled solve ({COMPILED_FORMULATIONS})"
     else:
         reason = "t_end is not a multiple of dt, or the model has nonholonomic rows (matrix-r)"
     return f"Python loop: {reason}"

@@ -98,8 +98,9 @@ class CompiledDynamics:
 
     For callers that evaluate q̈ at states of their own (an integrator of their own, a shooting
     method, a benchmark).  Same results as ``formulation.bind(model).accelerations`` after
-    ``model.evaluate`` (tested to 1e-10); Lagrange and Baumgarte check the rank of A and raise
-    :class:`~cmbs.errors.SingularSystemError` naming the constraints, as the Python solver does.
+    ``model.evaluate`` (tested to 1e-10); where the solve fails (Lagrange and Baumgarte at a
+    rank-deficient A, naming the constraints; a mass matrix that is not positive definite) it
+    raises the Python solver's :class:`~cmbs.errors.SingularSystemError`.
 
     Parameters
     ----------
@@ -107,7 +108,8 @@ class CompiledDynamics:
         A natural- or joint-coordinate model without Python-callable time functions.
     formulation
         A name or a :class:`~cmbs.dynamics.Formulation` with a compiled solve (``lagrange``,
-        ``baumgarte``, ``projection`` with the standard inertia).
+        ``baumgarte``, ``penalty``, ``projection`` with the standard inertia, ``udwadia-kalaba``
+        without a non-ideal term).
     """
 
     def __init__(self, model: Model, formulation: str | Formulation = "lagrange"):
@@ -121,8 +123,8 @@ class CompiledDynamics:
         if solve_kernel is None:
             raise CmbsError(f"the compiled field cannot run model {model.name!r} with formulation {chosen.name!r}: "
                             "it takes natural- or joint-coordinate models without Python time functions, with "
-                            "a formulation that has a compiled solve (lagrange, baumgarte, projection with the "
-                            "standard inertia)")
+                            "a formulation that has a compiled solve (lagrange, baumgarte, penalty, projection with "
+                            "the standard inertia, udwadia-kalaba without a nonideal term)")
         # bound once: a call then passes (and numba unboxes) only the state and the outputs
         self._field = functools.partial(_bound_field_at, Bound(kernel, solve_kernel, model.new_terms().buffer))
         self._no_input = np.zeros(model.n_u)
