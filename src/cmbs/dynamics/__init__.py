@@ -40,3 +40,10 @@ def formulation(name: str, **options: object) -> Formulation:
 
 __all__ = ["Accelerations", "Formulation", "Solver", "Lagrange", "Baumgarte", "Penalty", "MatrixR", "Projection",
            "UdwadiaKalaba", "FORMULATIONS", "formulation"]
+
+
+def __getattr__(name: str) -> object:
+    """Submodules on first use (PEP 562): ``cmbs.dynamics.field`` works after a plain ``import cmbs``."""
+    from cmbs.lazy import submodule
+
+    return submodule(__name__, name)
