@@ -18,9 +18,11 @@ augmented mass M̂ = M + s AᵀA, Q̂ = Q + s Aᵀγ (s = trace(M)/n) is used (U
 2006): since s AᵀA q̈ = s Aᵀγ on the constraint manifold, the motion is unchanged and M̂ is
 positive definite when M is definite on null(A).  λ is recovered from Q_c = -Aᵀλ (minimum norm).
 
-The whole solve is one compiled kernel, :func:`udwadia_kalaba_solve`, which
-:class:`UdwadiaKalabaSolver` calls on work arrays allocated once per run, and the compiled loops
-through :class:`UdwadiaKalabaKernel`.
+The whole solve is one compiled kernel, :func:`_solve_with`, which :class:`UdwadiaKalabaSolver`
+and the compiled loops call on the work arrays of one :class:`UdwadiaKalabaKernel` per run: where
+A is certified regular (full row rank, no singular value discarded) the ideal equations are the
+Lagrange multipliers' augmented system, solved as such (:func:`_regular`); elsewhere (redundant
+constraints, singular positions, a non-ideal term) the SVDs above (:func:`udwadia_kalaba_solve`).
 """
 
 from __future__ import annotations
@@ -34,9 +36,11 @@ from cmbs.dynamics.base import SINGULAR, Accelerations, StatelessSolver, check_p
 from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, backward_substitution,
                                  cholesky_in_place, cholesky_solve, fill_nan, forward_substitution, multiply,
                                  multiply_transposed)
-from cmbs.dynamics.projection import reference_row_scale
+from cmbs.dynamics.kkt import band_kkt, bounds_meeting, packed_workspace, schur_solve, unpack_workspace
+from cmbs.dynamics.projection import PROJECTION_REGULAR, reference_row_scale
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.jit import njit
+from cmbs.model.compiled import model_kernel
 from cmbs.model.model import Model, Terms
 
 
@@ -57,17 +61,13 @@ class UdwadiaKalaba:
     def compiled(self, solver: "UdwadiaKalabaSolver", model: Model) -> "UdwadiaKalabaKernel | None":
         """The solve of the compiled loops on the solver's factor and work arrays (None with a
         ``nonideal`` term: a Python callable)."""
-        if self.nonideal is not None:
-            return None
-        return UdwadiaKalabaKernel(solver.augmentation, solver.factored, solver.threshold, solver.row_scale,
-                                   float(solver.mass_scale), solver.factor, solver.work_matrix, solver.vectors_n,
-                                   solver.vectors_m, np.zeros(model.n), solver.no_nonideal)
+        return None if self.nonideal is not None else solver.kernel
 
 
 class UdwadiaKalabaSolver(StatelessSolver):
-    """Udwadia-Kalaba for one run: each evaluation is one call of the compiled
-    :func:`udwadia_kalaba_solve` on work arrays allocated here.  A constant, definite mass matrix
-    is factored once, here."""
+    """Udwadia-Kalaba for one run: each evaluation is one call of the compiled :func:`_solve_with`
+    on the :class:`UdwadiaKalabaKernel` made here (the compiled loops call the same).  A constant,
+    definite mass matrix is factored once, here."""
 
     def __init__(self, model: Model, parameters: UdwadiaKalaba):
         super().__init__(model)
@@ -87,6 +87,11 @@ class UdwadiaKalabaSolver(StatelessSolver):
         self.vectors_n = np.zeros((3, model.n))
         self.vectors_m = np.zeros((2, model.m))
         self.no_nonideal = np.zeros(0)
+        workspace = packed_workspace(model) if model_kernel(model) is not None else None
+        self.kernel = UdwadiaKalabaKernel(
+            self.augmentation, self.factored, self.threshold, self.row_scale, float(self.mass_scale), self.factor,
+            self.work_matrix, self.vectors_n, self.vectors_m, np.zeros(model.n), self.no_nonideal,
+            workspace is not None, *(workspace or (np.zeros(0), np.zeros(0, dtype=np.int64), NO_WORKSPACE)))
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
         """Udwadia-Kalaba's accelerations at one state.
@@ -100,10 +105,9 @@ class UdwadiaKalabaSolver(StatelessSolver):
             raise ValueError(f"terms of shape A {terms.A.shape} for model {self.model.name!r} "
                              f"(m = {self.model.m}, n = {self.model.n})")
         c = self.no_nonideal if self.p.nonideal is None else self._nonideal(t, q, qd)
-        qdd, lam, force = np.empty(n), np.empty(m), np.empty(n)
-        status = udwadia_kalaba_solve(terms.M, terms.Q, terms.A, terms.gamma, c, self.augmentation, self.factored,
-                                      self.threshold, self.row_scale, self.mass_scale, self.factor,
-                                      self.work_matrix, self.vectors_n, self.vectors_m, qdd, lam, force)
+        qdd, lam = np.empty(n), np.empty(m)
+        status = _solve_with(self.kernel, terms.M, terms.Q, terms.A, terms.gamma, c, qdd, lam)
+        force = self.kernel.force.copy()
         if status == NOT_POSITIVE_DEFINITE:
             matrix = f"M + s AᵀA (s = {self.scale:.3g})" if self.semi_definite else "the mass matrix M"
             raise SingularSystemError(f"model {self.model.name!r} at t={t:.6g}: {matrix} is not positive definite "
@@ -250,8 +254,10 @@ def _remove_range(Vt: np.ndarray, rank: int, x: np.ndarray) -> None:
 
 
 class UdwadiaKalabaKernel(NamedTuple):
-    """Udwadia-Kalaba without a non-ideal term as the compiled loops take it
-    (:mod:`cmbs.dynamics.field`): the arguments and work arrays of :func:`udwadia_kalaba_solve`."""
+    """Udwadia-Kalaba as its solver and the compiled loops (:mod:`cmbs.dynamics.field`) take it:
+    the arguments and work arrays of :func:`udwadia_kalaba_solve`, the constraint force it
+    writes, and (``regular_path``, for models with a compiled kernel) the packed
+    :func:`cmbs.dynamics.kkt.schur_workspace` of :func:`_regular`."""
 
     augmentation: float
     factored: bool
@@ -264,16 +270,74 @@ class UdwadiaKalabaKernel(NamedTuple):
     vectors_m: np.ndarray
     force: np.ndarray
     no_nonideal: np.ndarray
+    regular_path: bool
+    floats: np.ndarray
+    integers: np.ndarray
+    layout: np.ndarray
+
+
+#: The layout of an empty workspace (a model without a compiled kernel has no regular path).
+NO_WORKSPACE = np.zeros((29, 5), dtype=np.int64)
+
+
+@njit(cache=True)
+def _solve_with(kernel, M, Q, A, gamma, c, qdd, lam):
+    """Udwadia-Kalaba's q̈, λ and constraint force (into ``kernel.force``) with the non-ideal
+    vector ``c`` (empty for none): :func:`_regular` where it applies, else
+    :func:`udwadia_kalaba_solve`.  Returns OK, NOT_POSITIVE_DEFINITE or NON_FINITE."""
+    if c.size == 0 and _regular(kernel, M, Q, A, gamma, qdd, lam):
+        return OK
+    return udwadia_kalaba_solve(M, Q, A, gamma, c, kernel.augmentation, kernel.factored, kernel.threshold,
+                                kernel.row_scale, kernel.mass_scale, kernel.factor, kernel.work_matrix,
+                                kernel.vectors_n, kernel.vectors_m, qdd, lam, kernel.force)
+
+
+@njit(cache=True)
+def _regular(kernel, M, Q, A, gamma, qdd, lam):
+    """Udwadia-Kalaba's ideal solution where nothing is discarded, by the augmented system; False
+    where that is not proven (the caller then takes the SVDs).
+
+    When A has full row rank and the pseudo-inverses discard no singular value, Gauss's principle
+    gives q̈ = a + M̂⁻¹Aᵀ(AM̂⁻¹Aᵀ)⁻¹(γ - Aa): the solution of [M Aᵀ; A 0][q̈; λ] = [Q; γ] (with M̂
+    = M + sAᵀA, Q̂ = Q + sAᵀγ the same, since Aq̈ = γ), and λ = -(Aᵀ)⁺(Mq̈ - Q) is that system's
+    unique multiplier.  The Gram bounds of :func:`~cmbs.dynamics.kkt.bounds_meeting` prove it:
+    σ_min(SA)² ≥ low ≥ (1e-4)² max(σ_max², 1) and low > threshold² (the λ pseudo-inverse of the
+    row-scaled A keeps everything), and for B = AL⁻ᵀ scaled by D = mass_scale·S,
+    σ_min(DB)² ≥ mass_scale² low / λ_max(M̂) ≥ mass_scale² low / trace M̂ > threshold² (the q̈
+    pseudo-inverse keeps everything).  Solved as the projection's regular path
+    (:func:`cmbs.dynamics.projection._by_schur`): band LU or the Schur complement."""
+    m, n = A.shape
+    if not kernel.regular_path or m == 0 or m > n:
+        return False
+    schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
+    low, high = bounds_meeting(A, kernel.row_scale, PROJECTION_REGULAR, kernel.threshold, schur[27], schur[28],
+                               schur[7], schur[8], schur[13], schur[14], schur[15])
+    threshold = kernel.threshold
+    if low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold:
+        return False
+    trace = 0.0
+    for j in range(n):
+        trace += M[j, j]
+        for i in range(m):
+            trace += kernel.augmentation * A[i, j] * A[i, j]
+    if not kernel.mass_scale * kernel.mass_scale * low > threshold * threshold * trace:
+        return False
+    solved = band_kkt(Q, A, gamma, schur, qdd, lam) if schur[16] == 1 else schur_solve(M, Q, A, gamma, schur, qdd,
+                                                                                        lam)
+    if not solved:
+        return False
+    force = kernel.force
+    multiply(M, qdd, force)
+    force -= Q                                              # Q_c = M q̈ - Q
+    return all_finite(qdd) and all_finite(lam)
 
 
 @njit(cache=True)
 def _kernel_solve(kernel, terms, t, qd, qdd, lam):
-    """:func:`udwadia_kalaba_solve` at the terms (Q, Φ, A, γ, Φ_t, M); status OK, SINGULAR (the
-    mass matrix to factor is not positive definite) or NON_FINITE."""
+    """:func:`_solve_with` at the terms (Q, Φ, A, γ, Φ_t, M) without a non-ideal term; status OK,
+    SINGULAR (the mass matrix to factor is not positive definite) or NON_FINITE."""
     Q, phi, A, gamma, phi_t, M = terms
-    status = udwadia_kalaba_solve(M, Q, A, gamma, kernel.no_nonideal, kernel.augmentation, kernel.factored,
-                                  kernel.threshold, kernel.row_scale, kernel.mass_scale, kernel.factor,
-                                  kernel.work_matrix, kernel.vectors_n, kernel.vectors_m, qdd, lam, kernel.force)
+    status = _solve_with(kernel, M, Q, A, gamma, kernel.no_nonideal, qdd, lam)
     return SINGULAR if status == NOT_POSITIVE_DEFINITE else status
 
 
@@ -283,7 +347,8 @@ def _fresh(kernel):
     return UdwadiaKalabaKernel(kernel.augmentation, kernel.factored, kernel.threshold, kernel.row_scale,
                                kernel.mass_scale, kernel.factor.copy(), kernel.work_matrix.copy(),
                                kernel.vectors_n.copy(), kernel.vectors_m.copy(), kernel.force.copy(),
-                               kernel.no_nonideal)
+                               kernel.no_nonideal, kernel.regular_path, kernel.floats.copy(), kernel.integers.copy(),
+                               kernel.layout)
 
 
 UdwadiaKalabaKernel.solve = staticmethod(_kernel_solve)
