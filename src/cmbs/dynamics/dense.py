@@ -1,10 +1,11 @@
-"""Dense linear algebra for the compiled solves of the formulations, written out by hand.
+"""Dense products and checks for the compiled solves of the penalty and Udwadia-Kalaba, written
+out by hand.
 
 The matrices of one evaluation are small (n ≤ a few dozen), where a call of LAPACK through numpy
 costs more than the arithmetic.  These kernels work in place on arrays their caller owns (work
 arrays allocated once per bound solver), compiled by :func:`cmbs.jit.njit` (plain Python
-without numba).  Cholesky column by column (Golub & Van Loan, *Matrix Computations*, 4th ed.,
-§4.2).
+without numba).  The Cholesky factor and its triangular solves are those of
+:mod:`cmbs.dynamics.kkt` with its dense profile (:data:`cmbs.dynamics.kkt.DENSE`).
 """
 
 from __future__ import annotations
@@ -16,55 +17,6 @@ from cmbs.jit import njit
 #: Statuses of the compiled solves: the solution was written; the symmetric matrix to factor
 #: was not numerically positive definite; a non-finite value appeared (the outputs are NaN).
 OK, NOT_POSITIVE_DEFINITE, NON_FINITE = 0, 1, 2
-
-
-@njit(cache=True)
-def cholesky_in_place(L: np.ndarray) -> bool:
-    """Lower Cholesky factor L Lᵀ = K of the symmetric K given in ``L``'s lower triangle, in
-    place; the strict upper triangle is set to zero.  False when K is not numerically positive
-    definite (a pivot ≤ 0 or NaN), ``L`` then partly overwritten."""
-    size = L.shape[0]
-    for j in range(size):
-        pivot = L[j, j]
-        for k in range(j):
-            pivot -= L[j, k] * L[j, k]
-        if not pivot > 0.0:
-            return False
-        pivot = np.sqrt(pivot)
-        L[j, j] = pivot
-        for i in range(j + 1, size):
-            total = L[i, j]
-            for k in range(j):
-                total -= L[i, k] * L[j, k]
-            L[i, j] = total / pivot
-            L[j, i] = 0.0
-    return True
-
-
-@njit(cache=True)
-def forward_substitution(L: np.ndarray, b: np.ndarray) -> None:
-    """b ← L⁻¹ b for the lower triangular L."""
-    for i in range(L.shape[0]):
-        total = b[i]
-        for k in range(i):
-            total -= L[i, k] * b[k]
-        b[i] = total / L[i, i]
-
-
-@njit(cache=True)
-def backward_substitution(L: np.ndarray, b: np.ndarray) -> None:
-    """b ← L⁻ᵀ b for the lower triangular L."""
-    for i in range(L.shape[0] - 1, -1, -1):
-        b[i] /= L[i, i]
-        for k in range(i):
-            b[k] -= L[i, k] * b[i]
-
-
-@njit(cache=True)
-def cholesky_solve(L: np.ndarray, b: np.ndarray) -> None:
-    """b ← (L Lᵀ)⁻¹ b for the Cholesky factor L."""
-    forward_substitution(L, b)
-    backward_substitution(L, b)
 
 
 @njit(cache=True)

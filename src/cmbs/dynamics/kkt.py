@@ -128,24 +128,36 @@ def cholesky_in_place(L, start):
     """Lower Cholesky factor L Lᵀ = K of the symmetric positive definite K given in ``L``'s lower
     triangle, in place (the upper triangle is not read).  ``start[i]`` is the first column of
     row i that may be non-zero (the profile of K, which the factor keeps: George & Liu 1981
-    §4.2); zeros for a dense K.  Returns False when K is not numerically positive definite."""
+    §4.2); :data:`DENSE` (or zeros) for a dense K.  Returns False when K is not numerically
+    positive definite (a pivot ≤ 0 or NaN; ``L`` then partly overwritten)."""
     size = L.shape[0]
     for j in range(size):
         pivot = L[j, j]
-        for k in range(start[j], j):
+        for k in range(_first(start, j), j):
             pivot -= L[j, k] * L[j, k]
         if not pivot > 0.0:
             return False
         pivot = math.sqrt(pivot)
         L[j, j] = pivot
         for i in range(j + 1, size):
-            if start[i] > j:
+            if _first(start, i) > j:
                 continue
             total = L[i, j]
-            for k in range(max(start[i], start[j]), j):
+            for k in range(max(_first(start, i), _first(start, j)), j):
                 total -= L[i, k] * L[j, k]
             L[i, j] = total / pivot
     return True
+
+
+#: The profile argument of :func:`cholesky_in_place`, :func:`solve_lower` and
+#: :func:`solve_lower_transposed` for a dense matrix.
+DENSE = np.zeros(0, dtype=np.int64)
+
+
+@njit_borrowing(cache=True, inline="always")
+def _first(start, i):
+    """The first column of row i in the profile ``start`` (0 for :data:`DENSE`)."""
+    return start[i] if start.shape[0] else 0
 
 
 @njit_borrowing(cache=True)
@@ -153,7 +165,7 @@ def solve_lower(L, start, b):
     """Solve L x = b in place for the lower triangular L with row profile ``start``."""
     for i in range(L.shape[0]):
         total = b[i]
-        for k in range(start[i], i):
+        for k in range(_first(start, i), i):
             total -= L[i, k] * b[k]
         b[i] = total / L[i, i]
 
@@ -163,7 +175,7 @@ def solve_lower_transposed(L, start, b):
     """Solve Lᵀ x = b in place for the lower triangular L with row profile ``start``."""
     for i in range(L.shape[0] - 1, -1, -1):
         b[i] /= L[i, i]
-        for k in range(start[i], i):
+        for k in range(_first(start, i), i):
             b[k] -= L[i, k] * b[i]
 
 

@@ -41,8 +41,9 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import SINGULAR, Accelerations, StatelessSolver, check_parameters
-from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, cholesky_in_place,
-                                 cholesky_solve, fill_nan, max_abs, multiply, multiply_transposed)
+from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, fill_nan, max_abs, multiply,
+                                 multiply_transposed)
+from cmbs.dynamics.kkt import DENSE, cholesky_in_place, solve_lower, solve_lower_transposed
 from cmbs.errors import SingularSystemError
 from cmbs.jit import njit
 from cmbs.model.model import Model, Terms
@@ -178,7 +179,7 @@ def penalty_solve(M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.ndarray
     for i in range(target.size):
         target[i] = gamma[i] - 2.0 * mu * Omega * (target[i] + phi_t[i]) - Omega**2 * phi[i]
     add_scaled_gram(M, A, alpha, factor)
-    if not cholesky_in_place(factor):
+    if not cholesky_in_place(factor, DENSE):
         if all_finite(M) and all_finite(A) and np.isfinite(alpha):
             return NOT_POSITIVE_DEFINITE, np.nan
         return fill_nan(qdd, lam, force), np.nan
@@ -223,7 +224,8 @@ def _solve_and_measure(factor: np.ndarray, base: np.ndarray, A: np.ndarray, lam_
     multiply_transposed(A, lam_star, rhs)
     for j in range(qdd.size):
         qdd[j] = base[j] - rhs[j]
-    cholesky_solve(factor, qdd)
+    solve_lower(factor, DENSE, qdd)
+    solve_lower_transposed(factor, DENSE, qdd)
     multiply(A, qdd, residual)
     residual -= target
     scale = size_A * max_abs(qdd) + max_abs(target)

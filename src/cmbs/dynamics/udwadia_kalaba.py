@@ -33,10 +33,10 @@ from typing import Callable, ClassVar, NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import SINGULAR, Accelerations, StatelessSolver, check_parameters
-from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, backward_substitution,
-                                 cholesky_in_place, cholesky_solve, fill_nan, forward_substitution, multiply,
-                                 multiply_transposed)
-from cmbs.dynamics.kkt import band_kkt, bounds_meeting, packed_workspace, schur_solve, unpack_workspace
+from cmbs.dynamics.dense import NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, fill_nan, multiply, \
+    multiply_transposed
+from cmbs.dynamics.kkt import DENSE, band_kkt, bounds_meeting, cholesky_in_place, packed_workspace, schur_solve, \
+    solve_lower, solve_lower_transposed, unpack_workspace
 from cmbs.dynamics.projection import PROJECTION_REGULAR, reference_row_scale
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.jit import njit
@@ -80,7 +80,7 @@ class UdwadiaKalabaSolver(StatelessSolver):
         self.factor = np.array(M0, dtype=float)
         self.factored = False
         if model.constant_mass and not self.semi_definite:
-            self.factored = cholesky_in_place(self.factor)    # else factored at each evaluation
+            self.factored = cholesky_in_place(self.factor, DENSE)    # else factored at each evaluation
         self.augmentation = self.scale if self.semi_definite else 0.0
         self.threshold = float(parameters.threshold)    # the kernel's argument type
         self.work_matrix = np.zeros((model.m, model.n))
@@ -156,11 +156,12 @@ def udwadia_kalaba_solve(M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.
             a[j] += augmentation * scaled_force[j]
     elif not factored:
         factor[:, :] = M
-    if not (factored or cholesky_in_place(factor)):
+    if not (factored or cholesky_in_place(factor, DENSE)):
         if all_finite(M) and all_finite(A) and (augmentation == 0.0 or all_finite(gamma)):
             return NOT_POSITIVE_DEFINITE
         return fill_nan(qdd, lam, force)
-    cholesky_solve(factor, a)                               # a = M̂⁻¹ Q̂
+    solve_lower(factor, DENSE, a)                           # a = M̂⁻¹ Q̂
+    solve_lower_transposed(factor, DENSE, a)
     multiply(A, a, residual)
     for i in range(m):
         residual[i] = gamma[i] - residual[i]                # γ - A a
@@ -168,7 +169,7 @@ def udwadia_kalaba_solve(M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.
     for i in range(m):                                      # row i of D B = d_i (L⁻¹ A[i])ᵀ
         row = scaled_B[i]
         row[:] = A[i]
-        forward_substitution(factor, row)
+        solve_lower(factor, DENSE, row)
         row *= row_scale[i] * mass_scale
     if not (all_finite(a) and all_finite(scaled_B) and all_finite(residual) and all_finite(c)):
         return fill_nan(qdd, lam, force)
@@ -181,11 +182,11 @@ def udwadia_kalaba_solve(M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.
         _apply_pseudo_inverse(U, sigma, Vt, rank, residual, coefficients, scaled_force)    # B⁺ (γ - A a)
     if c.size:                                              # + (I - B⁺B) L⁻¹ c
         extra[:] = c
-        forward_substitution(factor, extra)
+        solve_lower(factor, DENSE, extra)
         if m:
             _remove_range(Vt, rank, extra)
         scaled_force += extra
-    backward_substitution(factor, scaled_force)             # L⁻ᵀ (...)
+    solve_lower_transposed(factor, DENSE, scaled_force)     # L⁻ᵀ (...)
     for j in range(n):
         qdd[j] = a[j] + scaled_force[j]
     multiply(M, qdd, force)
