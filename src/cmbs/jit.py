@@ -66,7 +66,7 @@ def interpreted(kernel: Callable) -> Callable:
     return getattr(kernel, "py_func", kernel)
 
 
-def type_dispatch(attribute: str, borrowing: bool = True) -> Callable:
+def type_dispatch(attribute: str) -> Callable:
     """A function ``f(data, *args)`` that calls ``type(data).<attribute>(data, *args)``.
 
     ``data`` is a :class:`typing.NamedTuple` whose class carries the kernel as a static attribute
@@ -75,8 +75,7 @@ def type_dispatch(attribute: str, borrowing: bool = True) -> Callable:
     a loop taking ``data`` compiles only the kernel of that class and its specialisation is
     cached like any other; interpreted, it is a plain attribute lookup.  Adding a kind of model
     or a formulation is adding a class and its kernel: no code of the loops changes.  The call
-    borrows its arguments as :func:`njit_borrowing` kernels do, unless ``borrowing`` is False
-    (a kernel that returns new arrays)."""
+    is compiled into its caller (numba's inlining), so it costs nothing beside the kernel's."""
 
     def dispatch(data, *args):
         return getattr(type(data), attribute)(data, *args)
@@ -85,14 +84,24 @@ def type_dispatch(attribute: str, borrowing: bool = True) -> Callable:
     if _numba is not None:
         from numba.extending import overload
 
-        @overload(dispatch, jit_options={"cache": True, **({"_nrt": False} if borrowing else {})})
+        @overload(dispatch, inline="always", strict=False)
         def _resolved(data, *args):
-            kernel = getattr(data.instance_class, attribute)
-
-            def call(data, *args):
-                return kernel(data, *args)
-            return call
+            return _forwarding(getattr(data.instance_class, attribute), 1 + len(args))
     return dispatch
+
+
+def _forwarding(kernel: Callable, arity: int) -> Callable:
+    """``lambda data, a, b, ...: kernel(data, a, b, ...)`` with ``arity`` parameters (numba inlines
+    only functions with named parameters)."""
+    forwards = {1: lambda d: kernel(d),
+                2: lambda d, a: kernel(d, a),
+                3: lambda d, a, b: kernel(d, a, b),
+                4: lambda d, a, b, c: kernel(d, a, b, c),
+                5: lambda d, a, b, c, e: kernel(d, a, b, c, e),
+                6: lambda d, a, b, c, e, f: kernel(d, a, b, c, e, f),
+                7: lambda d, a, b, c, e, f, g: kernel(d, a, b, c, e, f, g),
+                8: lambda d, a, b, c, e, f, g, h: kernel(d, a, b, c, e, f, g, h)}
+    return forwards[arity]
 
 
 #: ``numba.prange`` (parallel loop over independent iterations) with numba, else ``range``.

@@ -145,7 +145,7 @@ def record_constraints(terms, qd, lam, PHI, PHID, FORCE, k):
 
 
 #: ``fresh(kernel)``: a copy of a formulation's kernel with work arrays of its own.
-fresh = type_dispatch("fresh", borrowing=False)
+fresh = type_dispatch("fresh")
 
 
 @njit(cache=True, parallel=True)
