@@ -204,21 +204,33 @@ def _random_states(model, count, seed):
 
 @pytest.mark.parametrize("name", ["four-bar", "human", "slider-crank", "slider-crank-joint", "chain"])
 @pytest.mark.parametrize("formulation", ["lagrange", "baumgarte", "projection"])
-def test_compiled_dynamics_equals_the_python_solver(name, formulation):
-    """One compiled call (model terms + solve) against model.evaluate + the Python solver."""
+def test_compiled_dynamics_equals_the_saddle_point_system(name, formulation):
+    """One compiled call (model terms + solve) against numpy's solve of [M Aᵀ; A 0][q̈; λ] = [Q; c]
+    written here: c = γ, or Baumgarte's γ - 2ξωΦ̇ - ω²Φ (ξ = 1, ω = 10); at these regular states
+    the projection has the Lagrange solution (Aghili 2005 §IV), and its numpy solver (SVD
+    pseudo-inverse) must agree too."""
     from cmbs.dynamics.field import CompiledDynamics
 
     model = cmbs.load(name, links=6, closed=True) if name == "chain" else cmbs.load(name)
     model = model.without_drivers() if name == "four-bar" else model
     compiled = CompiledDynamics(model, formulation)
-    solver = cmbs.formulation(formulation).bind(model)
+    n, m = model.n, model.m
     for q, qd in _random_states(model, 4, seed=5):
         u = np.linspace(-1.0, 1.0, model.n_u)
         qdd, lam = compiled.accelerations(q, qd, 0.3, u)
-        expected = solver.accelerations(model.evaluate(q, qd, 0.3, u), q, qd, 0.3)
-        scale = max(1.0, np.abs(expected.qdd).max())
-        np.testing.assert_allclose(qdd, expected.qdd, rtol=0, atol=1e-10 * scale)
-        np.testing.assert_allclose(lam, expected.lam, rtol=0, atol=1e-10 * max(1.0, np.abs(expected.lam).max()))
+        terms = model.evaluate(q, qd, 0.3, u)
+        c = terms.gamma.copy()
+        if formulation == "baumgarte":
+            c -= 2.0 * 1.0 * 10.0 * (terms.A @ qd + terms.phi_t) + 10.0**2 * terms.phi
+        solution = np.linalg.solve(np.block([[terms.M, terms.A.T], [terms.A, np.zeros((m, m))]]),
+                                   np.concatenate([terms.Q, c]))
+        expected_qdd, expected_lam = solution[:n], solution[n:]
+        scale = max(1.0, np.abs(expected_qdd).max())
+        np.testing.assert_allclose(qdd, expected_qdd, rtol=0, atol=1e-10 * scale)
+        np.testing.assert_allclose(lam, expected_lam, rtol=0, atol=1e-10 * max(1.0, np.abs(expected_lam).max()))
+        if formulation == "projection":
+            python = cmbs.formulation("projection").bind(model).accelerations(terms, q, qd, 0.3)
+            np.testing.assert_allclose(qdd, python.qdd, rtol=0, atol=1e-10 * scale)
 
 
 def test_projection_takes_the_svd_at_a_singular_position_and_the_schur_path_elsewhere():

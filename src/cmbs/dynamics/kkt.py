@@ -686,19 +686,20 @@ def lu_solve_transposed(K, pivots, b):
 
 
 def packed_workspace(model: Model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(floats, integers, layout): the :func:`schur_workspace` of a model with a compiled kernel
-    (built with its Jacobian's structure, :func:`cmbs.banded.jacobian_pattern`), packed by
-    :func:`pack_workspace`, with scratch of its own.
+    """(floats, integers, layout): the :func:`schur_workspace` of a model (built with its
+    Jacobian's structure, :func:`cmbs.banded.jacobian_pattern`, when it has a compiled kernel:
+    a user-equation model's A is scanned instead), packed by :func:`pack_workspace`, with scratch
+    of its own.
 
     Built once per model object (about 0.8 ms for a 14-link chain) and kept while the model
     lives; each call returns copies of the float and integer arrays, so that runs at the same
     time (threads of a sweep) do not write into each other's scratch."""
     cached = _WORKSPACES.get(id(model))
     if cached is None:
-        mass = model_kernel(model).mass
-        constant = mass.shape[0] == model.n
-        schur = schur_workspace(constant, mass if constant else np.zeros((model.n, model.n)), model.m,
-                                jacobian_pattern(model))
+        constant = bool(model.constant_mass)
+        mass = np.array(model.mass_matrix(model.q0), dtype=float) if constant else np.zeros((model.n, model.n))
+        pattern = jacobian_pattern(model) if model_kernel(model) is not None else None
+        schur = schur_workspace(constant, mass, model.m, pattern)
         cached = pack_workspace(schur)
         _WORKSPACES[id(model)] = cached
         weakref.finalize(model, _WORKSPACES.pop, id(model), None)

@@ -85,49 +85,57 @@ class Baumgarte:
 
 
 class KKTSolver(StatelessSolver):
-    """Solves the augmented (KKT) system with an optional Baumgarte right-hand side."""
+    """Solves the augmented (KKT) system with an optional Baumgarte right-hand side: one call of
+    the compiled :func:`_solve` on the :class:`LagrangeKernel` made here (the compiled loops call
+    the same), or with ``least_squares`` numpy's minimum-norm least-squares solution."""
 
     def __init__(self, model: Model, least_squares: bool, singular_tolerance: float, *, xi: float, omega: float):
         super().__init__(model)
         self.least_squares = least_squares
         self.singular_tolerance = singular_tolerance
         self.xi, self.omega = xi, omega
-        n, m = model.n, model.m
         norms = np.linalg.norm(model.jacobian(model.q0, 0.0), axis=1)
         self.row_scale = 1.0 / np.where(norms > 0, norms, 1.0)
-        self.matrix = np.zeros((n + m, n + m))
-        self.rhs = np.zeros(n + m)
+        self.kernel = None if least_squares else lagrange_kernel(self, model)
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
+        if self.least_squares:
+            return self._least_squares(terms, qd)
+        qdd, lam = np.empty(self.model.n), np.empty(self.model.m)
+        status = _solve(self.kernel, (terms.Q, terms.phi, terms.A, terms.gamma, terms.phi_t, terms.M), t, qd, qdd, lam)
+        if status != OK:
+            raise SingularSystemError(self._singular_message(terms, t))
+        return Accelerations(qdd, lam, -terms.A.T @ lam)
+
+    def _least_squares(self, terms: Terms, qd: np.ndarray) -> Accelerations:
+        """The minimum-norm least-squares solution of the augmented system (any rank of A)."""
         n, m = self.model.n, self.model.m
         gamma = terms.gamma
         if self.omega:
             gamma = gamma - 2.0 * self.xi * self.omega * constraint_velocity(terms, qd) - self.omega**2 * terms.phi
-        K, rhs = self.matrix, self.rhs
+        K = np.zeros((n + m, n + m))
         K[:n, :n] = terms.M
         K[:n, n:] = terms.A.T
         K[n:, :n] = terms.A
-        rhs[:n] = terms.Q
-        rhs[n:] = gamma
-        if m and not self.least_squares:
-            self._check_rank(terms, t)
-        if self.least_squares:
-            solution = np.linalg.lstsq(K, rhs, rcond=None)[0]
-        else:
-            solution = linalg.solve(K, rhs, assume_a="sym", check_finite=False)
+        solution = np.linalg.lstsq(K, np.concatenate([terms.Q, gamma]), rcond=None)[0]
         lam = solution[n:]
         return Accelerations(solution[:n], lam, -terms.A.T @ lam)
 
-    def _check_rank(self, terms: Terms, t: float) -> None:
+    def _singular_message(self, terms: Terms, t: float) -> str:
+        """Why :func:`_solve` found the system singular, naming the dependent constraints (the
+        rank of the row-scaled A by SVD, the constraints by QR with column pivoting on Aᵀ)."""
         A = terms.A
         scaled = A * self.row_scale[:, None]
         sigma = np.linalg.svd(scaled, compute_uv=False)
-        if sigma.size < A.shape[0] or sigma[-1] < self.singular_tolerance * max(sigma[0], 1.0):
-            _, _, pivots = linalg.qr(scaled.T, pivoting=True, mode="economic")
-            rank = int(np.sum(sigma > self.singular_tolerance * max(sigma[0], 1.0)))
-            dependent = [self.model.constraint_names[k] for k in sorted(pivots[rank:])]
-            raise SingularSystemError(
-                f"model {self.model.name!r} at t={t:.6g}: the constraint Jacobian has rank {rank} < {A.shape[0]} "
+        cutoff = self.singular_tolerance * max(sigma[0], 1.0) if sigma.size else 0.0
+        rank = int(np.sum(sigma > cutoff))
+        if rank == A.shape[0]:
+            return (f"model {self.model.name!r} at t={t:.6g}: the augmented system [M Aᵀ; A 0] is singular (a motion "
+                    "the constraints allow has no mass). Use formulation 'projection' or 'udwadia-kalaba', or "
+                    "least_squares=True")
+        _, _, pivots = linalg.qr(scaled.T, pivoting=True, mode="economic")
+        dependent = [self.model.constraint_names[k] for k in sorted(pivots[rank:])]
+        return (f"model {self.model.name!r} at t={t:.6g}: the constraint Jacobian has rank {rank} < {A.shape[0]} "
                 f"(redundant constraints or a singular configuration); dependent: {', '.join(dependent)}. "
                 "Use formulation 'projection', 'udwadia-kalaba' or 'penalty', or least_squares=True")
 
@@ -161,8 +169,8 @@ def _solve(kernel, terms, t, qd, qdd, lam):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c], c = γ (Lagrange) or γ - 2ξωΦ̇ - ω²Φ with
     Φ̇ = Aq̇ + Φ_t (Baumgarte), at the terms (Q, Φ, A, γ, Φ_t, M); SINGULAR when σ_min/σ_max of
     the row-scaled A is below the tolerance (:func:`~cmbs.dynamics.kkt.certify`, then the
-    Gram matrix's eigenvalues where its bounds are inconclusive), as :meth:`KKTSolver._check_rank`
-    tests it.  Band LU for large natural models (when the workspace chose it), the Schur
+    Gram matrix's eigenvalues where its bounds are inconclusive); :meth:`KKTSolver._singular_message`
+    names the constraints.  Band LU for large natural models (when the workspace chose it), the Schur
     complement when A is certified regular and M's block positive definite, else the full system.
     """
     Q, phi, A, gamma, phi_t, M = terms
