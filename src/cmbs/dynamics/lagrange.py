@@ -55,8 +55,8 @@ class Lagrange:
         return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=0.0, omega=0.0)
 
     def compiled(self, solver: "KKTSolver", model: Model) -> "LagrangeKernel | None":
-        """The solve of the compiled loops (None for ``least_squares``)."""
-        return None if self.least_squares else lagrange_kernel(solver, model)
+        """The solve of the compiled loops: the bound solver's own (None for ``least_squares``)."""
+        return solver.kernel
 
 
 @dataclass(frozen=True)
@@ -80,8 +80,8 @@ class Baumgarte:
         return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=self.xi, omega=self.omega)
 
     def compiled(self, solver: "KKTSolver", model: Model) -> "LagrangeKernel | None":
-        """The solve of the compiled loops (None for ``least_squares``)."""
-        return None if self.least_squares else lagrange_kernel(solver, model)
+        """The solve of the compiled loops: the bound solver's own (None for ``least_squares``)."""
+        return solver.kernel
 
 
 class KKTSolver(StatelessSolver):
