@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from cmbs.dynamics.base import NON_FINITE, SINGULAR
 from cmbs.jit import njit
 
-#: Statuses of the compiled solves: the solution was written; the symmetric matrix to factor
-#: was not numerically positive definite; a non-finite value appeared (the outputs are NaN).
-OK, NOT_POSITIVE_DEFINITE, NON_FINITE = 0, 1, 2
+#: The status of a compiled solve whose symmetric matrix to factor was not numerically positive
+#: definite: the engine's SINGULAR (:mod:`cmbs.dynamics.base`; OK and NON_FINITE are its too).
+NOT_POSITIVE_DEFINITE = SINGULAR
 
 
 @njit(cache=True)

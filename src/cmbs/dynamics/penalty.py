@@ -40,8 +40,8 @@ from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from cmbs.dynamics.base import SINGULAR, Accelerations, StatelessSolver, check_parameters
-from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, fill_nan, max_abs, multiply,
+from cmbs.dynamics.base import OK, Accelerations, StatelessSolver, check_parameters
+from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, add_scaled_gram, all_finite, fill_nan, max_abs, multiply,
                                  multiply_transposed)
 from cmbs.dynamics.kkt import DENSE, cholesky_in_place, solve_lower, solve_lower_transposed
 from cmbs.errors import SingularSystemError
@@ -162,7 +162,7 @@ def penalty_solve(M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.ndarray
     """The penalty's q̈, λ and constraint force -Aᵀλ at one state, written into ``qdd`` (n,),
     ``lam`` (m,) and ``force`` (n,); the augmented Lagrangian's λ* (m,) is updated in place (set to
     zero when ``iterations`` is 0).  Returns (status, relative residual): status
-    :data:`~cmbs.dynamics.dense.OK`, ``NOT_POSITIVE_DEFINITE`` (M + αAᵀA; outputs not written) or
+    :data:`~cmbs.dynamics.base.OK`, ``NOT_POSITIVE_DEFINITE`` (M + αAᵀA; outputs not written) or
     ``NON_FINITE`` (outputs NaN); the residual of the kept iterate as the module docstring
     defines it.
 
@@ -261,8 +261,6 @@ def _kernel_solve(kernel, terms, t, qd, qdd, lam):
     status, relative = penalty_solve(M, Q, A, gamma, phi, phi_t, qd, kernel.alpha, kernel.mu, kernel.Omega,
                                      kernel.iterations, kernel.tolerance, kernel.lam_star, kernel.factor,
                                      kernel.vectors_n, kernel.vectors_m, qdd, lam, kernel.force)
-    if status == NOT_POSITIVE_DEFINITE:
-        return SINGULAR
     if status == OK and relative > kernel.worst[0]:
         kernel.worst[0] = relative
         kernel.worst[1] = t

@@ -32,8 +32,8 @@ from typing import Callable, ClassVar, NamedTuple
 
 import numpy as np
 
-from cmbs.dynamics.base import SINGULAR, Accelerations, StatelessSolver, check_parameters
-from cmbs.dynamics.dense import NOT_POSITIVE_DEFINITE, OK, add_scaled_gram, all_finite, fill_nan, multiply, \
+from cmbs.dynamics.base import OK, Accelerations, StatelessSolver, check_parameters
+from cmbs.dynamics.dense import NOT_POSITIVE_DEFINITE, add_scaled_gram, all_finite, fill_nan, multiply, \
     multiply_transposed
 from cmbs.dynamics.kkt import DENSE, band_kkt, bounds_meeting, cholesky_in_place, packed_workspace, schur_solve, \
     solve_lower, solve_lower_transposed, unpack_workspace
@@ -131,7 +131,7 @@ def udwadia_kalaba_solve(M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.
                          vectors_m: np.ndarray, qdd: np.ndarray, lam: np.ndarray, force: np.ndarray) -> int:
     """Udwadia-Kalaba's q̈, λ and constraint force Q_c = M q̈ - Q (module docstring) at one state,
     written into ``qdd`` (n,), ``lam`` (m,) and ``force`` (n,).  Returns the status:
-    :data:`~cmbs.dynamics.dense.OK`, ``NOT_POSITIVE_DEFINITE`` (outputs not written) or
+    :data:`~cmbs.dynamics.base.OK`, ``NOT_POSITIVE_DEFINITE`` (outputs not written) or
     ``NON_FINITE`` (outputs NaN).
 
     ``c`` is the non-ideal vector (n,), or empty for none.  ``augmentation`` s > 0 factors
@@ -338,8 +338,7 @@ def _kernel_solve(kernel, terms, t, qd, qdd, lam):
     """:func:`_solve_with` at the terms (Q, Φ, A, γ, Φ_t, M) without a non-ideal term; status OK,
     SINGULAR (the mass matrix to factor is not positive definite) or NON_FINITE."""
     Q, phi, A, gamma, phi_t, M = terms
-    status = _solve_with(kernel, M, Q, A, gamma, kernel.no_nonideal, qdd, lam)
-    return SINGULAR if status == NOT_POSITIVE_DEFINITE else status
+    return _solve_with(kernel, M, Q, A, gamma, kernel.no_nonideal, qdd, lam)
 
 
 @njit(cache=True)
