@@ -31,7 +31,15 @@ def njit(*args, **options) -> Callable:
 
     The function keeps numba's reference counting (NRT) even when called from a
     :func:`njit_borrowing` one, so it may create arrays, provided it returns none to such a
-    caller."""
+    caller.
+
+    First-use compile time: numba links every compiled callee into its caller's module and
+    optimises the whole module again, so each separately compiled function between a loop and a
+    formulation's solve adds the solve's optimisation once more (1.5-3.5 s each).  A small
+    function that only forwards to such a call (a wrapper, a right-hand side, a record step) is
+    therefore compiled into its caller (``inline="always"``).  And a constant integer or boolean
+    passed to a compiled callee is typed as a literal, for which numba compiles the callee once
+    more: pass an ``np.int64`` (or a float) instead."""
     if _numba is not None:
         return _numba.njit(*args, **{"_nrt": True, **options})
     if len(args) == 1 and callable(args[0]) and not options:
@@ -74,8 +82,9 @@ def type_dispatch(attribute: str) -> Callable:
     by numba when the caller is compiled (``numba.extending.overload`` on the tuple's class), so
     a loop taking ``data`` compiles only the kernel of that class and its specialisation is
     cached like any other; interpreted, it is a plain attribute lookup.  Adding a kind of model
-    or a formulation is adding a class and its kernel: no code of the loops changes.  The call
-    is compiled into its caller (numba's inlining), so it costs nothing beside the kernel's."""
+    or a formulation is adding a class and its kernel: no code of the loops changes.  The
+    kernel's body is the overload's implementation, compiled into its caller (numba's
+    ``inline="always"``): no call between the caller and the kernel."""
 
     def dispatch(data, *args):
         return getattr(type(data), attribute)(data, *args)
@@ -86,22 +95,8 @@ def type_dispatch(attribute: str) -> Callable:
 
         @overload(dispatch, inline="always", strict=False)
         def _resolved(data, *args):
-            return _forwarding(getattr(data.instance_class, attribute), 1 + len(args))
+            return getattr(data.instance_class, attribute).py_func
     return dispatch
-
-
-def _forwarding(kernel: Callable, arity: int) -> Callable:
-    """``lambda data, a, b, ...: kernel(data, a, b, ...)`` with ``arity`` parameters (numba inlines
-    only functions with named parameters)."""
-    forwards = {1: lambda d: kernel(d),
-                2: lambda d, a: kernel(d, a),
-                3: lambda d, a, b: kernel(d, a, b),
-                4: lambda d, a, b, c: kernel(d, a, b, c),
-                5: lambda d, a, b, c, e: kernel(d, a, b, c, e),
-                6: lambda d, a, b, c, e, f: kernel(d, a, b, c, e, f),
-                7: lambda d, a, b, c, e, f, g: kernel(d, a, b, c, e, f, g),
-                8: lambda d, a, b, c, e, f, g, h: kernel(d, a, b, c, e, f, g, h)}
-    return forwards[arity]
 
 
 #: ``numba.prange`` (parallel loop over independent iterations) with numba, else ``range``.

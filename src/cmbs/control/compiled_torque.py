@@ -63,7 +63,7 @@ def computed_torque_kernel(law: object, held: bool) -> ComputedTorqueKernel | No
                                 np.empty(model.n + r), np.empty(r, dtype=np.int64), bool(held))
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def _apply(law, step, stage, q, qd, t, u):
     """The law's inputs into ``u`` at a stage: every stage, or when ``held`` at the run's first
     stage and each step's last (at t_n + h, the next sample instant, with that stage's state

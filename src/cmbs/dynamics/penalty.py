@@ -253,7 +253,7 @@ class PenaltyKernel(NamedTuple):
     worst: np.ndarray
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _kernel_solve(kernel, terms, t, qd, qdd, lam):
     """:func:`penalty_solve` at the terms (Q, Φ, A, γ, Φ_t, M); status OK, SINGULAR (M + αAᵀA
     not positive definite) or NON_FINITE; the largest residual is kept with its time."""

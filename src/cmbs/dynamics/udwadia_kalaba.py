@@ -333,7 +333,7 @@ def _regular(kernel, M, Q, A, gamma, qdd, lam):
     return all_finite(qdd) and all_finite(lam)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _kernel_solve(kernel, terms, t, qd, qdd, lam):
     """:func:`_solve_with` at the terms (Q, Φ, A, γ, Φ_t, M) without a non-ideal term; status OK,
     SINGULAR (the mass matrix to factor is not positive definite) or NON_FINITE."""

@@ -31,7 +31,7 @@ from cmbs.jit import njit
 UNDERFLOW, TOO_MANY_STEPS = 5, 6
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rhs(model, formulation, y, t, u, buffer, terms, lam, out):
     """dy/dt = (q̇, q̈) into ``out``; returns the field's status."""
     n = y.shape[0] // 2
@@ -48,7 +48,7 @@ def _rms(values, scale):
     return math.sqrt(total / values.shape[0])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _record(model, formulation, t, y, slope, u, buffer, terms, k, T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE):
     """Row ``k`` of the outputs at (t, y); returns 1 when the state was singular (q̈ from the
     interpolant's slope, λ = 0), else 0."""
@@ -72,10 +72,16 @@ def _record(model, formulation, t, y, slope, u, buffer, terms, k, T, Qs, QDs, QD
 
 
 @njit(cache=True)
-def _combination(y, h, weights, stages, count, out, add_y=True):
-    """out = y + h Σ_{j<count} w_j k_j (or without y), over the non-zero weights."""
+def _combination(y, h, weights, stages, count, out):
+    """out = y + h Σ_{j<count} w_j k_j, over the non-zero weights."""
     for i in range(out.shape[0]):
-        out[i] = y[i] if add_y else 0.0
+        out[i] = y[i]
+    _add_stages(h, weights, stages, count, out)
+
+
+@njit(cache=True)
+def _add_stages(h, weights, stages, count, out):
+    """out += h Σ_{j<count} w_j k_j, over the non-zero weights."""
     for j in range(count):
         if weights[j] != 0.0:
             factor = h * weights[j]
@@ -154,9 +160,10 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
     evaluations += 1
     if status != OK:
         return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, 0, status, t, steps, rejected, evaluations, unsolved, y
-    unsolved += _record(model, formulation, t, y, k1, u, buffer, terms,
-                        0, T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE)
-    next_out = 1
+    next_out = np.int64(0)   # not a literal 0: numba would compile _record once more for each constant
+    unsolved += _record(model, formulation, t, y, k1, u, buffer, terms, next_out, T, Qs, QDs, QDDs, LAMs, PHI, PHID,
+                        FORCE)
+    next_out += 1
     t_end = t_out[count - 1]
     # Hairer & Wanner's starting step (Solving ODEs I, §II.4), as the Python loop
     scale = atol + np.abs(y) * rtol
@@ -205,11 +212,14 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
         for i in range(d):
             scale[i] = atol + rtol * max(abs(y[i]), abs(y_new[i]))
         if b_error_low.shape[0] == 0:
-            _combination(y, h_try, b_error, stages, s, work, False)
+            work[:] = 0.0
+            _add_stages(h_try, b_error, stages, s, work)
             error = _rms(work, scale)
         else:                                   # DOP853's combined norm
-            _combination(y, 1.0, b_error, stages, s, work, False)
-            _combination(y, 1.0, b_error_low, stages, s, low, False)
+            work[:] = 0.0
+            low[:] = 0.0
+            _add_stages(1.0, b_error, stages, s, work)
+            _add_stages(1.0, b_error_low, stages, s, low)
             high_sum, low_sum = 0.0, 0.0
             for i in range(d):
                 high_sum += (work[i] / scale[i]) ** 2

@@ -1185,7 +1185,7 @@ class JointKernel(NamedTuple):
     mass: np.ndarray
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def _evaluate_joints(kernel, q, qd, t, u, buffer):
     """:func:`_evaluate_kernel` for a :class:`JointKernel`."""
     _evaluate_kernel(kernel.ints, kernel.reals, q, qd, t, u, buffer)

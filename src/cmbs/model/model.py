@@ -270,7 +270,11 @@ class Model:
         """M, Q, Φ, A, γ, Φ_t at (q, q̇, t, u), written into ``out`` (or a new :class:`Terms`).
 
         ``q`` and ``qd`` must be float64 arrays of size n; ``u`` of size n_u (zeros if None).
+        Read-only ones (such as the model's own ``q0``) are copied first: compiled equations
+        would otherwise compile, and load, a second kernel for them.
         """
+        if not (q.flags.writeable and qd.flags.writeable):
+            q, qd = _writable(q), _writable(qd)
         terms = out if out is not None else self.equations.new_terms()
         self.equations.evaluate(q, qd, t, self._no_input if u is None else u, terms)
         return terms

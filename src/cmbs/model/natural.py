@@ -1235,7 +1235,7 @@ class NaturalKernel(NamedTuple):
     mass: np.ndarray
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def _evaluate_natural(kernel, q, qd, t, u, buffer):
     """:func:`_evaluate` for a :class:`NaturalKernel`."""
     _evaluate(q, qd, t, u, kernel.ints, kernel.reals, buffer)
