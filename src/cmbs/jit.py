@@ -39,7 +39,9 @@ def njit(*args, **options) -> Callable:
     function that only forwards to such a call (a wrapper, a right-hand side, a record step) is
     therefore compiled into its caller (``inline="always"``).  And a constant integer or boolean
     passed to a compiled callee is typed as a literal, for which numba compiles the callee once
-    more: pass an ``np.int64`` (or a float) instead."""
+    more: pass an ``np.int64`` (or a float) instead.  An array assigned to a slice
+    (``a[:] = b``, ``a[k] = row``) brings numba's formatted shape-mismatch error, about 2 s to
+    compile per array rank: the kernels copy element by element."""
     if _numba is not None:
         return _numba.njit(*args, **{"_nrt": True, **options})
     if len(args) == 1 and callable(args[0]) and not options:
@@ -95,7 +97,8 @@ def type_dispatch(attribute: str) -> Callable:
 
         @overload(dispatch, inline="always", strict=False)
         def _resolved(data, *args):
-            return getattr(data.instance_class, attribute).py_func
+            kernel = getattr(data.instance_class, attribute)
+            return getattr(kernel, "py_func", kernel)
     return dispatch
 
 

@@ -155,7 +155,9 @@ def udwadia_kalaba_solve(M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.
         for j in range(n):
             a[j] += augmentation * scaled_force[j]
     elif not factored:
-        factor[:, :] = M
+        for i in range(n):
+            for j in range(n):
+                factor[i, j] = M[i, j]
     if not (factored or cholesky_in_place(factor, DENSE)):
         if all_finite(M) and all_finite(A) and (augmentation == 0.0 or all_finite(gamma)):
             return NOT_POSITIVE_DEFINITE
@@ -168,7 +170,8 @@ def udwadia_kalaba_solve(M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.
     scaled_B = work_matrix
     for i in range(m):                                      # row i of D B = d_i (L⁻¹ A[i])ᵀ
         row = scaled_B[i]
-        row[:] = A[i]
+        for j in range(n):
+            row[j] = A[i, j]
         solve_lower(factor, DENSE, row)
         row *= row_scale[i] * mass_scale
     if not (all_finite(a) and all_finite(scaled_B) and all_finite(residual) and all_finite(c)):
@@ -181,7 +184,8 @@ def udwadia_kalaba_solve(M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.
             residual[i] *= row_scale[i] * mass_scale        # D (γ - A a)
         _apply_pseudo_inverse(U, sigma, Vt, rank, residual, coefficients, scaled_force)    # B⁺ (γ - A a)
     if c.size:                                              # + (I - B⁺B) L⁻¹ c
-        extra[:] = c
+        for j in range(n):
+            extra[j] = c[j]
         solve_lower(factor, DENSE, extra)
         if m:
             _remove_range(Vt, rank, extra)

@@ -36,7 +36,8 @@ def _rhs(model, formulation, y, t, u, buffer, terms, lam, out):
     """dy/dt = (q̇, q̈) into ``out``; returns the field's status."""
     n = y.shape[0] // 2
     status = field(model, formulation, y[:n], y[n:], t, u, buffer, terms, out[n:], lam)
-    out[:n] = y[n:]
+    for i in range(n):
+        out[i] = y[n + i]
     return status
 
 
@@ -59,14 +60,17 @@ def _record(model, formulation, t, y, slope, u, buffer, terms, k, T, Qs, QDs, QD
     status = field(model, formulation, y[:n], y[n:], t, u, buffer, terms, qdd, lam)
     unsolved = 0
     if status != OK:                         # the terms at the state are in the buffer all the same
-        qdd[:] = slope[n:]
+        for i in range(n):
+            qdd[i] = slope[n + i]
         lam[:] = 0.0
         unsolved = 1
     T[k] = t
-    Qs[k] = y[:n]
-    QDs[k] = y[n:]
-    QDDs[k] = qdd
-    LAMs[k] = lam
+    for i in range(n):
+        Qs[k, i] = y[i]
+        QDs[k, i] = y[n + i]
+        QDDs[k, i] = qdd[i]
+    for r in range(m):
+        LAMs[k, r] = lam[r]
     record_constraints(terms, y[n:], lam, PHI, PHID, FORCE, k)
     return unsolved
 
@@ -151,8 +155,9 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
     value = np.empty(d)
     slope = np.empty(d)
     y = np.empty(d)
-    y[:n] = q0
-    y[n:] = qd0
+    for i in range(n):
+        y[i] = q0[i]
+        y[n + i] = qd0[i]
     k1 = np.empty(d)
     steps, rejected, evaluations, unsolved = 0, 0, 0, 0
     t = t_out[0]
@@ -185,7 +190,8 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
             return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, TOO_MANY_STEPS, t, steps, rejected, \
                 evaluations, unsolved, y
         h_try = min(h, t_end - t)
-        stages[0] = k1
+        for i in range(d):
+            stages[0, i] = k1[i]
         finite = True
         for i in range(1, s):
             _combination(y, h_try, a[i], stages, i, work)
@@ -239,7 +245,8 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
         factor_old = error
         t_new = t + h_try
         if first_same_as_last:
-            k_new[:] = stages[s - 1]
+            for i in range(d):
+                k_new[i] = stages[s - 1, i]
         else:
             status = _rhs(model, formulation, y_new, t_new, u, buffer, terms, lam, k_new)
             evaluations += 1
@@ -273,8 +280,9 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
                                 QDs, QDDs, LAMs, PHI, PHID, FORCE)
             next_out += 1
         t = t_new
-        y[:] = y_new
-        k1[:] = k_new
+        for i in range(d):
+            y[i] = y_new[i]
+            k1[i] = k_new[i]
     return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, OK, t, steps, rejected, evaluations, unsolved, y
 
 
