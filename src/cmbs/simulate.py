@@ -299,10 +299,14 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         raise CmbsError(f"the compiled loop cannot run this simulation of model {model.name!r}: it needs a model, "
                         f"formulation and inputs without Python callables (formulations {COMPILED_FORMULATIONS}; "
                         "constant inputs or a ComputedTorque law, alone or in a ZeroOrderHold with period dt), "
-                        "integrator rk4 with t_end a multiple of dt or, with constant inputs, rk45, rk23 or dop853, "
-                        "and no --project; or matrix-r with rk4 and constant inputs on a holonomic model")
+                        "integrator rk4 with t_end a multiple of dt, backward-euler or generalized-alpha or, with "
+                        "constant inputs, rk45, rk23 or dop853, and no --project; or matrix-r with rk4 and constant "
+                        "inputs on a holonomic model")
     run_options = {"integrator": integrator, "dt": dt, "every": every, "rtol": rtol, "atol": atol, "project": project}
-    if plan is not None and compiled is not False and integrator != "rk4":
+    if plan is not None and compiled is not False and integrator in INDEX3:
+        trajectory = _run_compiled_index3(model, plan, inputs, q_start, qd_start, grid, INDEX3[integrator],
+                                          newton_tolerance, started, run_options)
+    elif plan is not None and compiled is not False and integrator != "rk4":
         trajectory = _run_compiled_adaptive(model, solver, chosen, plan, inputs, q_start, qd_start, times, started,
                                             run_options)
     elif plan is not None and compiled is not False:
@@ -476,14 +480,23 @@ def _force_derivatives(model: Model, inputs: Inputs, q: np.ndarray, qd: np.ndarr
     return C, K
 
 
-def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, grid: np.ndarray, every: int,
-                scheme: Scheme, dt: float, tolerance: float, bar: _Progress) -> Integration:
-    """Backward Euler / generalized-α on M a + Aᵀλ = Q, Φ(q) = 0 (consistent start from Lagrange)."""
+def _consistent_start(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The accelerations and multipliers the index-3 integrators start from: Lagrange's, with
+    least-squares multipliers (redundant constraints allowed)."""
     from cmbs.dynamics import Lagrange
 
-    terms = model.new_terms()
-    model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0), out=terms)
+    terms = model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0))
     start = Lagrange(least_squares=True).bind(model).accelerations(terms, q0, qd0, 0.0)
+    return start.qdd, start.lam
+
+
+def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, grid: np.ndarray, every: int,
+                scheme: Scheme, dt: float, tolerance: float, bar: _Progress) -> Integration:
+    """Backward Euler / generalized-α on M a + Aᵀλ = Q, Φ(q) = 0 (consistent start from Lagrange)
+    with the model and inputs as Python calls: :func:`cmbs.integrate.implicit.integrate_index3`,
+    the loop of :func:`_run_compiled_index3` interpreted."""
+    a0, lam0 = _consistent_start(model, inputs, q0, qd0)
+    terms = model.new_terms()
 
     def residual(t, q, v, a, lam):
         model.evaluate(q, v, t, inputs(t, q, v), out=terms)
@@ -492,8 +505,38 @@ def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, g
         C, K = _force_derivatives(model, inputs, q, v, t, extra=lambda tt: tt.M @ a + tt.A.T @ lam)
         return r, phi, M, A, C, K
 
-    return integrate_index3(residual, q0, qd0, start.qdd, start.lam, grid, scheme=scheme, step=dt,
+    return integrate_index3(residual, q0, qd0, a0, lam0, grid, scheme=scheme, step=dt,
                             tolerance=tolerance, progress=bar, stop_on=(CmbsError,), keep_every=every)
+
+
+def _run_compiled_index3(model: Model, plan: tuple, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray,
+                         grid: np.ndarray, scheme: Scheme, tolerance: float, started: float,
+                         options: dict) -> Trajectory:
+    """Backward Euler / generalized-α compiled (:mod:`cmbs.integrate.compiled_index3`): the loop of
+    :func:`cmbs.integrate.implicit.integrate` on the model's and inputs' kernels, from the
+    consistent start of :func:`_consistent_start`; outputs at ``grid[::options["every"]]`` with
+    Newton's λ."""
+    from cmbs.integrate.compiled_index3 import index3_problem
+    from cmbs.integrate.implicit import integrate
+
+    model_part, _, law = plan
+    every, dt = options["every"], options["dt"]
+    u0 = np.array(inputs(0.0, q0, qd0), dtype=float)
+    a0, lam0 = _consistent_start(model, inputs, q0, qd0)
+    problem = index3_problem(model_part, law, u0, model.new_terms().buffer.size, model.n, model.m,
+                             (grid.size - 1) // every + 1)
+    loop_started = time.perf_counter()
+    result = integrate(problem, q0, qd0, a0, lam0, grid, scheme=scheme, step=dt, tolerance=tolerance,
+                       keep_every=every)
+    loop_wall = time.perf_counter() - loop_started
+    info = _info(model, None, {**options, "compiled": True, "loop_wall_time": loop_wall}, result.status,
+                 result.message, result.counters)
+    k, n = result.t.size, model.n
+    lam, u, position_error, velocity_error, force = (record[:k] for record in problem.records)
+    trajectory = _trajectory(model, result.t, result.y[:, :n], result.y[:, n:], result.dy[:, n:], lam, u,
+                             position_error, velocity_error, info, force)
+    info["wall_time"] = time.perf_counter() - started
+    return trajectory
 
 
 def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, grid: np.ndarray, every: int,
