@@ -4,12 +4,18 @@ schemes' orders; against the same loop run interpreted on a Python residual (the
 with Python callables, with numpy's solve and the tangents of cmbs.simulate._force_derivatives);
 and the failures, which end the run with the messages of the Python path."""
 
+import json
 import math
+import os
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
 
 import cmbs
+from cmbs import jit
 from cmbs.control import ComputedTorque, Reference, ZeroOrderHold
 from cmbs.model.natural import NaturalModelBuilder
 from cmbs.simulate import simulate
@@ -162,3 +168,40 @@ def test_failures_end_the_run_with_the_python_paths_message(tmp_path, integrator
             assert run.info["message"].startswith(message), run.info["message"]
             assert run.t[-1] == pytest.approx(last, abs=1e-12) and np.all(np.isfinite(run.q))
         np.testing.assert_allclose(runs[0].q, runs[1].q, rtol=0, atol=1e-11)
+
+
+ALLOCATIONS = textwrap.dedent("""
+    import gc
+    import json
+
+    from numba.core.runtime import rtsys
+
+    import cmbs
+
+    model = cmbs.load("four-bar")
+    counts = []
+    for t_end in (0.05, 0.05, 0.1):          # the first run compiles and warms the caches
+        gc.collect()
+        before = rtsys.get_allocation_stats()
+        run = cmbs.simulate(model, t_end=t_end, integrator="generalized-alpha", dt=1e-3)
+        assert run.info["compiled"] and run.info["status"] == "success"
+        del run
+        gc.collect()
+        after = rtsys.get_allocation_stats()
+        counts.append([after.alloc - before.alloc, after.free - before.free])
+    print(json.dumps(counts[1:]))
+""")
+
+
+@pytest.mark.skipif(not jit.COMPILED, reason="numba's statistics: numba is not installed")
+def test_compiled_loop_frees_what_it_allocates_and_allocates_nothing_per_step():
+    """numba's allocation statistics (on at interpreter start, hence the subprocess): a run of 100
+    steps allocates as much as one of 50 (the work arrays are allocated once per run), and frees
+    all of it."""
+    environment = {**os.environ, "NUMBA_NRT_STATS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    done = subprocess.run([sys.executable, "-c", ALLOCATIONS], capture_output=True, text=True, env=environment,
+                          timeout=1500)
+    assert done.returncode == 0, done.stderr[-3000:]
+    short, long = json.loads(done.stdout.strip().splitlines()[-1])
+    assert short[0] == short[1] and long[0] == long[1]
+    assert long == short

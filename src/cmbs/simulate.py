@@ -227,10 +227,11 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         (:mod:`cmbs.integrate.compiled_plan`: a model, formulation and inputs with compiled
         kernels, i.e. no Python callables: no Python time functions, the formulations of
         :data:`COMPILED_FORMULATIONS`, constant inputs or a :class:`~cmbs.control.ComputedTorque`
-        law alone or in a :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; with rk4 or,
-        constant inputs only, rk45/rk23/dop853; or matrix-r with constant inputs on a holonomic
-        model and rk4, :mod:`cmbs.integrate.compiled_matrix_r`; no projection), True requires it,
-        False keeps the Python loop.
+        law alone or in a :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; with rk4,
+        backward-euler or generalized-alpha (:mod:`cmbs.integrate.compiled_index3`) or, constant
+        inputs only, rk45/rk23/dop853; or matrix-r with constant inputs on a holonomic model and
+        rk4, :mod:`cmbs.integrate.compiled_matrix_r`; no projection), True requires it, False
+        keeps the Python loop.
 
     Returns
     -------

@@ -24,7 +24,12 @@ of q_{n+1} and v_{n+1} with respect to a_{n+1} divided by h² and h)::
 
 C_t = -∂Q/∂v and K_t = -∂Q/∂q are supplied by the caller (finite differences or zero).  The
 constraint row is divided by h² b' to keep the matrix well scaled as h → 0.  This module knows
-nothing about mechanics: the caller gives the residual and the matrices.
+nothing about mechanics: the caller gives the residual and the matrices as a problem, a kernel
+tuple whose class carries them (:data:`residual_terms` and the other dispatches below).  The loop
+(:func:`newton_steps`) is written once: compiled for a problem with compiled kernels
+(:class:`cmbs.integrate.compiled_index3.Index3Problem`), interpreted for a residual given as a
+Python function (:func:`integrate_index3`: models and inputs with Python callables, the
+trapezoidal rule of :func:`cmbs.simulate`).
 """
 
 from __future__ import annotations
