@@ -205,3 +205,16 @@ def test_compiled_loop_frees_what_it_allocates_and_allocates_nothing_per_step():
     short, long = json.loads(done.stdout.strip().splitlines()[-1])
     assert short[0] == short[1] and long[0] == long[1]
     assert long == short
+
+
+def test_trapezoidal_rule_on_a_fully_driven_mechanism_is_its_kinematics():
+    """The driven four-bar has no independent coordinate: the trapezoidal rule's Newton loop has
+    no unknowns (it stopped with a ValueError on an empty max) and the motion is the kinematic
+    analysis's, positions, velocities and accelerations."""
+    model = cmbs.load("four-bar")
+    run = simulate(model, t_end=1.0, integrator="trapezoidal", dt=0.01)
+    assert run.info["status"] == "success" and run.t[-1] == pytest.approx(1.0)
+    kinematics = cmbs.kinematic_analysis(model, run.t)
+    np.testing.assert_allclose(run.q, kinematics.q, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(run.qd, kinematics.qd, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(run.qdd, kinematics.qdd, rtol=0, atol=1e-8)
