@@ -224,13 +224,47 @@ def newton_steps(problem, t_out, keep_every, coefficients, step, tolerance, max_
     previous a and λ, until the scaled correction h² b' max|Δa| is below ``tolerance`` (1 +
     max|q_{n+1}|) after at least two iterations.  Returns (status, index of the output being
     stepped to, time of the failed step or reached, last scaled correction).
+
+    Its helpers are inner functions, compiled into it (numba's closures) and plain Python when it
+    runs interpreted: a run on a Python residual compiles nothing.
     """
     b0, b1, g0, g1, alpha_m, alpha_f, b_eff, g_eff = coefficients
     q, v, a, lam, x = state
     a_new, lam_new, x_new, q_new, v_new, r, phi, M, A, C, K, matrix, rhs = work
     n, m = q.shape[0], lam.shape[0]
+
+    def newton_system(damping, scale):
+        """The Newton matrix [M + damping C + scale K, Aᵀ; A, 0] and right-hand side -(r, Φ/scale)
+        (module docstring) into ``matrix`` and ``rhs``; False when an entry is not finite."""
+        for i in range(n):
+            for j in range(n):
+                matrix[i, j] = M[i, j] + damping * C[i, j] + scale * K[i, j]
+            for b in range(m):
+                matrix[i, n + b] = A[b, i]
+                matrix[n + b, i] = A[b, i]
+            rhs[i] = -r[i]
+        for b in range(m):
+            for c in range(m):
+                matrix[n + b, n + c] = 0.0
+            rhs[n + b] = -(phi[b] / scale)
+        for i in range(n + m):
+            if not math.isfinite(rhs[i]):
+                return False
+            for j in range(n + m):
+                if not math.isfinite(matrix[i, j]):
+                    return False
+        return True
+
+    def store(row):
+        """Row ``row`` of the outputs: (q, v) and (v, a)."""
+        for i in range(n):
+            out_y[row, i] = q[i]
+            out_y[row, n + i] = v[i]
+            out_dy[row, i] = v[i]
+            out_dy[row, n + i] = a[i]
+
     t = t_out[0]
-    _store(out_y, out_dy, 0, q, v, a)
+    store(0)
     record_output(problem, 0, 0, 0, t, (q, v, a, lam))
     next_out = 1
     change = 0.0
@@ -254,7 +288,7 @@ def newton_steps(problem, t_out, keep_every, coefficients, step, tolerance, max_
             if status != OK:
                 return status, next_out, t_new, change
             counters[2] += 1
-            if not _newton_system(M, C, K, A, r, phi, h * g_eff, scale, matrix, rhs):
+            if not newton_system(h * g_eff, scale):
                 return DIVERGED, next_out, t_new, change
             if not newton_solve(problem, matrix, rhs):
                 return SINGULAR, next_out, t_new, change
@@ -290,43 +324,7 @@ def newton_steps(problem, t_out, keep_every, coefficients, step, tolerance, max_
         if abs(t - t_out[next_out]) <= 1e-12 * max(1.0, abs(t)):
             if next_out % keep_every == 0:
                 row = next_out // keep_every
-                _store(out_y, out_dy, row, q, v, a)
+                store(row)
                 record_output(problem, row, counters[0], 1, t, (q, v, a, lam))
             next_out += 1
     return OK, next_out, t, change
-
-
-@njit(cache=True)
-def _newton_system(M, C, K, A, r, phi, damping, scale, matrix, rhs):
-    """The Newton matrix [M + damping C + scale K, Aᵀ; A, 0] and right-hand side -(r, Φ/scale)
-    (module docstring) into ``matrix`` and ``rhs``; False when an entry is not finite."""
-    n, m = M.shape[0], A.shape[0]
-    for i in range(n):
-        for j in range(n):
-            matrix[i, j] = M[i, j] + damping * C[i, j] + scale * K[i, j]
-        for b in range(m):
-            matrix[i, n + b] = A[b, i]
-            matrix[n + b, i] = A[b, i]
-        rhs[i] = -r[i]
-    for b in range(m):
-        for c in range(m):
-            matrix[n + b, n + c] = 0.0
-        rhs[n + b] = -(phi[b] / scale)
-    for i in range(n + m):
-        if not math.isfinite(rhs[i]):
-            return False
-        for j in range(n + m):
-            if not math.isfinite(matrix[i, j]):
-                return False
-    return True
-
-
-@njit(cache=True)
-def _store(out_y, out_dy, row, q, v, a):
-    """Row ``row`` of the outputs: (q, v) and (v, a)."""
-    n = q.shape[0]
-    for i in range(n):
-        out_y[row, i] = q[i]
-        out_y[row, n + i] = v[i]
-        out_dy[row, i] = v[i]
-        out_dy[row, n + i] = a[i]
