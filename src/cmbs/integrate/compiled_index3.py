@@ -124,11 +124,18 @@ def _record(problem, row, step, stage, t, state):
 
 
 @njit(cache=True)
-def _step_done(problem, t):
-    """Nothing: a compiled run shows no progress."""
+def _after_step(problem, t, state):
+    """Nothing: the state is the integrator's."""
+
+
+@njit(cache=True)
+def _at_output(problem, t):
+    """Go on (a compiled run shows no progress)."""
+    return OK
 
 
 Index3Problem.residual = staticmethod(_residual)
 Index3Problem.newton_solve = staticmethod(_solve)
 Index3Problem.record = staticmethod(_record)
-Index3Problem.step_done = staticmethod(_step_done)
+Index3Problem.after_step = staticmethod(_after_step)
+Index3Problem.at_output = staticmethod(_at_output)

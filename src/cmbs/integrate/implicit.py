@@ -87,8 +87,9 @@ Residual = Callable[[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
                     tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
 
 #: Status codes of :func:`newton_steps` besides OK (0): the Newton matrix is singular, the
-#: correction (or the matrix) is not finite, Newton did not converge, the residual stopped the run.
-SINGULAR, DIVERGED, NOT_CONVERGED, STOPPED = 1, 2, 3, 4
+#: correction (or the matrix) is not finite, Newton did not converge, the problem stopped the run,
+#: the problem hands the run back to its caller at an output instant (which may resume it there).
+SINGULAR, DIVERGED, NOT_CONVERGED, STOPPED, HANDED_BACK = 1, 2, 3, 4, 5
 
 #: ``residual(problem, step, stage, t, (q, v, a, λ), (r_dyn, Φ, M, A, C_t, K_t)) -> status``: the
 #: residual and the matrices at an iterate of step ``step``, ``stage`` 3 at its first iterate and
@@ -99,19 +100,31 @@ residual_terms = type_dispatch("residual")
 newton_solve = type_dispatch("newton_solve")
 #: ``record(problem, row, step, stage, t, (q, v, a, λ))``: what the problem records at an output beside (q, v, a).
 record_output = type_dispatch("record")
-#: ``step_done(problem, t)``: called after every accepted step (a progress bar).
-step_done = type_dispatch("step_done")
+#: ``after_step(problem, t, (q, v, a, λ, x))``: the problem may adjust the accepted state in place.
+after_step = type_dispatch("after_step")
+#: ``at_output(problem, t) -> status``: after the outputs of an instant of ``t_out`` are stored
+#: (a progress bar; a check that may stop the run or hand it back).
+at_output = type_dispatch("at_output")
 
 
 class CallbackProblem(NamedTuple):
-    """A problem given as a Python function ``residual`` (:data:`Residual`): the loop then runs
-    interpreted.  An exception of the types ``stop_on`` raised by ``residual`` ends the run with
-    its text as the message (kept in ``stopped[0]``)."""
+    """A problem given as Python functions: the loop then runs interpreted.  ``function`` is the
+    residual (:data:`Residual`); an exception of the types ``stop_on`` raised by it or by
+    ``check`` ends the run with its text as the message (kept in ``stopped[0]``).  Optional:
+    ``progress(t)`` and ``check(t) -> bool`` (True hands the run back) at each output instant,
+    ``adjust(t, (q, v, a, λ, x))`` after each step, ``keep(row, t, (q, v, a, λ))`` at each output
+    kept."""
 
     function: Residual
     progress: Callable[[float], None] | None
     stop_on: tuple[type[Exception], ...]
     stopped: list
+    adjust: Callable[[float, tuple], None] | None = None
+    check: Callable[[float], bool] | None = None
+    keep: Callable[[int, float, tuple], None] | None = None
+
+    def stop_message(self) -> str:
+        return self.stopped[0]
 
 
 def _callback_residual(problem: CallbackProblem, step: int, stage: int, t: float, state: tuple, out: tuple) -> int:
@@ -136,18 +149,32 @@ def _callback_solve(problem: CallbackProblem, matrix: np.ndarray, rhs: np.ndarra
 
 
 def _callback_record(problem: CallbackProblem, row: int, step: int, stage: int, t: float, state: tuple) -> None:
-    """Nothing beside (q, v, a): the caller evaluates the rest at the outputs."""
+    if problem.keep is not None:
+        problem.keep(row, t, state)
 
 
-def _callback_step_done(problem: CallbackProblem, t: float) -> None:
+def _callback_after_step(problem: CallbackProblem, t: float, state: tuple) -> None:
+    if problem.adjust is not None:
+        problem.adjust(t, state)
+
+
+def _callback_at_output(problem: CallbackProblem, t: float) -> int:
     if problem.progress is not None:
         problem.progress(t)
+    if problem.check is None:
+        return OK
+    try:
+        return HANDED_BACK if problem.check(t) else OK
+    except problem.stop_on as error:
+        problem.stopped[0] = str(error)
+        return STOPPED
 
 
 CallbackProblem.residual = staticmethod(_callback_residual)
 CallbackProblem.newton_solve = staticmethod(_callback_solve)
 CallbackProblem.record = staticmethod(_callback_record)
-CallbackProblem.step_done = staticmethod(_callback_step_done)
+CallbackProblem.after_step = staticmethod(_callback_after_step)
+CallbackProblem.at_output = staticmethod(_callback_at_output)
 
 
 def integrate_index3(residual: Residual, q0: np.ndarray, v0: np.ndarray, a0: np.ndarray, lam0: np.ndarray,
@@ -155,7 +182,7 @@ def integrate_index3(residual: Residual, q0: np.ndarray, v0: np.ndarray, a0: np.
                      max_iterations: int = 25, progress: Callable[[float], None] | None = None,
                      stop_on: tuple[type[Exception], ...] = (), keep_every: int = 1) -> Integration:
     """:func:`integrate` with the residual a Python function (:class:`CallbackProblem`): the loop
-    of :func:`newton_steps` runs interpreted, calling ``progress(t)`` after every step."""
+    of :func:`newton_steps` runs interpreted, calling ``progress(t)`` at every output instant."""
     return integrate(CallbackProblem(residual, progress, stop_on, [""]), q0, v0, a0, lam0, t_out, scheme=scheme,
                      step=step, tolerance=tolerance, max_iterations=max_iterations, keep_every=keep_every,
                      compiled=False)
@@ -165,39 +192,58 @@ def integrate(problem: NamedTuple, q0: np.ndarray, v0: np.ndarray, a0: np.ndarra
               t_out: np.ndarray, *, scheme: Scheme, step: float, tolerance: float = 1e-10, max_iterations: int = 25,
               keep_every: int = 1, compiled: bool = True) -> Integration:
     """Fixed-step integration of the index-3 DAE of ``problem`` (a kernel tuple whose class carries
-    :data:`residual_terms`, :data:`newton_solve`, :data:`record_output` and :data:`step_done`)
-    by :func:`newton_steps`, compiled or (``compiled`` False: a problem with Python callables)
-    interpreted; output at ``t_out`` (each a multiple of the step or hit exactly by shortening the
-    last step before it), of which only ``t_out[::keep_every]`` are stored (``keep_every`` must
-    divide the number of intervals, so that the last is kept).
+    :data:`residual_terms`, :data:`newton_solve`, :data:`record_output`, :data:`after_step` and
+    :data:`at_output`) by :func:`newton_steps`, compiled or (``compiled`` False: a problem with
+    Python callables) interpreted; output at ``t_out`` (each a multiple of the step or hit exactly
+    by shortening the last step before it), of which only ``t_out[::keep_every]`` are stored
+    (``keep_every`` must divide the number of intervals, so that the last is kept).
 
     Returns an :class:`~cmbs.integrate.explicit.Integration` whose ``y`` holds (q, v) and ``dy``
     (v, a); ``counters`` include the Newton iterations.  A failed run keeps the outputs before the
     failure.
     """
-    n, m = q0.size, lam0.size
     if keep_every < 1 or (t_out.size - 1) % keep_every:
         raise ValueError(f"keep_every={keep_every} does not divide the {t_out.size - 1} output intervals")
     kept = t_out[::keep_every]
-    out_y = np.zeros((kept.size, 2 * n))
-    out_dy = np.zeros((kept.size, 2 * n))
-    state = tuple(np.array(x, dtype=float) for x in (q0, v0, a0, lam0, a0))
-    work = (np.empty(n), np.empty(m), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m),
-            np.empty((n, n)), np.empty((m, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n + m, n + m)),
-            np.empty(n + m))
+    out_y = np.zeros((kept.size, 2 * q0.size))
+    out_dy = np.zeros((kept.size, 2 * q0.size))
     counts = np.zeros(3, dtype=np.int64)
-    s = scheme
-    coefficients = (s.b0, s.b1, s.g0, s.g1, s.alpha_m, s.alpha_f, s.b_eff, s.g_eff)
-    loop = newton_steps if compiled else interpreted(newton_steps)
-    status, next_out, t_stop, change = loop(problem, np.ascontiguousarray(t_out, dtype=float), keep_every,
-                                            coefficients, float(step), float(tolerance), int(max_iterations), state,
-                                            work, out_y, out_dy, counts)
-    counters = {"steps": int(counts[0]), "newton_iterations": int(counts[1]), "evaluations": int(counts[2])}
+    state = newton_state(q0, v0, a0, lam0)
+    status, next_out, t_stop, change = newton_run(problem, state, t_out, 0, scheme, step, tolerance, max_iterations,
+                                                  keep_every, out_y, out_dy, counts, compiled)
+    counters = counter_dict(counts)
     if status == OK:
         return Integration(kept, out_y, out_dy, "success", "", counters)
     stored = -(-next_out // keep_every)          # the kept instants before t_out[next_out]
     return Integration(kept[:stored], out_y[:stored], out_dy[:stored], "failed",
                        failure_message(problem, status, t_stop, change, max_iterations), counters)
+
+
+def newton_state(q: np.ndarray, v: np.ndarray, a: np.ndarray, lam: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The state (q, v, a, λ, x) :func:`newton_steps` starts from (x = a: the auxiliary
+    acceleration of a start), as new arrays."""
+    return tuple(np.array(value, dtype=float) for value in (q, v, a, lam, a))
+
+
+def counter_dict(counts: np.ndarray) -> dict[str, int]:
+    """The counters of :func:`newton_steps` by name."""
+    return {"steps": int(counts[0]), "newton_iterations": int(counts[1]), "evaluations": int(counts[2])}
+
+
+def newton_run(problem: NamedTuple, state: tuple, t_out: np.ndarray, first: int, scheme: Scheme, step: float,
+               tolerance: float, max_iterations: int, keep_every: int, out_y: np.ndarray, out_dy: np.ndarray,
+               counts: np.ndarray, compiled: bool) -> tuple[int, int, float, float]:
+    """:func:`newton_steps` from output instant ``first`` of ``t_out`` (with the work arrays it
+    needs), compiled or interpreted; returns what it returns."""
+    n, m = state[0].size, state[3].size
+    work = (np.empty(n), np.empty(m), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m),
+            np.empty((n, n)), np.empty((m, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n + m, n + m)),
+            np.empty(n + m))
+    s = scheme
+    coefficients = (s.b0, s.b1, s.g0, s.g1, s.alpha_m, s.alpha_f, s.b_eff, s.g_eff)
+    loop = newton_steps if compiled else interpreted(newton_steps)
+    return loop(problem, np.ascontiguousarray(t_out, dtype=float), first, keep_every, coefficients, float(step),
+                float(tolerance), int(max_iterations), state, work, out_y, out_dy, counts)
 
 
 def failure_message(problem: NamedTuple, status: int, t: float, change: float, max_iterations: int) -> str:
@@ -209,16 +255,19 @@ def failure_message(problem: NamedTuple, status: int, t: float, change: float, m
     if status == NOT_CONVERGED:
         return (f"Newton iteration did not converge in {max_iterations} iterations at t={t:.6g} "
                 f"(last correction {change:.3g}); reduce the step")
-    return problem.stopped[0]
+    return problem.stop_message()
 
 
 @njit(cache=True)
-def newton_steps(problem, t_out, keep_every, coefficients, step, tolerance, max_iterations, state, work, out_y, out_dy,
-                 counters):
+def newton_steps(problem, t_out, first, keep_every, coefficients, step, tolerance, max_iterations, state, work, out_y,
+                 out_dy, counters):
     """The loop of :func:`integrate`: steps of ``step`` through the output times ``t_out`` from the
-    state (q, v, a, λ, x) at ``t_out[0]`` (updated in place), storing (q, v) and (v, a) at every
-    ``keep_every``-th output into ``out_y``, ``out_dy`` and calling :data:`record_output` there;
-    ``counters`` = (steps, Newton iterations, residual evaluations).
+    state (q, v, a, λ, x) at ``t_out[first]`` (updated in place), storing (q, v) and (v, a) at
+    every ``keep_every``-th output into ``out_y``, ``out_dy`` and calling :data:`record_output`
+    there (at ``t_out[0]`` too when ``first`` is 0: a resumed run has its row);
+    ``counters`` = (steps, Newton iterations, residual evaluations).  After each step the problem
+    may adjust the state (:data:`after_step`), and at each output instant stop the run or hand it
+    back (:data:`at_output`).
 
     Each step solves for a_{n+1}, λ_{n+1} by Newton's method (module docstring), from the
     previous a and λ, until the scaled correction h² b' max|Δa| is below ``tolerance`` (1 +
@@ -263,10 +312,11 @@ def newton_steps(problem, t_out, keep_every, coefficients, step, tolerance, max_
             out_dy[row, i] = v[i]
             out_dy[row, n + i] = a[i]
 
-    t = t_out[0]
-    store(0)
-    record_output(problem, 0, 0, 0, t, (q, v, a, lam))
-    next_out = 1
+    t = t_out[first]
+    if first == 0:
+        store(0)
+        record_output(problem, 0, 0, 0, t, (q, v, a, lam))
+    next_out = first + 1
     change = 0.0
     while next_out < t_out.shape[0]:
         h = min(step, t_out[next_out] - t)
@@ -320,11 +370,14 @@ def newton_steps(problem, t_out, keep_every, coefficients, step, tolerance, max_
         x[:] = x_new
         t = t_new
         counters[0] += 1
-        step_done(problem, t)
+        after_step(problem, t, state)
         if abs(t - t_out[next_out]) <= 1e-12 * max(1.0, abs(t)):
             if next_out % keep_every == 0:
                 row = next_out // keep_every
                 store(row)
                 record_output(problem, row, counters[0], 1, t, (q, v, a, lam))
             next_out += 1
+            status = at_output(problem, t)
+            if status != OK:
+                return status, next_out, t, change
     return OK, next_out, t, change
