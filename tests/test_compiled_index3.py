@@ -218,3 +218,57 @@ def test_trapezoidal_rule_on_a_fully_driven_mechanism_is_its_kinematics():
     np.testing.assert_allclose(run.q, kinematics.q, rtol=0, atol=1e-9)
     np.testing.assert_allclose(run.qd, kinematics.qd, rtol=0, atol=1e-9)
     np.testing.assert_allclose(run.qdd, kinematics.qdd, rtol=0, atol=1e-8)
+
+
+def test_compiled_trapezoidal_rule_equals_the_loop_on_python_calls():
+    """The undriven four-bar, 2 s at 10 ms in matrix R's independent coordinates: the compiled run
+    (cmbs.integrate.compiled_reduced) and the run on Python calls (compiled=False: numpy's
+    recovery, acceleration analysis, R and tangents) take the same Newton iterations to the same
+    motion."""
+    model = cmbs.load("four-bar").without_drivers()
+    fast, slow = (simulate(model, t_end=2.0, integrator="trapezoidal", dt=0.01, compiled=flag) for flag in (None, False))
+    assert fast.info["compiled"] and "compiled" not in slow.info
+    assert fast.info["status"] == slow.info["status"] == "success"
+    for key in ("steps", "newton_iterations", "evaluations"):
+        assert fast.info[key] == slow.info[key], key
+    np.testing.assert_allclose(fast.q, slow.q, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(fast.qd, slow.qd, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(fast.qdd, slow.qdd, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(fast["lam"], slow["lam"], rtol=0, atol=1e-9 * np.abs(slow["lam"]).max())
+
+
+def test_compiled_trapezoidal_rule_repartitions_through_the_singular_position():
+    """The slider-crank with gravity crosses θ1 = 90° at 0.83 s, where its partition must change;
+    against its branch ODE (cmbs.library.mechanisms.slider_crank_branch) the compiled run errs
+    as the Python one (2.8e-6 rad at 1 ms; tests/test_dynamics.py has the order) and re-partitions
+    as it does."""
+    from cmbs.library.mechanisms import slider_crank_branch
+
+    model = cmbs.load("slider-crank", gravity=9.81)
+    reference = slider_crank_branch(np.array([1.0]), gravity=9.81)[0][0]
+    fast, slow = (simulate(model, t_end=1.0, integrator="trapezoidal", dt=1e-3, compiled=flag) for flag in (None, False))
+    assert fast.info["compiled"] and fast.info["status"] == slow.info["status"] == "success"
+    errors = [abs(run["theta1"][-1] - reference) for run in (fast, slow)]
+    assert errors[0] < 3e-6 and errors[0] == pytest.approx(errors[1], rel=1e-3)
+    assert fast.info["max_condition"] == pytest.approx(slow.info["max_condition"], rel=1e-6)
+    assert fast.info["max_condition"] > 1e4            # the recovery met the singular position
+
+
+def test_compiled_trapezoidal_rule_fails_with_the_python_paths_message(tmp_path):
+    """A recovery that cannot converge (one Newton iteration for 1e-12) and forces that become
+    infinite (1/(t - 0.5)) end the compiled run where the Python run ends, with its message."""
+    path = tmp_path / "singular.toml"
+    path.write_text(SINGULAR_FORCE)
+    cases = [(cmbs.load("slider-crank", gravity=9.81), {"max_iterations": 1}, 0.0,
+              "model 'slider-crank' at t=0.001: matrix-r position recovery did not converge in 1 iterations "
+              "(residual 0.00399)"),
+             (cmbs.load(path), {}, 0.49, "model 'singular' at t=0.5: non-finite forces or mass matrix (force f (fz) "
+                                         "('1/(t-0.5)') is not finite at t = 0.5: inf, -inf, nan)")]
+    for model, options, last, message in cases:
+        runs = [simulate(model, t_end=1.0, integrator="trapezoidal", dt=1e-3 if last == 0.0 else 0.01,
+                         compiled=flag, formulation_options=options) for flag in (None, False)]
+        assert runs[0].info["compiled"] and "compiled" not in runs[1].info
+        for run in runs:
+            assert run.info["status"] == "failed" and run.info["message"] == message, run.info["message"]
+            assert run.t[-1] == pytest.approx(last, abs=1e-12)
+        np.testing.assert_allclose(runs[0].q, runs[1].q, rtol=0, atol=1e-9)
