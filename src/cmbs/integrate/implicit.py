@@ -27,9 +27,10 @@ constraint row is divided by h² b' to keep the matrix well scaled as h → 0.  
 nothing about mechanics: the caller gives the residual and the matrices as a problem, a kernel
 tuple whose class carries them (:data:`residual_terms` and the other dispatches below).  The loop
 (:func:`newton_steps`) is written once: compiled for a problem with compiled kernels
-(:class:`cmbs.integrate.compiled_index3.Index3Problem`), interpreted for a residual given as a
-Python function (:func:`integrate_index3`: models and inputs with Python callables, the
-trapezoidal rule of :func:`cmbs.simulate`).
+(:class:`cmbs.integrate.compiled_index3.Index3Problem`, and the trapezoidal rule's
+:class:`cmbs.integrate.compiled_reduced.ReducedProblem`), interpreted for a problem given as Python
+functions (:class:`CallbackProblem`, :func:`integrate_index3`: models and inputs with Python
+callables).
 """
 
 from __future__ import annotations
