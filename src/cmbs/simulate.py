@@ -561,7 +561,8 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
     inputs), else interpreted on the Python problem of :func:`_python_reduced_problem`; this
     function drives both alike, handing every re-partition to ``solver``."""
     from cmbs.dynamics.base import OK
-    from cmbs.integrate.implicit import HANDED_BACK, counter_dict, failure_message, newton_run, newton_state
+    from cmbs.integrate.implicit import (HANDED_BACK, NEWTON_ITERATIONS, counter_dict, failure_message, newton_run,
+                                         newton_state)
 
     terms = model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0))
     full = (q0.copy(), qd0.copy(), solver.accelerations(terms, q0, qd0, 0.0).qdd)
@@ -582,8 +583,9 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
         independent = solver.partition.independent
         state = newton_state(full[0][independent], full[1][independent], full[2][independent], np.zeros(0))
         out = np.zeros((times.size, 2 * independent.size))       # the loop's own (z, ż) records: unused
-        status, next_out, t_stop, change = newton_run(problem, state, grid, first, scheme, dt, tolerance, 25, every,
-                                                      out, out.copy(), counts, kernel is not None)
+        status, next_out, t_stop, change = newton_run(problem, state, grid, first, scheme, dt, tolerance,
+                                                      NEWTON_ITERATIONS, every, out, out.copy(), counts,
+                                                      kernel is not None)
         if kernel is not None:
             solver.note_condition(problem.worst[0], problem.worst[1])
         if status == OK:
@@ -605,7 +607,8 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
             retried = reached
             solver.repartition(model.jacobian(full[0], grid[reached]))
         else:
-            message, stored = failure_message(problem, status, t_stop, change, 25), -(-next_out // every)
+            message = failure_message(problem, status, t_stop, change, NEWTON_ITERATIONS)
+            stored = -(-next_out // every)
             break
         first = reached
     if kernel is not None:

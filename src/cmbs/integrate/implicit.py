@@ -91,6 +91,8 @@ Residual = Callable[[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
 #: correction (or the matrix) is not finite, Newton did not converge, the problem stopped the run,
 #: the problem hands the run back to its caller at an output instant (which may resume it there).
 SINGULAR, DIVERGED, NOT_CONVERGED, STOPPED, HANDED_BACK = 1, 2, 3, 4, 5
+#: Newton iterations a step may take.
+NEWTON_ITERATIONS = 25
 
 #: ``residual(problem, step, stage, t, (q, v, a, λ), (r_dyn, Φ, M, A, C_t, K_t)) -> status``: the
 #: residual and the matrices at an iterate of step ``step``, ``stage`` 3 at its first iterate and
@@ -180,7 +182,7 @@ CallbackProblem.at_output = staticmethod(_callback_at_output)
 
 def integrate_index3(residual: Residual, q0: np.ndarray, v0: np.ndarray, a0: np.ndarray, lam0: np.ndarray,
                      t_out: np.ndarray, *, scheme: Scheme, step: float, tolerance: float = 1e-10,
-                     max_iterations: int = 25, progress: Callable[[float], None] | None = None,
+                     max_iterations: int = NEWTON_ITERATIONS, progress: Callable[[float], None] | None = None,
                      stop_on: tuple[type[Exception], ...] = (), keep_every: int = 1) -> Integration:
     """:func:`integrate` with the residual a Python function (:class:`CallbackProblem`): the loop
     of :func:`newton_steps` runs interpreted, calling ``progress(t)`` at every output instant."""
@@ -190,7 +192,7 @@ def integrate_index3(residual: Residual, q0: np.ndarray, v0: np.ndarray, a0: np.
 
 
 def integrate(problem: NamedTuple, q0: np.ndarray, v0: np.ndarray, a0: np.ndarray, lam0: np.ndarray,
-              t_out: np.ndarray, *, scheme: Scheme, step: float, tolerance: float = 1e-10, max_iterations: int = 25,
+              t_out: np.ndarray, *, scheme: Scheme, step: float, tolerance: float = 1e-10, max_iterations: int = NEWTON_ITERATIONS,
               keep_every: int = 1, compiled: bool = True) -> Integration:
     """Fixed-step integration of the index-3 DAE of ``problem`` (a kernel tuple whose class carries
     :data:`residual_terms`, :data:`newton_solve`, :data:`record_output`, :data:`after_step` and
