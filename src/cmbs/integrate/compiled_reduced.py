@@ -115,11 +115,10 @@ def reduced_problems(kernel: NamedTuple, model: object, solver: object, u: np.nd
 
 def reduced_work(n: int, k: int, r: int) -> tuple:
     """The work arrays of a :class:`ReducedProblem` with ``k`` independent coordinates and ``r``
-    dependent ones: A_d's LU factors and pivots, a side vector, R, M, M q̈ - Q, -Q, M R or C R,
-    K_t, C_t, a shifted state, a column of -Q, zeros (n)."""
+    dependent ones: A_d's LU factors and pivots, a side vector, R, M, M q̈ - Q, -Q, X R (X = M, K_t
+    or C_t), K_t, C_t, a shifted state, zeros (n)."""
     return (np.empty((r, r)), np.empty(r, dtype=np.int64), np.empty(r), np.empty((n, k)), np.empty((n, n)),
-            np.empty(n), np.empty(n), np.empty((n, k)), np.empty((n, n)), np.empty((n, n)), np.empty(n), np.empty(n),
-            np.zeros(n))
+            np.empty(n), np.empty(n), np.empty((n, k)), np.empty((n, n)), np.empty((n, n)), np.empty(n), np.zeros(n))
 
 
 @njit(cache=True)
@@ -196,7 +195,7 @@ def _residual(problem, step, stage, t, state, out):
     if status != OK:
         return status
     q, qd, qdd = problem.last
-    Ad, pivots, side, R, mass, force, base, XR, K, C, shifted, column, _ = problem.work
+    Ad, pivots, side, R, mass, force, base, XR, K, C, shifted, _ = problem.work
     rows, dependent, independent = problem.rows, problem.dependent, problem.independent
     n, m, k, r = q.shape[0], problem.m, independent.shape[0], rows.shape[0]
     Q, _, A, _, _, M = terms_views(problem.model, n, m, problem.buffer)
@@ -280,7 +279,7 @@ def _at_output(problem, t):
     """HANDED_BACK when κ₂ of the partition at the accepted state exceeds ``limit`` (or A_d is
     singular there), else OK."""
     full_q = problem.full[0]
-    Ad, pivots, side, zeros = problem.work[0], problem.work[1], problem.work[2], problem.work[12]
+    Ad, pivots, side, zeros = problem.work[0], problem.work[1], problem.work[2], problem.work[11]
     n, m, rows, dependent = full_q.shape[0], problem.m, problem.rows, problem.dependent
     evaluate(problem.model, full_q, zeros, t, problem.u_zero, problem.buffer)
     if not _factor_dependent(problem.buffer, n, m, rows, dependent, Ad, pivots):
