@@ -39,7 +39,7 @@ def test_compiled_loop_stops_at_a_singular_position_with_the_python_message():
 def test_compiled_loop_refuses_what_it_cannot_run():
     model = cmbs.load("pendulum")
     with pytest.raises(CmbsError, match="compiled loop cannot run"):
-        simulate(model, t_end=0.1, integrator="trapezoidal", compiled=True)
+        simulate(model, t_end=0.1, integrator="trapezoidal", u=lambda t, q, qd: np.zeros(model.n_u), compiled=True)
     with pytest.raises(CmbsError, match="compiled loop cannot run"):
         simulate(model, t_end=0.1, integrator="rk45", u=lambda t, q, qd: np.zeros(model.n_u), compiled=True)
     with pytest.raises(CmbsError, match="compiled loop cannot run"):

@@ -227,10 +227,12 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         (:mod:`cmbs.integrate.compiled_plan`: a model, formulation and inputs with compiled
         kernels, i.e. no Python callables: no Python time functions, the formulations of
         :data:`COMPILED_FORMULATIONS`, constant inputs or a :class:`~cmbs.control.ComputedTorque`
-        law alone or in a :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; with rk4 or,
-        constant inputs only, rk45/rk23/dop853; or matrix-r with constant inputs on a holonomic
-        model and rk4, :mod:`cmbs.integrate.compiled_matrix_r`; no projection), True requires it,
-        False keeps the Python loop.
+        law alone or in a :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; with rk4,
+        backward-euler or generalized-alpha (:mod:`cmbs.integrate.compiled_index3`) or, constant
+        inputs only, rk45/rk23/dop853 or trapezoidal (:mod:`cmbs.integrate.compiled_reduced`); or
+        matrix-r with constant inputs on a holonomic model and rk4,
+        :mod:`cmbs.integrate.compiled_matrix_r`; no projection), True requires it, False keeps the
+        Python loop.
 
     Returns
     -------
@@ -299,10 +301,17 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         raise CmbsError(f"the compiled loop cannot run this simulation of model {model.name!r}: it needs a model, "
                         f"formulation and inputs without Python callables (formulations {COMPILED_FORMULATIONS}; "
                         "constant inputs or a ComputedTorque law, alone or in a ZeroOrderHold with period dt), "
-                        "integrator rk4 with t_end a multiple of dt or, with constant inputs, rk45, rk23 or dop853, "
-                        "and no --project; or matrix-r with rk4 and constant inputs on a holonomic model")
+                        "integrator rk4 with t_end a multiple of dt, backward-euler or generalized-alpha or, with "
+                        "constant inputs, rk45, rk23, dop853 or trapezoidal, and no --project; or matrix-r with rk4 "
+                        "and constant inputs on a holonomic model")
     run_options = {"integrator": integrator, "dt": dt, "every": every, "rtol": rtol, "atol": atol, "project": project}
-    if plan is not None and compiled is not False and integrator != "rk4":
+    if plan is not None and compiled is not False and integrator in INDEX3:
+        trajectory = _run_compiled_index3(model, plan, inputs, q_start, qd_start, grid, INDEX3[integrator],
+                                          newton_tolerance, started, run_options)
+    elif plan is not None and compiled is not False and integrator == "trapezoidal":
+        trajectory = _run_compiled_trapezoidal(model, solver, chosen, plan, inputs, q_start, qd_start, grid,
+                                               newton_tolerance, started, run_options)
+    elif plan is not None and compiled is not False and integrator != "rk4":
         trajectory = _run_compiled_adaptive(model, solver, chosen, plan, inputs, q_start, qd_start, times, started,
                                             run_options)
     elif plan is not None and compiled is not False:
@@ -476,14 +485,23 @@ def _force_derivatives(model: Model, inputs: Inputs, q: np.ndarray, qd: np.ndarr
     return C, K
 
 
-def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, grid: np.ndarray, every: int,
-                scheme: Scheme, dt: float, tolerance: float, bar: _Progress) -> Integration:
-    """Backward Euler / generalized-α on M a + Aᵀλ = Q, Φ(q) = 0 (consistent start from Lagrange)."""
+def _consistent_start(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The accelerations and multipliers the index-3 integrators start from: Lagrange's, with
+    least-squares multipliers (redundant constraints allowed)."""
     from cmbs.dynamics import Lagrange
 
-    terms = model.new_terms()
-    model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0), out=terms)
+    terms = model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0))
     start = Lagrange(least_squares=True).bind(model).accelerations(terms, q0, qd0, 0.0)
+    return start.qdd, start.lam
+
+
+def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, grid: np.ndarray, every: int,
+                scheme: Scheme, dt: float, tolerance: float, bar: _Progress) -> Integration:
+    """Backward Euler / generalized-α on M a + Aᵀλ = Q, Φ(q) = 0 (consistent start from Lagrange)
+    with the model and inputs as Python calls: :func:`cmbs.integrate.implicit.integrate_index3`,
+    the loop of :func:`_run_compiled_index3` interpreted."""
+    a0, lam0 = _consistent_start(model, inputs, q0, qd0)
+    terms = model.new_terms()
 
     def residual(t, q, v, a, lam):
         model.evaluate(q, v, t, inputs(t, q, v), out=terms)
@@ -492,32 +510,153 @@ def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, g
         C, K = _force_derivatives(model, inputs, q, v, t, extra=lambda tt: tt.M @ a + tt.A.T @ lam)
         return r, phi, M, A, C, K
 
-    return integrate_index3(residual, q0, qd0, start.qdd, start.lam, grid, scheme=scheme, step=dt,
+    return integrate_index3(residual, q0, qd0, a0, lam0, grid, scheme=scheme, step=dt,
                             tolerance=tolerance, progress=bar, stop_on=(CmbsError,), keep_every=every)
 
 
+def _run_compiled_index3(model: Model, plan: tuple, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray,
+                         grid: np.ndarray, scheme: Scheme, tolerance: float, started: float,
+                         options: dict) -> Trajectory:
+    """Backward Euler / generalized-α compiled (:mod:`cmbs.integrate.compiled_index3`): the loop of
+    :func:`cmbs.integrate.implicit.integrate` on the model's and inputs' kernels, from the
+    consistent start of :func:`_consistent_start`; outputs at ``grid[::options["every"]]`` with
+    Newton's λ."""
+    from cmbs.integrate.compiled_index3 import index3_problem
+    from cmbs.integrate.implicit import integrate
+
+    model_part, _, law = plan
+    every, dt = options["every"], options["dt"]
+    u0 = np.array(inputs(0.0, q0, qd0), dtype=float)
+    a0, lam0 = _consistent_start(model, inputs, q0, qd0)
+    problem = index3_problem(model_part, law, u0, model.new_terms().buffer.size, model.n, model.m,
+                             (grid.size - 1) // every + 1)
+    loop_started = time.perf_counter()
+    result = integrate(problem, q0, qd0, a0, lam0, grid, scheme=scheme, step=dt, tolerance=tolerance,
+                       keep_every=every)
+    loop_wall = time.perf_counter() - loop_started
+    info = _info(model, None, {**options, "compiled": True, "loop_wall_time": loop_wall}, result.status,
+                 result.message, result.counters)
+    k, n = result.t.size, model.n
+    lam, u, position_error, velocity_error, force = (record[:k] for record in problem.records)
+    trajectory = _trajectory(model, result.t, result.y[:, :n], result.y[:, n:], result.dy[:, n:], lam, u,
+                             position_error, velocity_error, info, force)
+    info["wall_time"] = time.perf_counter() - started
+    return trajectory
+
+
 def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, grid: np.ndarray, every: int,
-                 scheme: Scheme, dt: float, tolerance: float, bar: _Progress) -> Integration:
+                 scheme: Scheme, dt: float, tolerance: float, bar: _Progress | None,
+                 kernel: object | None = None) -> Integration:
     """Implicit trapezoidal rule in the independent coordinates z of matrix R (thesis eq. 3.51-3.57):
     Newton on f = Rᵀ(M q̈ - Q) = M̄ z̈ - Q̄ with tangent M̄ + h/2 RᵀC̄R + h²/4 RᵀK̄R.  The dependent
-    coordinates follow by position, velocity and acceleration analysis with z held; between output
-    intervals the partition is chosen again if its dependent block became ill-conditioned.  Of
-    the instants of ``grid`` only ``grid[::every]`` are stored."""
-    n = model.n
-    terms = model.new_terms()
-    model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0), out=terms)
-    full = {"q": q0.copy(), "qd": qd0.copy(), "qdd": solver.accelerations(terms, q0, qd0, 0.0).qdd}
+    coordinates follow by position, velocity and acceleration analysis with z held, and the step's
+    full state is the expansion of its last iterate.  At each instant of ``grid`` the partition is
+    chosen again if its dependent block became ill-conditioned (κ₂ grown by ``condition_growth``,
+    or above 1e12: :meth:`MatrixRSolver.update_partition`, which raises for a user's partition);
+    a step that fails is tried once more with independent coordinates chosen at its start
+    (automatic partition).  Of the instants of ``grid`` only ``grid[::every]`` are stored.
 
-    def expand(t: float, z: np.ndarray, zd: np.ndarray, zdd: np.ndarray) -> tuple:
+    The loop is :func:`cmbs.integrate.implicit.newton_steps`, compiled on the problem of
+    :mod:`cmbs.integrate.compiled_reduced` when the model's ``kernel`` is given (constant
+    inputs), else interpreted on the Python problem of :func:`_python_reduced_problem`; this
+    function drives both alike, handing every re-partition to ``solver``."""
+    from cmbs.dynamics.base import OK
+    from cmbs.integrate.implicit import (HANDED_BACK, NEWTON_ITERATIONS, counter_dict, failure_message, newton_run,
+                                         newton_state)
+
+    terms = model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0))
+    full = (q0.copy(), qd0.copy(), solver.accelerations(terms, q0, qd0, 0.0).qdd)
+    last = tuple(value.copy() for value in full)
+    times = grid[::every]
+    y, dy = np.zeros((times.size, 2 * model.n)), np.zeros((times.size, 2 * model.n))
+    if kernel is None:
+        problem_for = _python_reduced_problem(model, solver, inputs, full, last, y, dy, bar)
+    else:
+        from cmbs.integrate.compiled_reduced import reduced_problems
+
+        problem_for = reduced_problems(kernel, model, solver, np.array(inputs(0.0, q0, qd0), dtype=float), full,
+                                       last, times.size)
+    counts = np.zeros(3, dtype=np.int64)
+    first, retried, message, stored = 0, -1, "", times.size
+    while True:
+        problem = problem_for()
         independent = solver.partition.independent
-        guess, qd, qdd = full["q"].copy(), full["qd"].copy(), full["qdd"].copy()
-        guess[independent], qd[independent], qdd[independent] = z, zd, zdd
-        q, qd = solver.recover(guess, qd, t, integrated_velocities=False)
-        return q, qd, acceleration_analysis(model, q, qd, t, qdd=qdd, fixed=independent)
+        state = newton_state(full[0][independent], full[1][independent], full[2][independent], np.zeros(0))
+        out = np.zeros((times.size, 2 * independent.size))       # the loop's own (z, ż) records: unused
+        status, next_out, t_stop, change = newton_run(problem, state, grid, first, scheme, dt, tolerance,
+                                                      NEWTON_ITERATIONS, every, out, out.copy(), counts,
+                                                      kernel is not None)
+        if kernel is not None:
+            solver.note_condition(problem.worst[0], problem.worst[1])
+        if status == OK:
+            break
+        reached = next_out - 1                      # the state is that of grid[reached]
+        if status == HANDED_BACK:
+            before = solver.repartitions
+            try:
+                solver.update_partition(model.jacobian(full[0], grid[reached]), grid[reached])
+            except CmbsError as error:
+                message, stored = str(error), reached // every + 1
+                break
+            if solver.repartitions == before:        # the loop's κ₂ and numpy's disagree: cannot go on
+                message = (f"model {model.name!r} at t={grid[reached]:.6g}: the partition's condition calls for a "
+                           "new partition but none was chosen")
+                stored = reached // every + 1
+                break
+        elif solver.user is None and retried != reached:    # once more with independent coordinates chosen here
+            retried = reached
+            solver.repartition(model.jacobian(full[0], grid[reached]))
+        else:
+            message = failure_message(problem, status, t_stop, change, NEWTON_ITERATIONS)
+            stored = -(-next_out // every)
+            break
+        first = reached
+    if kernel is not None:
+        records_q, records_qd, records_qdd = problem.records
+        y, dy = np.hstack([records_q, records_qd]), np.hstack([records_qd, records_qdd])
+    return Integration(times[:stored], y[:stored], dy[:stored], "failed" if message else "success", message,
+                       counter_dict(counts))
+
+
+def _run_compiled_trapezoidal(model: Model, solver, chosen: Formulation, plan: tuple, inputs: Inputs,
+                              q0: np.ndarray, qd0: np.ndarray, grid: np.ndarray, tolerance: float, started: float,
+                              options: dict) -> Trajectory:
+    """The trapezoidal rule of :func:`_run_reduced` on the compiled problem of
+    :mod:`cmbs.integrate.compiled_reduced`, recorded as the Python run is (:func:`_record`)."""
+    loop_started = time.perf_counter()
+    result = _run_reduced(model, solver, inputs, q0, qd0, grid, options["every"], TRAPEZOIDAL, options["dt"],
+                          tolerance, None, kernel=plan[0])
+    loop_wall = time.perf_counter() - loop_started
+    trajectory = _record(model, solver, inputs, result, chosen,
+                         {**options, "compiled": True, "loop_wall_time": loop_wall})
+    _note_rounding(trajectory.info, solver)
+    trajectory.info["wall_time"] = time.perf_counter() - started
+    return trajectory
+
+
+def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, last: tuple, y: np.ndarray,
+                            dy: np.ndarray, bar: _Progress | None) -> Callable[[], object]:
+    """The trapezoidal rule's problem for :func:`_run_reduced` as Python functions (the model or
+    the inputs have Python callables): a :class:`~cmbs.integrate.implicit.CallbackProblem` whose
+    residual expands an iterate into ``last`` (as
+    :class:`~cmbs.integrate.compiled_reduced.ReducedProblem`'s kernel does), whose steps accept
+    ``last`` into ``full``, whose check asks for a new partition as
+    :meth:`MatrixRSolver.update_partition` would, and which records ``full`` into ``y``, ``dy``.
+    Returns the maker of the problem for the current partition."""
+    from cmbs.dynamics.matrix_r import partition_condition
+    from cmbs.integrate.compiled_reduced import partition_limit
+    from cmbs.integrate.implicit import CallbackProblem
+
+    terms = model.new_terms()
 
     def residual(t, z, zd, zdd, lam):
-        q, qd, qdd = expand(t, z, zd, zdd)
-        full["last"] = (q, qd, qdd)
+        independent = solver.partition.independent
+        guess, qd, qdd = full[0].copy(), full[1].copy(), full[2].copy()
+        guess[independent], qd[independent], qdd[independent] = z, zd, zdd
+        q, qd = solver.recover(guess, qd, t, integrated_velocities=False)
+        qdd = acceleration_analysis(model, q, qd, t, qdd=qdd, fixed=independent)
+        for target, value in zip(last, (q, qd, qdd)):
+            target[:] = value
         model.evaluate(q, qd, t, inputs(t, q, qd), out=terms)
         if not (np.all(np.isfinite(terms.Q)) and np.all(np.isfinite(terms.M))):
             raise CmbsError(f"model {model.name!r} at t={t:.6g}: non-finite forces or mass matrix")
@@ -526,39 +665,24 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
         return (R.T @ (terms.M @ qdd - terms.Q), np.zeros(0), R.T @ terms.M @ R, np.zeros((0, R.shape[1])),
                 R.T @ C @ R, R.T @ K @ R)
 
-    def on_step(t: float) -> None:
-        full["q"], full["qd"], full["qdd"] = full["last"]
-        bar(t)
+    def adjust(t: float, state: tuple) -> None:
+        independent = solver.partition.independent
+        for target, value in zip(full, last):
+            target[:] = value
+        z, zd, zdd, _, x = state
+        z[:], zd[:], zdd[:], x[:] = full[0][independent], full[1][independent], full[2][independent], \
+            full[2][independent]
 
-    times = grid[::every]
-    y, dy = np.zeros((times.size, 2 * n)), np.zeros((times.size, 2 * n))
-    y[0], dy[0] = np.concatenate([q0, qd0]), np.concatenate([qd0, full["qdd"]])
-    counters: dict[str, int] = {}
-    for k in range(1, grid.size):
-        stored = -(-k // every)                     # the kept rows before grid[k]
-        for attempt in range(2):  # on failure, once more with independent coordinates chosen here
-            start = (full["q"], full["qd"], full["qdd"])
-            independent = solver.partition.independent
-            part = integrate_index3(residual, start[0][independent], start[1][independent], start[2][independent],
-                                    np.zeros(0), grid[k - 1:k + 1], scheme=scheme, step=dt, tolerance=tolerance,
-                                    progress=on_step, stop_on=(CmbsError,))
-            for key, value in part.counters.items():
-                counters[key] = counters.get(key, 0) + value
-            if part.status == "success" or solver.user is not None or attempt == 1:
-                break
-            full["q"], full["qd"], full["qdd"] = start
-            solver.repartition(model.jacobian(start[0], times[k - 1]))
-        if part.status != "success":
-            return Integration(times[:stored], y[:stored], dy[:stored], part.status, part.message, counters)
-        if k % every == 0:
-            y[k // every] = np.concatenate([full["q"], full["qd"]])
-            dy[k // every] = np.concatenate([full["qd"], full["qdd"]])
-        try:
-            solver.update_partition(model.jacobian(full["q"], grid[k]), grid[k])
-        except CmbsError as error:
-            done = k // every + 1
-            return Integration(times[:done], y[:done], dy[:done], "failed", str(error), counters)
-    return Integration(times, y, dy, "success", "", counters)
+    def check(t: float) -> bool:
+        part = solver.partition
+        condition = partition_condition(model.jacobian(full[0], t)[part.rows], part.dependent, 2)
+        return condition > partition_limit(solver)
+
+    def keep(row: int, t: float, state: tuple) -> None:
+        y[row] = np.concatenate([full[0], full[1]])
+        dy[row] = np.concatenate([full[1], full[2]])
+
+    return lambda: CallbackProblem(residual, bar, (CmbsError,), [""], adjust, check, keep)
 
 
 def _record(model: Model, solver, inputs: Inputs, result: Integration, chosen: Formulation | None,

@@ -4,7 +4,11 @@ A run is compiled when its model, formulation and inputs each have a compiled ke
 (:func:`cmbs.model.compiled.model_kernel`, :func:`cmbs.dynamics.field.formulation_kernel`,
 :func:`inputs_kernel`) and its integrator has a compiled loop for them: rk4 (t_end a multiple of
 dt) with any inputs kernel, rk45/rk23/dop853 with constant inputs; drift projection runs in
-Python.  :func:`cmbs.simulate` and :func:`cmbs.sweep` ask here.
+Python.  The index-3 integrators (backward Euler, generalized-α:
+:mod:`cmbs.integrate.compiled_index3`) bring their own formulation: they need the model's and the
+inputs' kernels only (a held law with t_end a multiple of dt); so does the trapezoidal rule in matrix
+R's independent coordinates (:mod:`cmbs.integrate.compiled_reduced`), with constant inputs.
+:func:`cmbs.simulate` and :func:`cmbs.sweep` ask here.
 """
 
 from __future__ import annotations
@@ -20,6 +24,8 @@ from cmbs.model.model import Model
 
 #: The integrators with a compiled adaptive loop (:mod:`cmbs.integrate.compiled_adaptive`).
 ADAPTIVE = ("rk45", "rk23", "dop853")
+#: The integrators of the index-3 DAE, compiled with :mod:`cmbs.integrate.compiled_index3`.
+INDEX3 = ("backward-euler", "generalized-alpha")
 
 
 def inputs_kernel(u: object, model: Model, dt: float) -> NamedTuple | None:
@@ -43,18 +49,26 @@ def inputs_kernel(u: object, model: Model, dt: float) -> NamedTuple | None:
 
 
 def compiled_run(model: Model, chosen: Formulation, solver: object, integrator: str, u: object, project: bool,
-                 t_end: float, dt: float) -> tuple[NamedTuple, NamedTuple, NamedTuple] | None:
+                 t_end: float, dt: float) -> tuple[NamedTuple, NamedTuple | None, NamedTuple] | None:
     """(model, formulation, inputs) kernel tuples when a compiled loop can run the simulation of
-    ``model`` under ``chosen`` (bound as ``solver``) with ``integrator``, else None."""
-    if project or (integrator != "rk4" and integrator not in ADAPTIVE):
-        return None
-    if integrator == "rk4" and whole_steps(t_end, dt) is None:
+    ``model`` under ``chosen`` (bound as ``solver``) with ``integrator``, else None; the
+    formulation's is None for an index-3 integrator (:data:`INDEX3`) and the trapezoidal rule,
+    which bring their own."""
+    if project or (integrator not in ("rk4", "trapezoidal") and integrator not in ADAPTIVE
+                   and integrator not in INDEX3):
         return None
     model_part = model_kernel(model)
     if model_part is None:
         return None
     inputs = inputs_kernel(u, model, dt)
-    if inputs is None or (integrator in ADAPTIVE and not isinstance(inputs, ConstantInputs)):
+    exact = whole_steps(t_end, dt) is not None
+    if inputs is None or (integrator not in INDEX3 and integrator != "rk4" and not isinstance(inputs, ConstantInputs)):
+        return None
+    if integrator == "trapezoidal":
+        return model_part, None, inputs
+    if integrator in INDEX3:        # a held law samples at each step's end: the steps must be the periods
+        return None if getattr(inputs, "held", False) and not exact else (model_part, None, inputs)
+    if integrator == "rk4" and not exact:
         return None
     formulation = formulation_kernel(chosen, solver, model)
     return None if formulation is None else (model_part, formulation, inputs)

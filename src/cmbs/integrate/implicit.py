@@ -24,17 +24,26 @@ of q_{n+1} and v_{n+1} with respect to a_{n+1} divided by h² and h)::
 
 C_t = -∂Q/∂v and K_t = -∂Q/∂q are supplied by the caller (finite differences or zero).  The
 constraint row is divided by h² b' to keep the matrix well scaled as h → 0.  This module knows
-nothing about mechanics: the caller gives the residual and the matrices.
+nothing about mechanics: the caller gives the residual and the matrices as a problem, a kernel
+tuple whose class carries them (:data:`residual_terms` and the other dispatches below).  The loop
+(:func:`newton_steps`) is written once: compiled for a problem with compiled kernels
+(:class:`cmbs.integrate.compiled_index3.Index3Problem`, and the trapezoidal rule's
+:class:`cmbs.integrate.compiled_reduced.ReducedProblem`), interpreted for a problem given as Python
+functions (:class:`CallbackProblem`, :func:`integrate_index3`: models and inputs with Python
+callables).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 
+from cmbs.dynamics.base import OK
 from cmbs.integrate.explicit import Integration
+from cmbs.jit import interpreted, njit, type_dispatch
 
 
 @dataclass(frozen=True)
@@ -78,87 +87,300 @@ def generalized_alpha(rho_infinity: float = 0.9) -> Scheme:
 Residual = Callable[[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
                     tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
 
+#: Status codes of :func:`newton_steps` besides OK (0): the Newton matrix is singular, the
+#: correction (or the matrix) is not finite, Newton did not converge, the problem stopped the run,
+#: the problem hands the run back to its caller at an output instant (which may resume it there).
+SINGULAR, DIVERGED, NOT_CONVERGED, STOPPED, HANDED_BACK = 1, 2, 3, 4, 5
+#: Newton iterations a step may take.
+NEWTON_ITERATIONS = 25
+
+#: ``residual(problem, step, stage, t, (q, v, a, λ), (r_dyn, Φ, M, A, C_t, K_t)) -> status``: the
+#: residual and the matrices at an iterate of step ``step``, ``stage`` 3 at its first iterate and
+#: 1 at the others (the stages at which an inputs kernel samples, as
+#: :func:`cmbs.integrate.compiled_rk4.apply_inputs` takes them).
+residual_terms = type_dispatch("residual")
+#: ``newton_solve(problem, matrix, rhs) -> bool``: the Newton correction into ``rhs``; False when singular.
+newton_solve = type_dispatch("newton_solve")
+#: ``record(problem, row, step, stage, t, (q, v, a, λ))``: what the problem records at an output beside (q, v, a).
+record_output = type_dispatch("record")
+#: ``after_step(problem, t, (q, v, a, λ, x))``: the problem may adjust the accepted state in place.
+after_step = type_dispatch("after_step")
+#: ``at_output(problem, t) -> status``: after the outputs of an instant of ``t_out`` are stored
+#: (a progress bar; a check that may stop the run or hand it back).
+at_output = type_dispatch("at_output")
+
+
+class CallbackProblem(NamedTuple):
+    """A problem given as Python functions: the loop then runs interpreted.  ``function`` is the
+    residual (:data:`Residual`); an exception of the types ``stop_on`` raised by it or by
+    ``check`` ends the run with its text as the message (kept in ``stopped[0]``).  Optional:
+    ``progress(t)`` and ``check(t) -> bool`` (True hands the run back) at each output instant,
+    ``adjust(t, (q, v, a, λ, x))`` after each step, ``keep(row, t, (q, v, a, λ))`` at each output
+    kept."""
+
+    function: Residual
+    progress: Callable[[float], None] | None
+    stop_on: tuple[type[Exception], ...]
+    stopped: list
+    adjust: Callable[[float, tuple], None] | None = None
+    check: Callable[[float], bool] | None = None
+    keep: Callable[[int, float, tuple], None] | None = None
+
+    def stop_message(self) -> str:
+        return self.stopped[0]
+
+
+def _callback_residual(problem: CallbackProblem, step: int, stage: int, t: float, state: tuple, out: tuple) -> int:
+    """The Python residual at the iterate ``state``, copied into ``out``."""
+    try:
+        values = problem.function(t, *state)
+    except problem.stop_on as error:
+        problem.stopped[0] = str(error)
+        return STOPPED
+    for target, value in zip(out, values):
+        target[...] = value
+    return OK
+
+
+def _callback_solve(problem: CallbackProblem, matrix: np.ndarray, rhs: np.ndarray) -> bool:
+    """numpy's LU solve (LAPACK) into ``rhs``."""
+    try:
+        rhs[:] = np.linalg.solve(matrix, rhs)
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def _callback_record(problem: CallbackProblem, row: int, step: int, stage: int, t: float, state: tuple) -> None:
+    if problem.keep is not None:
+        problem.keep(row, t, state)
+
+
+def _callback_after_step(problem: CallbackProblem, t: float, state: tuple) -> None:
+    if problem.adjust is not None:
+        problem.adjust(t, state)
+
+
+def _callback_at_output(problem: CallbackProblem, t: float) -> int:
+    if problem.progress is not None:
+        problem.progress(t)
+    if problem.check is None:
+        return OK
+    try:
+        return HANDED_BACK if problem.check(t) else OK
+    except problem.stop_on as error:
+        problem.stopped[0] = str(error)
+        return STOPPED
+
+
+CallbackProblem.residual = staticmethod(_callback_residual)
+CallbackProblem.newton_solve = staticmethod(_callback_solve)
+CallbackProblem.record = staticmethod(_callback_record)
+CallbackProblem.after_step = staticmethod(_callback_after_step)
+CallbackProblem.at_output = staticmethod(_callback_at_output)
+
 
 def integrate_index3(residual: Residual, q0: np.ndarray, v0: np.ndarray, a0: np.ndarray, lam0: np.ndarray,
                      t_out: np.ndarray, *, scheme: Scheme, step: float, tolerance: float = 1e-10,
-                     max_iterations: int = 25, progress: Callable[[float], None] | None = None,
+                     max_iterations: int = NEWTON_ITERATIONS, progress: Callable[[float], None] | None = None,
                      stop_on: tuple[type[Exception], ...] = (), keep_every: int = 1) -> Integration:
-    """Fixed-step integration of the index-3 DAE; output at ``t_out`` (each a multiple of the step
-    or hit exactly by shortening the last step before it), of which only ``t_out[::keep_every]``
-    are stored (``keep_every`` must divide the number of intervals, so that the last is kept).
+    """:func:`integrate` with the residual a Python function (:class:`CallbackProblem`): the loop
+    of :func:`newton_steps` runs interpreted, calling ``progress(t)`` at every output instant."""
+    return integrate(CallbackProblem(residual, progress, stop_on, [""]), q0, v0, a0, lam0, t_out, scheme=scheme,
+                     step=step, tolerance=tolerance, max_iterations=max_iterations, keep_every=keep_every,
+                     compiled=False)
+
+
+def integrate(problem: NamedTuple, q0: np.ndarray, v0: np.ndarray, a0: np.ndarray, lam0: np.ndarray,
+              t_out: np.ndarray, *, scheme: Scheme, step: float, tolerance: float = 1e-10, max_iterations: int = NEWTON_ITERATIONS,
+              keep_every: int = 1, compiled: bool = True) -> Integration:
+    """Fixed-step integration of the index-3 DAE of ``problem`` (a kernel tuple whose class carries
+    :data:`residual_terms`, :data:`newton_solve`, :data:`record_output`, :data:`after_step` and
+    :data:`at_output`) by :func:`newton_steps`, compiled or (``compiled`` False: a problem with
+    Python callables) interpreted; output at ``t_out`` (each a multiple of the step or hit exactly
+    by shortening the last step before it), of which only ``t_out[::keep_every]`` are stored
+    (``keep_every`` must divide the number of intervals, so that the last is kept).
 
     Returns an :class:`~cmbs.integrate.explicit.Integration` whose ``y`` holds (q, v) and ``dy``
-    (v, a); ``counters`` include the Newton iterations.  Newton stops when the scaled correction
-    max|Δa| h² b' + max|Δλ| h² b' / (1 + max|λ|) is below ``tolerance`` relative to (1 + max|q|).
+    (v, a); ``counters`` include the Newton iterations.  A failed run keeps the outputs before the
+    failure.
     """
-    n, m = q0.size, lam0.size
-    q, v, a, lam = (np.array(x, dtype=float) for x in (q0, v0, a0, lam0))
-    x = a.copy()
     if keep_every < 1 or (t_out.size - 1) % keep_every:
         raise ValueError(f"keep_every={keep_every} does not divide the {t_out.size - 1} output intervals")
     kept = t_out[::keep_every]
-    out_y = np.zeros((kept.size, 2 * n))
-    out_dy = np.zeros((kept.size, 2 * n))
-    out_y[0], out_dy[0] = np.concatenate([q, v]), np.concatenate([v, a])
-    counters = {"steps": 0, "newton_iterations": 0, "evaluations": 0}
-    t = float(t_out[0])
-    next_out = 1
+    out_y = np.zeros((kept.size, 2 * q0.size))
+    out_dy = np.zeros((kept.size, 2 * q0.size))
+    counts = np.zeros(3, dtype=np.int64)
+    state = newton_state(q0, v0, a0, lam0)
+    status, next_out, t_stop, change = newton_run(problem, state, t_out, 0, scheme, step, tolerance, max_iterations,
+                                                  keep_every, out_y, out_dy, counts, compiled)
+    counters = counter_dict(counts)
+    if status == OK:
+        return Integration(kept, out_y, out_dy, "success", "", counters)
+    stored = -(-next_out // keep_every)          # the kept instants before t_out[next_out]
+    return Integration(kept[:stored], out_y[:stored], out_dy[:stored], "failed",
+                       failure_message(problem, status, t_stop, change, max_iterations), counters)
 
-    def fail(message: str) -> Integration:
-        stored = -(-next_out // keep_every)          # the kept instants before t_out[next_out]
-        return Integration(kept[:stored], out_y[:stored], out_dy[:stored], "failed", message, counters)
 
+def newton_state(q: np.ndarray, v: np.ndarray, a: np.ndarray, lam: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The state (q, v, a, λ, x) :func:`newton_steps` starts from (x = a: the auxiliary
+    acceleration of a start), as new arrays."""
+    return tuple(np.array(value, dtype=float) for value in (q, v, a, lam, a))
+
+
+def counter_dict(counts: np.ndarray) -> dict[str, int]:
+    """The counters of :func:`newton_steps` by name."""
+    return {"steps": int(counts[0]), "newton_iterations": int(counts[1]), "evaluations": int(counts[2])}
+
+
+def newton_run(problem: NamedTuple, state: tuple, t_out: np.ndarray, first: int, scheme: Scheme, step: float,
+               tolerance: float, max_iterations: int, keep_every: int, out_y: np.ndarray, out_dy: np.ndarray,
+               counts: np.ndarray, compiled: bool) -> tuple[int, int, float, float]:
+    """:func:`newton_steps` from output instant ``first`` of ``t_out`` (with the work arrays it
+    needs), compiled or interpreted; returns what it returns."""
+    n, m = state[0].size, state[3].size
+    work = (np.empty(n), np.empty(m), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m),
+            np.empty((n, n)), np.empty((m, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n + m, n + m)),
+            np.empty(n + m))
     s = scheme
-    while next_out < t_out.size:
+    coefficients = (s.b0, s.b1, s.g0, s.g1, s.alpha_m, s.alpha_f, s.b_eff, s.g_eff)
+    loop = newton_steps if compiled else interpreted(newton_steps)
+    return loop(problem, np.ascontiguousarray(t_out, dtype=float), first, keep_every, coefficients, float(step),
+                float(tolerance), int(max_iterations), state, work, out_y, out_dy, counts)
+
+
+def failure_message(problem: NamedTuple, status: int, t: float, change: float, max_iterations: int) -> str:
+    """Why :func:`newton_steps` stopped with ``status`` at t (``change``: its last scaled correction)."""
+    if status == SINGULAR:
+        return f"singular Newton matrix at t={t:.6g} (redundant constraints or a singular configuration)"
+    if status == DIVERGED:
+        return f"Newton iteration diverged at t={t:.6g}"
+    if status == NOT_CONVERGED:
+        return (f"Newton iteration did not converge in {max_iterations} iterations at t={t:.6g} "
+                f"(last correction {change:.3g}); reduce the step")
+    return problem.stop_message()
+
+
+@njit(cache=True)
+def newton_steps(problem, t_out, first, keep_every, coefficients, step, tolerance, max_iterations, state, work, out_y,
+                 out_dy, counters):
+    """The loop of :func:`integrate`: steps of ``step`` through the output times ``t_out`` from the
+    state (q, v, a, λ, x) at ``t_out[first]`` (updated in place), storing (q, v) and (v, a) at
+    every ``keep_every``-th output into ``out_y``, ``out_dy`` and calling :data:`record_output`
+    there (at ``t_out[0]`` too when ``first`` is 0: a resumed run has its row);
+    ``counters`` = (steps, Newton iterations, residual evaluations).  After each step the problem
+    may adjust the state (:data:`after_step`), and at each output instant stop the run or hand it
+    back (:data:`at_output`).
+
+    Each step solves for a_{n+1}, λ_{n+1} by Newton's method (module docstring), from the
+    previous a and λ, until the scaled correction h² b' max|Δa| is below ``tolerance`` (1 +
+    max|q_{n+1}|) after at least two iterations.  Returns (status, index of the output being
+    stepped to, time of the failed step or reached, last scaled correction).
+
+    Its helpers are inner functions, compiled into it (numba's closures) and plain Python when it
+    runs interpreted: a run on a Python residual compiles nothing.
+    """
+    b0, b1, g0, g1, alpha_m, alpha_f, b_eff, g_eff = coefficients
+    q, v, a, lam, x = state
+    a_new, lam_new, x_new, q_new, v_new, r, phi, M, A, C, K, matrix, rhs = work
+    n, m = q.shape[0], lam.shape[0]
+
+    def newton_system(damping, scale):
+        """The Newton matrix [M + damping C + scale K, Aᵀ; A, 0] and right-hand side -(r, Φ/scale)
+        (module docstring) into ``matrix`` and ``rhs``; False when an entry is not finite."""
+        for i in range(n):
+            for j in range(n):
+                matrix[i, j] = M[i, j] + damping * C[i, j] + scale * K[i, j]
+            for b in range(m):
+                matrix[i, n + b] = A[b, i]
+                matrix[n + b, i] = A[b, i]
+            rhs[i] = -r[i]
+        for b in range(m):
+            for c in range(m):
+                matrix[n + b, n + c] = 0.0
+            rhs[n + b] = -(phi[b] / scale)
+        for i in range(n + m):
+            if not math.isfinite(rhs[i]):
+                return False
+            for j in range(n + m):
+                if not math.isfinite(matrix[i, j]):
+                    return False
+        return True
+
+    def store(row):
+        """Row ``row`` of the outputs: (q, v) and (v, a)."""
+        for i in range(n):
+            out_y[row, i] = q[i]
+            out_y[row, n + i] = v[i]
+            out_dy[row, i] = v[i]
+            out_dy[row, n + i] = a[i]
+
+    t = t_out[first]
+    if first == 0:
+        store(0)
+        record_output(problem, 0, 0, 0, t, (q, v, a, lam))
+    next_out = first + 1
+    change = 0.0
+    while next_out < t_out.shape[0]:
         h = min(step, t_out[next_out] - t)
         if h <= 1e-14 * max(1.0, abs(t)):
             next_out += 1
             continue
         t_new = t + h
-        a_new, lam_new = a.copy(), lam.copy()
+        a_new[:] = a
+        lam_new[:] = lam
+        scale = h * h * b_eff
         converged = False
         for iteration in range(max_iterations):
-            x_new = ((1.0 - s.alpha_f) * a_new + s.alpha_f * a - s.alpha_m * x) / (1.0 - s.alpha_m)
-            q_new = q + h * v + h * h * (s.b0 * x + s.b1 * x_new)
-            v_new = v + h * (s.g0 * x + s.g1 * x_new)
-            try:
-                r_dyn, phi, M, A, C_t, K_t = residual(t_new, q_new, v_new, a_new, lam_new)
-            except stop_on as error:
-                return fail(str(error))
-            counters["evaluations"] += 1
-            scale = h * h * s.b_eff
-            matrix = np.zeros((n + m, n + m))
-            matrix[:n, :n] = M + h * s.g_eff * C_t + scale * K_t
-            matrix[:n, n:] = A.T
-            matrix[n:, :n] = A
-            rhs = -np.concatenate([r_dyn, phi / scale])
-            try:
-                delta = np.linalg.solve(matrix, rhs)
-            except np.linalg.LinAlgError:
-                return fail(f"singular Newton matrix at t={t_new:.6g} (redundant constraints or a singular "
-                            "configuration)")
-            a_new += delta[:n]
-            lam_new += delta[n:]
-            counters["newton_iterations"] += 1
-            change = scale * np.max(np.abs(delta[:n]), initial=0.0)
-            if not np.all(np.isfinite(delta)):
-                return fail(f"Newton iteration diverged at t={t_new:.6g}")
-            if change < tolerance * (1.0 + np.max(np.abs(q_new))) and iteration > 0:
+            for i in range(n):
+                x_new[i] = ((1.0 - alpha_f) * a_new[i] + alpha_f * a[i] - alpha_m * x[i]) / (1.0 - alpha_m)
+                q_new[i] = q[i] + h * v[i] + h * h * (b0 * x[i] + b1 * x_new[i])
+                v_new[i] = v[i] + h * (g0 * x[i] + g1 * x_new[i])
+            status = residual_terms(problem, counters[0] + 1, 3 if iteration == 0 else 1, t_new,
+                                    (q_new, v_new, a_new, lam_new), (r, phi, M, A, C, K))
+            if status != OK:
+                return status, next_out, t_new, change
+            counters[2] += 1
+            if not newton_system(h * g_eff, scale):
+                return DIVERGED, next_out, t_new, change
+            if not newton_solve(problem, matrix, rhs):
+                return SINGULAR, next_out, t_new, change
+            largest = 0.0
+            for i in range(n):
+                a_new[i] += rhs[i]
+                largest = max(largest, abs(rhs[i]))
+            for j in range(m):
+                lam_new[j] += rhs[n + j]
+            counters[1] += 1
+            change = scale * largest
+            for i in range(n + m):
+                if not math.isfinite(rhs[i]):
+                    return DIVERGED, next_out, t_new, change
+            size = 0.0
+            for i in range(n):
+                size = max(size, abs(q_new[i]))
+            if change < tolerance * (1.0 + size) and iteration > 0:
                 converged = True
                 break
         if not converged:
-            return fail(f"Newton iteration did not converge in {max_iterations} iterations at t={t_new:.6g} "
-                        f"(last correction {change:.3g}); reduce the step")
-        x_new = ((1.0 - s.alpha_f) * a_new + s.alpha_f * a - s.alpha_m * x) / (1.0 - s.alpha_m)
-        q = q + h * v + h * h * (s.b0 * x + s.b1 * x_new)
-        v = v + h * (s.g0 * x + s.g1 * x_new)
-        a, lam, x, t = a_new, lam_new, x_new, t_new
-        counters["steps"] += 1
-        if progress is not None:
-            progress(t)
+            return NOT_CONVERGED, next_out, t_new, change
+        for i in range(n):
+            x_new[i] = ((1.0 - alpha_f) * a_new[i] + alpha_f * a[i] - alpha_m * x[i]) / (1.0 - alpha_m)
+            q[i] = q[i] + h * v[i] + h * h * (b0 * x[i] + b1 * x_new[i])
+            v[i] = v[i] + h * (g0 * x[i] + g1 * x_new[i])
+        a[:] = a_new
+        lam[:] = lam_new
+        x[:] = x_new
+        t = t_new
+        counters[0] += 1
+        after_step(problem, t, state)
         if abs(t - t_out[next_out]) <= 1e-12 * max(1.0, abs(t)):
             if next_out % keep_every == 0:
                 row = next_out // keep_every
-                out_y[row], out_dy[row] = np.concatenate([q, v]), np.concatenate([v, a])
+                store(row)
+                record_output(problem, row, counters[0], 1, t, (q, v, a, lam))
             next_out += 1
-    return Integration(kept, out_y, out_dy, "success", "", counters)
+            status = at_output(problem, t)
+            if status != OK:
+                return status, next_out, t, change
+    return OK, next_out, t, change

@@ -1,0 +1,141 @@
+"""The index-3 DAE of a model with a compiled kernel as :func:`cmbs.integrate.implicit.integrate`
+takes it: backward Euler and generalized-α compiled, model terms and tangents included.
+
+:class:`Index3Problem` carries the model's kernel tuple (:mod:`cmbs.model.compiled`), its inputs
+kernel (:class:`~cmbs.integrate.compiled_rk4.ConstantInputs` or a
+:class:`~cmbs.control.compiled_torque.ComputedTorqueKernel`) and its work arrays.  At an
+iterate (q, v, a, λ) of a step its residual kernel gives::
+
+    r_dyn = M(q) a + A(q)ᵀ λ - Q(q, v, t, u),   Φ(q, t),   M,   A,
+    K_t = ∂r_dyn/∂q,   C_t = ∂r_dyn/∂v   (a and λ held),
+
+the tangents by forward differences with the steps 1e-7 max(1, |x_k|) of each coordinate or
+velocity x_k, the inputs evaluated at each shifted state (a computed-torque law's dependence on
+the state is part of the tangent; a held law keeps the sample it took at the step's first
+iterate).  Its
+records at the outputs are λ (Newton's), u, max|Φ|, max|A v + Φ_t| and f_c = -Aᵀλ.  The Newton
+matrix is solved by Gaussian elimination with partial pivoting
+(:func:`cmbs.dynamics.kkt.solve_in_place`).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from cmbs.dynamics.base import OK
+from cmbs.dynamics.kkt import solve_in_place
+from cmbs.integrate.compiled_rk4 import apply_inputs, record_constraints
+from cmbs.jit import njit
+from cmbs.model.compiled import evaluate, terms_views
+
+
+class Index3Problem(NamedTuple):
+    """A model's index-3 DAE for :func:`cmbs.integrate.implicit.integrate`: its kernel tuple,
+    inputs kernel and inputs u (n_u,), its terms buffer, two scratch vectors (n,) and the records
+    (λ (k, m), u (k, n_u), max|Φ| (k,), max|Φ̇| (k,), f_c (k, n)) of its k outputs."""
+
+    model: NamedTuple
+    inputs: NamedTuple
+    u: np.ndarray
+    buffer: np.ndarray
+    base: np.ndarray
+    shifted: np.ndarray
+    records: tuple
+
+
+def index3_problem(model_kernel: NamedTuple, inputs: NamedTuple, u0: np.ndarray, buffer_size: int, n: int, m: int,
+                   outputs: int) -> Index3Problem:
+    """An :class:`Index3Problem` with inputs starting at ``u0`` and room for ``outputs`` records."""
+    n_u = u0.size
+    records = (np.zeros((outputs, m)), np.zeros((outputs, n_u)), np.zeros(outputs), np.zeros(outputs),
+               np.zeros((outputs, n)))
+    return Index3Problem(model_kernel, inputs, np.array(u0, dtype=float), np.zeros(buffer_size), np.empty(n),
+                         np.empty(n), records)
+
+
+@njit(cache=True)
+def _dynamic_residual(problem, q, v, a, lam, t, step, stage, r):
+    """r = M a + Aᵀλ - Q at (q, v, t) with the inputs applied there (``step``, ``stage`` as
+    :func:`~cmbs.integrate.compiled_rk4.apply_inputs` takes them); the terms stay in the buffer."""
+    n, m = q.shape[0], lam.shape[0]
+    apply_inputs(problem.inputs, step, stage, q, v, t, problem.u)
+    evaluate(problem.model, q, v, t, problem.u, problem.buffer)
+    Q, _, A, _, _, M = terms_views(problem.model, n, m, problem.buffer)
+    for i in range(n):
+        total = -Q[i]
+        for j in range(n):
+            total += M[i, j] * a[j]
+        for b in range(m):
+            total += A[b, i] * lam[b]
+        r[i] = total
+
+
+@njit(cache=True)
+def _residual(problem, step, stage, t, state, out):
+    """The residual kernel (module docstring): r_dyn, Φ, M, A at the iterate ``state`` and the
+    tangents C_t, K_t by forward differences, into ``out``."""
+    q, v, a, lam = state
+    r, phi, M, A, C, K = out
+    n, m = q.shape[0], lam.shape[0]
+    _dynamic_residual(problem, q, v, a, lam, t, step, stage, r)
+    _, phi_now, A_now, _, _, M_now = terms_views(problem.model, n, m, problem.buffer)
+    M[:, :] = M_now
+    A[:, :] = A_now
+    phi[:] = phi_now
+    shifted, column = problem.shifted, problem.base
+    for k in range(n):
+        for i in range(n):
+            shifted[i] = q[i]
+        increment = 1e-7 * max(1.0, abs(q[k]))
+        shifted[k] += increment
+        _dynamic_residual(problem, shifted, v, a, lam, t, step, 1, column)
+        for i in range(n):
+            K[i, k] = (column[i] - r[i]) / increment
+    for k in range(n):
+        for i in range(n):
+            shifted[i] = v[i]
+        increment = 1e-7 * max(1.0, abs(v[k]))
+        shifted[k] += increment
+        _dynamic_residual(problem, q, shifted, a, lam, t, step, 1, column)
+        for i in range(n):
+            C[i, k] = (column[i] - r[i]) / increment
+    return OK
+
+
+@njit(cache=True)
+def _solve(problem, matrix, rhs):
+    """The Newton correction into ``rhs`` (``matrix`` destroyed); False when exactly singular."""
+    return solve_in_place(matrix, rhs)
+
+
+@njit(cache=True)
+def _record(problem, row, step, stage, t, state):
+    """Row ``row`` of the records at the output state: λ, u (applied there), max|Φ|, max|Φ̇|, f_c."""
+    q, v, a, lam = state
+    n, m = q.shape[0], lam.shape[0]
+    lams, us, largest, rates, forces = problem.records
+    apply_inputs(problem.inputs, step, stage, q, v, t, problem.u)
+    evaluate(problem.model, q, v, t, problem.u, problem.buffer)
+    lams[row] = lam
+    us[row] = problem.u
+    record_constraints(terms_views(problem.model, n, m, problem.buffer), v, lam, largest, rates, forces, row)
+
+
+@njit(cache=True)
+def _after_step(problem, t, state):
+    """Nothing: the state is the integrator's."""
+
+
+@njit(cache=True)
+def _at_output(problem, t):
+    """Go on (a compiled run shows no progress)."""
+    return OK
+
+
+Index3Problem.residual = staticmethod(_residual)
+Index3Problem.newton_solve = staticmethod(_solve)
+Index3Problem.record = staticmethod(_record)
+Index3Problem.after_step = staticmethod(_after_step)
+Index3Problem.at_output = staticmethod(_at_output)

@@ -1,0 +1,297 @@
+"""The implicit trapezoidal rule in matrix R's independent coordinates, compiled: the problem
+:func:`cmbs.integrate.implicit.newton_steps` takes for a model with a compiled kernel and
+constant inputs (the driver is :func:`cmbs.simulate`'s ``_run_reduced``, the same for a model
+with Python callables, whose problem is a :class:`~cmbs.integrate.implicit.CallbackProblem`).
+
+The unknowns are the independent coordinates z of the partition (thesis eq. 3.51-3.57).  At an
+iterate (z, ż, z̈) the residual kernel expands it to the full state, from the last accepted one
+with z, ż, z̈ put in: dependent coordinates by Newton on Φ_r = 0 and their velocities from
+A_d ḋ = -A_z ż - Φ_t (:func:`cmbs.integrate.compiled_matrix_r._recover`), dependent accelerations
+from A_d q̈_d = γ_r - A_z z̈; then, with R = [-A_d⁻¹A_z; I] (rows in the partition's order)::
+
+    f = Rᵀ(M q̈ - Q),   M̄ = Rᵀ M R,   C̄ = Rᵀ C_t R,   K̄ = Rᵀ K_t R
+
+where C_t = -∂Q/∂q̇ and K_t = -∂Q/∂q are forward differences over all n coordinates with the
+steps 1e-7 max(1, |x_k|).  After a step the accepted full state is the expansion at the last
+iterate evaluated, and the integrator's z, ż, z̈ are taken from it.  At each output instant
+the partition's κ₂ is tested as :func:`cmbs.integrate.compiled_matrix_r.rk4` tests it (the bound
+from the LU factors first, the SVD where the bound cannot rule it out); above the limit the run
+is handed back to Python, which chooses the partition again
+(:meth:`cmbs.dynamics.matrix_r.MatrixRSolver.update_partition`) and resumes.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+from cmbs.dynamics.base import OK
+from cmbs.dynamics.kkt import lu_solve, solve_in_place
+from cmbs.integrate.compiled_matrix_r import (NOT_CONVERGED, SINGULAR_CONDITION, _condition, _condition_two_bound,
+                                              _factor_dependent, _recover)
+from cmbs.integrate.implicit import HANDED_BACK, STOPPED
+from cmbs.jit import njit
+from cmbs.model.compiled import evaluate, terms_views
+
+#: Why a :class:`ReducedProblem` stopped its run (``failure[0]``): the position recovery did not
+#: converge, it met a non-finite Φ or an exactly singular A_d, the forces or the mass matrix are
+#: not finite.
+RECOVERY_NOT_CONVERGED, RECOVERY_FAILED, NON_FINITE_TERMS = 1, 2, 3
+
+
+class ReducedProblem(NamedTuple):
+    """The trapezoidal rule's problem for one partition (rows, dependent, independent): the model's
+    kernel, its constant inputs u (and zeros), terms buffer and number of constraints; the
+    recovery's tolerance and iterations; the κ₂ above which the run is handed back; the accepted
+    full state ``full`` and the last expansion ``last`` (each q, q̇, q̈), shared by the problems
+    of a run; its work arrays; ``worst`` (largest κ₁ met by a recovery, its time); ``failure``
+    (why the problem stopped the run: code, value, time); ``records`` (q, q̇, q̈ of the kept
+    outputs) and the model's name for the messages."""
+
+    model: NamedTuple
+    u: np.ndarray
+    u_zero: np.ndarray
+    buffer: np.ndarray
+    m: int
+    rows: np.ndarray
+    dependent: np.ndarray
+    independent: np.ndarray
+    tolerance: float
+    iterations: int
+    limit: float
+    full: tuple
+    last: tuple
+    work: tuple
+    worst: np.ndarray
+    failure: np.ndarray
+    records: tuple
+    name: str
+
+    def stop_message(self) -> str:
+        """The message of the failure the problem stopped the run for (as the Python path's)."""
+        code, value, t = self.failure
+        if code == RECOVERY_NOT_CONVERGED:
+            return (f"model {self.name!r} at t={t:.6g}: matrix-r position recovery did not converge in "
+                    f"{self.iterations} iterations (residual {value:.3g})")
+        if code == RECOVERY_FAILED:
+            return (f"model {self.name!r} at t={t:.6g}: matrix-r position recovery met non-finite constraints or "
+                    "a singular block A_d")
+        return f"model {self.name!r} at t={t:.6g}: non-finite forces or mass matrix"
+
+
+def partition_limit(solver: object) -> float:
+    """κ₂ of the partition above which :meth:`MatrixRSolver.update_partition` acts: ``condition_growth``
+    times its value when chosen (automatic partition), at most 1e12, where it raises."""
+    if solver.user is not None:
+        return SINGULAR_CONDITION
+    return min(solver.p.condition_growth * solver.reference_condition, SINGULAR_CONDITION)
+
+
+def reduced_problems(kernel: NamedTuple, model: object, solver: object, u: np.ndarray, full: tuple, last: tuple,
+                     outputs: int) -> Callable[[], ReducedProblem]:
+    """The maker of the :class:`ReducedProblem` of ``model`` (``kernel``) with inputs ``u`` for
+    the current partition of ``solver`` (a :class:`~cmbs.dynamics.matrix_r.MatrixRSolver`), all
+    sharing the full states ``full`` and ``last``, the terms buffer, ``worst``, ``failure`` and
+    the records of ``outputs`` outputs."""
+    n, m = model.n, model.m
+    buffer, worst, failure = model.new_terms().buffer.copy(), np.zeros(2), np.zeros(3)
+    records = (np.zeros((outputs, n)), np.zeros((outputs, n)), np.zeros((outputs, n)))
+    parameters = solver.p
+
+    def make() -> ReducedProblem:
+        part = solver.partition
+        rows, dependent, independent = (np.ascontiguousarray(part.rows, dtype=np.int64),
+                                        np.ascontiguousarray(part.dependent, dtype=np.int64),
+                                        np.ascontiguousarray(part.independent, dtype=np.int64))
+        return ReducedProblem(kernel, u, np.zeros(u.size), buffer, m, rows, dependent, independent,
+                              float(parameters.position_tolerance), int(parameters.max_iterations),
+                              float(partition_limit(solver)), full, last,
+                              reduced_work(n, independent.size, rows.size), worst, failure, records, model.name)
+
+    return make
+
+
+def reduced_work(n: int, k: int, r: int) -> tuple:
+    """The work arrays of a :class:`ReducedProblem` with ``k`` independent coordinates and ``r``
+    dependent ones: A_d's LU factors and pivots, a side vector, R, M, M q̈ - Q, -Q, X R (X = M, K_t
+    or C_t), K_t, C_t, a shifted state, zeros (n)."""
+    return (np.empty((r, r)), np.empty(r, dtype=np.int64), np.empty(r), np.empty((n, k)), np.empty((n, n)),
+            np.empty(n), np.empty(n), np.empty((n, k)), np.empty((n, n)), np.empty((n, n)), np.empty(n), np.zeros(n))
+
+
+@njit(cache=True)
+def _expand(problem, t, z, zd, zdd):
+    """The full state of the iterate (z, ż, z̈) into ``problem.last`` and the terms at it into the
+    buffer (A_d's LU factors at it in the work arrays); returns OK, or STOPPED with the
+    ``failure`` noted."""
+    q, qd, qdd = problem.last
+    full_q, full_qd, full_qdd = problem.full
+    Ad, pivots, side = problem.work[0], problem.work[1], problem.work[2]
+    rows, dependent, independent = problem.rows, problem.dependent, problem.independent
+    n, m, r = q.shape[0], problem.m, rows.shape[0]
+    q[:] = full_q
+    qd[:] = full_qd
+    qdd[:] = full_qdd
+    for b in range(independent.shape[0]):
+        q[independent[b]] = z[b]
+        qd[independent[b]] = zd[b]
+        qdd[independent[b]] = zdd[b]
+    status = _recover(problem.model, q, qd, t, problem.u_zero, problem.buffer, n, m, rows, dependent, independent,
+                      problem.tolerance, problem.iterations, np.inf, Ad, pivots, side, problem.worst)
+    if status != OK:
+        largest = 0.0
+        for a in range(r):
+            largest = max(largest, abs(problem.buffer[n + rows[a]]))
+        code = RECOVERY_NOT_CONVERGED if status == NOT_CONVERGED else RECOVERY_FAILED
+        problem.failure[0], problem.failure[1], problem.failure[2] = code, largest, t
+        return STOPPED
+    evaluate(problem.model, q, qd, t, problem.u, problem.buffer)
+    Q, _, A, gamma, _, M = terms_views(problem.model, n, m, problem.buffer)
+    for a in range(r):                      # A_d q̈_d = γ_r - A_z z̈ (A_d's factors are _recover's)
+        total = gamma[rows[a]]
+        for j in range(n):
+            total -= A[rows[a], j] * qdd[j]
+        side[a] = total
+    lu_solve(Ad, pivots, side)
+    for j in range(r):
+        qdd[dependent[j]] += side[j]
+    for i in range(n):
+        if not math.isfinite(Q[i]):
+            problem.failure[0], problem.failure[1], problem.failure[2] = NON_FINITE_TERMS, 0.0, t
+            return STOPPED
+        for j in range(n):
+            if not math.isfinite(M[i, j]):
+                problem.failure[0], problem.failure[1], problem.failure[2] = NON_FINITE_TERMS, 0.0, t
+                return STOPPED
+    return OK
+
+
+@njit(cache=True)
+def _reduce(R, X, XR, out):
+    """out = Rᵀ X R (XR: scratch n x k)."""
+    n, k = R.shape
+    for i in range(n):
+        for c in range(k):
+            total = 0.0
+            for j in range(n):
+                total += X[i, j] * R[j, c]
+            XR[i, c] = total
+    for b in range(k):
+        for c in range(k):
+            total = 0.0
+            for i in range(n):
+                total += R[i, b] * XR[i, c]
+            out[b, c] = total
+
+
+@njit(cache=True)
+def _residual(problem, step, stage, t, state, out):
+    """The residual kernel (module docstring): f, M̄, C̄, K̄ at the iterate ``state`` into ``out``."""
+    z, zd, zdd, _ = state
+    f, _, M_bar, _, C_bar, K_bar = out
+    status = _expand(problem, t, z, zd, zdd)
+    if status != OK:
+        return status
+    q, qd, qdd = problem.last
+    Ad, pivots, side, R, mass, force, base, XR, K, C, shifted, _ = problem.work
+    rows, dependent, independent = problem.rows, problem.dependent, problem.independent
+    n, m, k, r = q.shape[0], problem.m, independent.shape[0], rows.shape[0]
+    Q, _, A, _, _, M = terms_views(problem.model, n, m, problem.buffer)
+    R[:, :] = 0.0
+    for b in range(k):                      # R's column b: e_z(b) - A_d⁻¹ A_z e_b on the dependent rows
+        R[independent[b], b] = 1.0
+        for a in range(r):
+            side[a] = A[rows[a], independent[b]]
+        lu_solve(Ad, pivots, side)
+        for j in range(r):
+            R[dependent[j], b] = -side[j]
+    for i in range(n):
+        total = -Q[i]
+        for j in range(n):
+            mass[i, j] = M[i, j]
+            total += M[i, j] * qdd[j]
+        force[i] = total
+        base[i] = -Q[i]
+    for b in range(k):
+        total = 0.0
+        for i in range(n):
+            total += R[i, b] * force[i]
+        f[b] = total
+    _reduce(R, mass, XR, M_bar)
+    u = problem.u
+    for c in range(n):                      # K_t = -∂Q/∂q, C_t = -∂Q/∂q̇ by forward differences
+        shifted[:] = q
+        increment = 1e-7 * max(1.0, abs(q[c]))
+        shifted[c] += increment
+        evaluate(problem.model, shifted, qd, t, u, problem.buffer)
+        for i in range(n):
+            K[i, c] = (-problem.buffer[i] - base[i]) / increment
+    for c in range(n):
+        shifted[:] = qd
+        increment = 1e-7 * max(1.0, abs(qd[c]))
+        shifted[c] += increment
+        evaluate(problem.model, q, shifted, t, u, problem.buffer)
+        for i in range(n):
+            C[i, c] = (-problem.buffer[i] - base[i]) / increment
+    _reduce(R, K, XR, K_bar)
+    _reduce(R, C, XR, C_bar)
+    return OK
+
+
+@njit(cache=True)
+def _solve(problem, matrix, rhs):
+    """The Newton correction into ``rhs`` (``matrix`` destroyed); False when exactly singular."""
+    return solve_in_place(matrix, rhs)
+
+
+@njit(cache=True)
+def _record(problem, row, step, stage, t, state):
+    """Row ``row`` of the records: the accepted full state."""
+    records_q, records_qd, records_qdd = problem.records
+    full_q, full_qd, full_qdd = problem.full
+    records_q[row] = full_q
+    records_qd[row] = full_qd
+    records_qdd[row] = full_qdd
+
+
+@njit(cache=True)
+def _after_step(problem, t, state):
+    """The accepted full state is the last expansion; the integrator's z, ż, z̈ (and the auxiliary
+    acceleration) are taken from it."""
+    z, zd, zdd, _, x = state
+    full_q, full_qd, full_qdd = problem.full
+    last_q, last_qd, last_qdd = problem.last
+    full_q[:] = last_q
+    full_qd[:] = last_qd
+    full_qdd[:] = last_qdd
+    for b in range(problem.independent.shape[0]):
+        c = problem.independent[b]
+        z[b] = full_q[c]
+        zd[b] = full_qd[c]
+        zdd[b] = full_qdd[c]
+        x[b] = full_qdd[c]
+
+
+@njit(cache=True)
+def _at_output(problem, t):
+    """HANDED_BACK when κ₂ of the partition at the accepted state exceeds ``limit`` (or A_d is
+    singular there), else OK."""
+    full_q = problem.full[0]
+    Ad, pivots, side, zeros = problem.work[0], problem.work[1], problem.work[2], problem.work[11]
+    n, m, rows, dependent = full_q.shape[0], problem.m, problem.rows, problem.dependent
+    evaluate(problem.model, full_q, zeros, t, problem.u_zero, problem.buffer)
+    if not _factor_dependent(problem.buffer, n, m, rows, dependent, Ad, pivots):
+        return HANDED_BACK
+    if _condition_two_bound(problem.buffer, n, m, rows, dependent, Ad, pivots, side) > problem.limit \
+            and _condition(problem.buffer, n, m, rows, dependent) > problem.limit:
+        return HANDED_BACK
+    return OK
+
+
+ReducedProblem.residual = staticmethod(_residual)
+ReducedProblem.newton_solve = staticmethod(_solve)
+ReducedProblem.record = staticmethod(_record)
+ReducedProblem.after_step = staticmethod(_after_step)
+ReducedProblem.at_output = staticmethod(_at_output)
