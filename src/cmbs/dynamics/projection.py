@@ -204,9 +204,10 @@ def _by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     augmented matrix is regular, i.e. no motion x ≠ 0 with A x = 0 has M x = 0 (M being
     positive semi-definite), and each constraint inertia matrix is then regular.  For M_c x = 0
     or M̄ x = 0, the (I - P) part gives (I - P) M̂ (I - P) x = 0, so (I - P) x = 0, as
-    (I - P) M̂ (I - P) is definite on range(Aᵀ): M is positive definite where the Cholesky factor
-    of a joint model's M exists, and M̂ = M + s(I - P) is used where M has massless coordinates
-    (a natural model's constant M, whose massive block is definite); for M_μ x = 0 it gives
+    (I - P) M̂ (I - P) is definite on range(Aᵀ): M is positive definite where this path factors
+    it by Cholesky (a joint-coordinate or user model's M), and M̂ = M + s(I - P) is used where M
+    has massless coordinates (a natural model's constant M, whose massive block the workspace
+    found definite: M's smallest eigenvalue is 0 at q0); for M_μ x = 0 it gives
     μ (I - P) x = 0.  Then x = P x ∈ null(A) and the P part gives P M P x = 0, so xᵀ M x = 0 and
     M x = 0: x = 0.  The multipliers are the same too: f_c = (I - P)(M q̈ - Q) = -Aᵀλ and
     λ = -(Aᵀ)⁺ f_c.
