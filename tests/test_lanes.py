@@ -51,12 +51,14 @@ def _assert_identical(lanes, single):
         np.testing.assert_array_equal(a, b)
 
 
-@pytest.mark.parametrize("formulation", ["lagrange", "baumgarte", "projection"])
-def test_four_bar_lanes_equal_the_one_variant_loop_bit_for_bit(formulation):
+@pytest.mark.parametrize("formulation, options", [("lagrange", {}), ("baumgarte", {}), ("projection", {}),
+                                                  ("projection", {"inertia": "symmetric"}),
+                                                  ("projection", {"inertia": "parameterised"})])
+def test_four_bar_lanes_equal_the_one_variant_loop_bit_for_bit(formulation, options):
     """11 variants: a full block of 8 and a last block of 3 (its other lanes are padding)."""
     model = cmbs.load("four-bar").without_drivers()
     QD0 = _initial_velocities(model, np.linspace(-2.0, 2.0, 11), "alpha")
-    lanes, single = _both(model, QD0, make_formulation(formulation), steps=300, every=7)
+    lanes, single = _both(model, QD0, make_formulation(formulation, **options), steps=300, every=7)
     assert set(lanes[3]) == {OK} and set(lanes[4]) == {300 // 7 + 1}
     assert np.ptp(lanes[0][:, -1, -1]) > 0.5          # the variants really differ
     _assert_identical(lanes, single)
@@ -101,12 +103,14 @@ def test_variants_reaching_the_singular_position_leave_their_lanes():
     _assert_identical(lanes, single)
 
 
-def test_projection_variants_leave_their_lanes_for_the_svd_through_the_singular_position():
+@pytest.mark.parametrize("inertia", ["standard", "symmetric", "parameterised"])
+def test_projection_variants_leave_their_lanes_for_the_svd_through_the_singular_position(inertia):
     """The same slider-crank under the projection: the variants near the singular position leave
-    their lanes for the one-variant loop's SVD there and run to the end through it."""
+    their lanes for the one-variant loop's SVD there (with their inertia) and run to the end
+    through it; the lanes serve every inertia (each has the Lagrange solution where they run)."""
     model = cmbs.load("slider-crank").without_drivers()
     QD0 = _initial_velocities(model, np.linspace(1.0, 3.0, 9), "theta1")
-    lanes, single = _both(model, QD0, make_formulation("projection"), steps=600, every=5)
+    lanes, single = _both(model, QD0, make_formulation("projection", inertia=inertia), steps=600, every=5)
     assert set(lanes[3]) == {OK} and set(lanes[4]) == {600 // 5 + 1}
     assert np.sum(lanes[0][:, -1, 4] > np.pi / 2) >= 5      # from 45° through 90°
     _assert_identical(lanes, single)

@@ -107,9 +107,9 @@ class CompiledDynamics:
     model
         A natural- or joint-coordinate model without Python-callable time functions.
     formulation
-        A name or a :class:`~cmbs.dynamics.Formulation` with a compiled solve (``lagrange``,
-        ``baumgarte``, ``penalty``, ``projection`` with the standard inertia, ``udwadia-kalaba``
-        without a non-ideal term).
+        A name or a :class:`~cmbs.dynamics.Formulation` with a compiled solve (``lagrange`` and
+        ``baumgarte`` without ``least_squares``, ``penalty``, ``projection`` with any inertia,
+        ``udwadia-kalaba`` without a non-ideal term).
     """
 
     def __init__(self, model: Model, formulation: str | Formulation = "lagrange"):
@@ -123,8 +123,8 @@ class CompiledDynamics:
         if solve_kernel is None:
             raise CmbsError(f"the compiled field cannot run model {model.name!r} with formulation {chosen.name!r}: "
                             "it takes natural- or joint-coordinate models without Python time functions, with "
-                            "a formulation that has a compiled solve (lagrange, baumgarte, penalty, projection with "
-                            "the standard inertia, udwadia-kalaba without a nonideal term)")
+                            "a formulation that has a compiled solve (lagrange and baumgarte without least_squares, "
+                            "penalty, projection, udwadia-kalaba without a nonideal term)")
         # bound once: a call then passes (and numba unboxes) only the state and the outputs
         self._field = functools.partial(_bound_field_at, Bound(kernel, solve_kernel, model.new_terms().buffer))
         self._no_input = np.zeros(model.n_u)

@@ -19,6 +19,10 @@ full row rank and the minimum-norm multiplier otherwise.
 Natural-coordinate models have massless angle/distance coordinates (M only semi-definite);
 then M is replaced by M̂ = M + s(I - P) with s = trace(M)/n.  Since P(I - P) = 0, P M̂ = P M and
 the solution is unchanged, while M_c and M̄ become regular.
+
+One compiled solve, :func:`_solve` on a :class:`ProjectionKernel` made when the formulation is
+bound, serves every inertia, the Python loop (:meth:`ProjectionSolver.accelerations`) and the
+compiled loops alike.
 """
 
 from __future__ import annotations
@@ -31,11 +35,13 @@ import numpy as np
 from cmbs.dynamics.base import OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.kkt import band_kkt, bounds_meeting, packed_workspace, schur_solve, solve_in_place, \
     unpack_workspace
-from cmbs.errors import CmbsError
+from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.jit import njit, njit_borrowing
 from cmbs.model.model import Model, Terms
 
+#: The constraint inertia matrices; a :class:`ProjectionKernel` carries one by its index here.
 INERTIAS = ("standard", "symmetric", "parameterised")
+STANDARD, SYMMETRIC, PARAMETERISED = range(len(INERTIAS))
 
 
 @dataclass(frozen=True)
@@ -69,12 +75,9 @@ class Projection:
     def bind(self, model: Model) -> "ProjectionSolver":
         return ProjectionSolver(model, self)
 
-    def compiled(self, solver: "ProjectionSolver", model: Model) -> "ProjectionKernel | None":
-        """The solve of the compiled loops (the standard inertia; None for the others)."""
-        if self.inertia != "standard":
-            return None
-        return ProjectionKernel(float(self.threshold), float(solver.scale), bool(solver.semi_definite),
-                                np.ascontiguousarray(solver.row_scale, dtype=float), *packed_workspace(model))
+    def compiled(self, solver: "ProjectionSolver", model: Model) -> "ProjectionKernel":
+        """The solve of the compiled loops: the bound solver's own (every inertia)."""
+        return solver.kernel
 
 
 def pseudo_inverse(A: np.ndarray, threshold: float, row_scale: np.ndarray | None = None
@@ -107,43 +110,52 @@ def reference_row_scale(model: Model) -> np.ndarray:
 
 
 class ProjectionSolver(StatelessSolver):
+    """The projection for one run: each evaluation is one call of the compiled :func:`_solve` on
+    the :class:`ProjectionKernel` made here (the compiled loops call the same).  M counts as
+    semi-definite (and is replaced by M̂) when its smallest eigenvalue at q0 is at most 1e-12 of
+    its largest entry; s = trace(M)/n at q0."""
+
     def __init__(self, model: Model, parameters: Projection):
         super().__init__(model)
         self.p = parameters
         M0 = model.mass_matrix(model.q0)
         self.semi_definite = bool(np.linalg.eigvalsh(M0)[0] <= 1e-12 * max(np.abs(M0).max(), 1.0))
         self.scale = float(np.trace(M0)) / model.n
-        self.identity = np.eye(model.n)
         self.row_scale = reference_row_scale(model)
+        self.kernel = ProjectionKernel(INERTIAS.index(parameters.inertia),
+                                       float(self.scale if parameters.mu is None else parameters.mu),
+                                       float(parameters.threshold), self.scale, self.semi_definite,
+                                       np.ascontiguousarray(self.row_scale, dtype=float), *packed_workspace(model))
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
-        M, Q = terms.M, terms.Q
-        pinv, P = pseudo_inverse(terms.A, self.p.threshold, self.row_scale)
-        I_P = self.identity - P
-        constrained = pinv @ terms.gamma
-        M_hat = M + self.scale * I_P if self.semi_definite else M
-        PM = P @ M
-        if self.p.inertia == "standard":
-            matrix = M_hat + PM - M_hat @ P
-            rhs = P @ Q + M_hat @ constrained
-        elif self.p.inertia == "symmetric":
-            matrix = P @ M_hat @ P + I_P @ M_hat @ I_P
-            rhs = P @ Q + (self.identity - 2.0 * P) @ (M_hat @ constrained)
+        """Accelerations, multipliers and f_c = -Aᵀλ at one state; raises
+        :class:`~cmbs.errors.SingularSystemError` when the constraint inertia matrix is singular."""
+        qdd, lam = np.empty(self.model.n), np.empty(self.model.m)
+        status = _solve(self.kernel, (terms.Q, terms.phi, terms.A, terms.gamma, terms.phi_t, terms.M), t, qd, qdd, lam)
+        if status != OK:
+            raise SingularSystemError(self._singular_message(t))
+        return Accelerations(qdd, lam, -terms.A.T @ lam)
+
+    def _singular_message(self, t: float) -> str:
+        """Why :func:`_solve` found the constraint inertia matrix singular: M x = 0 for a motion x
+        the constraints allow, or an M that is not what q0 showed (M̂ is decided there)."""
+        if self.semi_definite:
+            other = f"or M is not positive semi-definite (M + s(I - P) used, s = {self.scale:.3g})"
         else:
-            mu = self.p.mu if self.p.mu is not None else self.scale
-            matrix = PM + mu * I_P
-            rhs = P @ Q + mu * constrained
-        qdd = np.linalg.solve(matrix, rhs)
-        force = I_P @ (M @ qdd - Q)
-        lam = -pinv.T @ force
-        return Accelerations(qdd, lam, force)
+            other = "or M, positive definite at q0 and therefore used as it is, has lost rank or definiteness"
+        return (f"model {self.model.name!r} at t={t:.6g}: the projection's {self.p.inertia} constraint inertia matrix "
+                f"is singular: a motion the constraints allow carries no mass (M x = 0 for some x != 0 with A x = 0), "
+                f"{other}")
 
 
 class ProjectionKernel(NamedTuple):
-    """The projection with the standard inertia as the compiled loops take it: the SVD
-    threshold, the mass-regularisation scale s and whether M is semi-definite, the row scale and
-    the packed :func:`cmbs.dynamics.kkt.schur_workspace`."""
+    """The projection as :func:`_solve` takes it: the constraint inertia (an index into
+    INERTIAS) and μ of the parameterised one, the SVD threshold, the mass-regularisation scale s
+    and whether M is semi-definite, the row scale and the packed
+    :func:`cmbs.dynamics.kkt.schur_workspace`."""
 
+    inertia: int
+    mu: float
     threshold: float
     scale: float
     semi_definite: bool
@@ -155,14 +167,16 @@ class ProjectionKernel(NamedTuple):
 
 @njit_borrowing(cache=True)
 def _solve(kernel, terms, t, qd, qdd, lam):
-    """Aghili's standard projection at the terms (Q, Φ, A, γ, Φ_t, M): by the augmented system
-    where A is certified regular (:func:`_by_schur`, the same solution there), else by the SVD
-    (:func:`_by_svd`); SINGULAR only when the constraint inertia matrix is exactly singular."""
+    """Aghili's projection with the kernel's constraint inertia at the terms (Q, Φ, A, γ, Φ_t, M):
+    by the augmented system where A is certified regular (:func:`_by_schur`, the same solution
+    there for every inertia), else by the SVD (:func:`_by_svd`); SINGULAR only when the
+    constraint inertia matrix is exactly singular."""
     Q, phi, A, gamma, phi_t, M = terms
     schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
     if _by_schur(M, Q, A, gamma, kernel.row_scale, kernel.threshold, schur, qdd, lam):
         return OK
-    if _by_svd(M, Q, A, gamma, kernel.row_scale, kernel.threshold, kernel.scale, kernel.semi_definite, qdd, lam):
+    if _by_svd(M, Q, A, gamma, kernel.row_scale, kernel.threshold, kernel.inertia, kernel.mu, kernel.scale,
+               kernel.semi_definite, qdd, lam):
         return OK
     return SINGULAR
 
@@ -174,13 +188,30 @@ PROJECTION_REGULAR = 1e-4
 
 @njit_borrowing(cache=True, inline="always")
 def _by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
-    """Aghili's standard projection solution at a regular configuration, by the augmented system.
+    """Aghili's projection solution at a regular configuration, for each of the three inertias,
+    by the augmented system [M Aᵀ; A 0][q̈; λ] = [Q; γ].
 
     When A has full row rank and no singular value of the row-scaled DA falls below the SVD
-    ``threshold``, the pseudo-inverse discards nothing, A⁺ = Aᵀ(AAᵀ)⁻¹ and P = I - A⁺A, and
-    (M̂ + PM - M̂P) q̈ = PQ + M̂A⁺γ holds exactly when P(Mq̈ - Q) = 0 and Aq̈ = γ (Aghili 2005,
-    §IV: the two projections of the equation), i.e. when Mq̈ + Aᵀλ = Q, Aq̈ = γ for some λ: the
-    Lagrange solution, unique here, with the same multipliers (λ = -(Aᵀ)⁺f_c and f_c = -Aᵀλ).
+    ``threshold``, the pseudo-inverse discards nothing: A⁺ = Aᵀ(AAᵀ)⁻¹ and P = I - A⁺A.  Let q̈
+    solve the augmented system.  Then P M q̈ = P Q (P Aᵀ = 0) and (I - P) q̈ = A⁺A q̈ = A⁺γ, so
+    with w = A⁺γ and P M̂ = P M (Aghili 2005, §IV: the two projections of the equation):
+
+    - standard: M_c = P M + M̂ (I - P), so M_c q̈ = P M q̈ + M̂ w = P Q + M̂ A⁺γ;
+    - symmetric: M̄ q̈ = P M̂ (q̈ - w) + (I - P) M̂ w = P Q + (I - 2P) M̂ A⁺γ;
+    - parameterised: M_μ q̈ = P M q̈ + μ w = P Q + μ A⁺γ.
+
+    q̈ solves each system, and it is the only solution: the path succeeds only when the
+    augmented matrix is regular, i.e. no motion x ≠ 0 with A x = 0 has M x = 0 (M being
+    positive semi-definite), and each constraint inertia matrix is then regular.  For M_c x = 0
+    or M̄ x = 0, the (I - P) part gives (I - P) M̂ (I - P) x = 0, so (I - P) x = 0, as
+    (I - P) M̂ (I - P) is definite on range(Aᵀ): M is positive definite where this path factors
+    it by Cholesky (a joint-coordinate or user model's M), and M̂ = M + s(I - P) is used where M
+    has massless coordinates (a natural model's constant M, whose massive block the workspace
+    found definite: M's smallest eigenvalue is 0 at q0); for M_μ x = 0 it gives
+    μ (I - P) x = 0.  Then x = P x ∈ null(A) and the P part gives P M P x = 0, so xᵀ M x = 0 and
+    M x = 0: x = 0.  The multipliers are the same too: f_c = (I - P)(M q̈ - Q) = -Aᵀλ and
+    λ = -(Aᵀ)⁺ f_c.
+
     Taken only when the Gram-matrix bounds of :func:`~cmbs.dynamics.kkt.bounds` certify σ_min(DA) >=
     PROJECTION_REGULAR·max(σ_max, 1) and σ_min > ``threshold``; returns False otherwise (near
     singular positions, redundant constraints), and the caller takes the SVD path.  Solved by
@@ -197,13 +228,13 @@ def _by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     return schur_solve(M, Q, A, gamma, schur, qdd, lam)
 
 
-
 @njit(cache=True)
-def _by_svd(M, Q, A, gamma, row_scale, threshold, scale, semi_definite, qdd, lam):
-    """Aghili's standard projection solution with the SVD pseudo-inverse of the row-scaled A,
-    singular values up to the threshold ``threshold`` discarded (any rank of A); M̂ = M + s(I - P)
-    when ``semi_definite`` flags a semi-definite M (s = ``scale``).  Returns False when
-    the constraint inertia matrix is exactly singular."""
+def _by_svd(M, Q, A, gamma, row_scale, threshold, inertia, mu, scale, semi_definite, qdd, lam):
+    """Aghili's projection solution with the constraint inertia ``inertia`` (STANDARD, SYMMETRIC
+    or PARAMETERISED, scalar ``mu``) and the SVD pseudo-inverse of the row-scaled A, singular
+    values up to ``threshold`` discarded (any rank of A); M̂ = M + s(I - P) when
+    ``semi_definite`` flags a semi-definite M (s = ``scale``).  Returns False when the
+    constraint inertia matrix is exactly singular."""
     n = M.shape[0]
     m = A.shape[0]
     pinv = np.zeros((n, m))
@@ -218,8 +249,16 @@ def _by_svd(M, Q, A, gamma, row_scale, threshold, scale, semi_definite, qdd, lam
                 pinv += np.outer(v / sigma[k], U[:, k] * row_scale)
     I_P = np.eye(n) - P
     M_hat = M + scale * I_P if semi_definite else M.copy()
-    matrix = M_hat + P @ M - M_hat @ P
-    solution = P @ Q + M_hat @ (pinv @ gamma)
+    constrained = pinv @ gamma                      # A⁺γ
+    if inertia == STANDARD:
+        matrix = M_hat + P @ M - M_hat @ P
+        solution = P @ Q + M_hat @ constrained
+    elif inertia == SYMMETRIC:
+        matrix = P @ M_hat @ P + I_P @ M_hat @ I_P
+        solution = P @ Q + (np.eye(n) - 2.0 * P) @ (M_hat @ constrained)
+    else:
+        matrix = P @ M + mu * I_P
+        solution = P @ Q + mu * constrained
     if not solve_in_place(matrix, solution):
         return False
     qdd[:] = solution
@@ -231,8 +270,8 @@ def _by_svd(M, Q, A, gamma, row_scale, threshold, scale, semi_definite, qdd, lam
 @njit(cache=True)
 def _fresh(kernel):
     """A copy of ``kernel`` with work arrays of its own (for runs beside each other)."""
-    return ProjectionKernel(kernel.threshold, kernel.scale, kernel.semi_definite, kernel.row_scale,
-                            kernel.floats.copy(), kernel.integers.copy(), kernel.layout)
+    return ProjectionKernel(kernel.inertia, kernel.mu, kernel.threshold, kernel.scale, kernel.semi_definite,
+                            kernel.row_scale, kernel.floats.copy(), kernel.integers.copy(), kernel.layout)
 
 
 ProjectionKernel.solve = staticmethod(_solve)

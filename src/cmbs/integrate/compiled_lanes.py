@@ -10,7 +10,7 @@ innermost, on lane-major arrays (..., LANES), over the structural non-zeros of A
 advance.
 
 Every lane performs the operations :func:`cmbs.integrate.compiled_rk4.rk4` performs for its
-variant (Lagrange, Baumgarte or the standard projection), in the same order: the results are bit
+variant (Lagrange, Baumgarte or the projection), in the same order: the results are bit
 for bit those of the one-variant loop (tests/test_lanes.py).  The common path of a stage is that
 of :func:`cmbs.dynamics.field.field` where the rank certificate of A holds
 (:func:`cmbs.dynamics.kkt.certify`, or the projection's regularity test, with the reference
@@ -20,7 +20,10 @@ variant whose stage leaves that path (terms or q̈ not finite, a certificate tha
 a factorisation that fails) leaves its lanes at that step and finishes in the one-variant loop
 from the start of the step, with the state and certificate reference it had then: the same
 stages again, the same results, including a stop at a singular position or the projection's SVD
-through it.
+through it.  The projection's three constraint inertias share the lanes: where the certificate
+holds each has the Lagrange solution (:func:`cmbs.dynamics.projection._by_schur`, the path the
+one-variant loop takes there for every inertia), and a variant that leaves continues with its
+formulation kernel, its own inertia's SVD included.
 """
 
 from __future__ import annotations
@@ -48,8 +51,8 @@ LAGRANGE, BAUMGARTE, PROJECTION = 0, 1, 2
 def lane_setup(model: NamedTuple, formulation: NamedTuple, m: int, n: int) -> tuple | None:
     """(method, parameters, schur, plan) of :func:`rk4_lanes` for a model's and a formulation's
     kernels, or None when lanes cannot run the batch: a natural-coordinate model under Lagrange,
-    Baumgarte or the standard projection (``parameters`` = (ξ, ω, tolerance or threshold, s,
-    semi-definite flag); ``schur`` the formulation's unpacked workspace), with :func:`lane_plan`."""
+    Baumgarte or the projection with any inertia (``parameters`` = (ξ, ω, tolerance or threshold,
+    s, semi-definite flag); ``schur`` the formulation's unpacked workspace), with :func:`lane_plan`."""
     if not isinstance(model, NaturalKernel):
         return None
     if isinstance(formulation, LagrangeKernel):
