@@ -85,8 +85,10 @@ def type_dispatch(attribute: str) -> Callable:
     a loop taking ``data`` compiles only the kernel of that class and its specialisation is
     cached like any other; interpreted, it is a plain attribute lookup.  Adding a kind of model
     or a formulation is adding a class and its kernel: no code of the loops changes.  The
-    kernel's body is the overload's implementation, compiled into its caller (numba's
-    ``inline="always"``): no call between the caller and the kernel."""
+    overload's implementation is a forwarding function compiled into its caller (numba's
+    inlining), so the dispatch costs nothing beside the kernel's call.  (Inlining the kernel's
+    own body instead saves about 2 s of a first compilation but changed the results of a
+    kernel with problem hooks, the compiled trapezoidal rule: the kernels stay calls.)"""
 
     def dispatch(data, *args):
         return getattr(type(data), attribute)(data, *args)
@@ -97,9 +99,22 @@ def type_dispatch(attribute: str) -> Callable:
 
         @overload(dispatch, inline="always", strict=False)
         def _resolved(data, *args):
-            kernel = getattr(data.instance_class, attribute)
-            return getattr(kernel, "py_func", kernel)
+            return _forwarding(getattr(data.instance_class, attribute), 1 + len(args))
     return dispatch
+
+
+def _forwarding(kernel: Callable, arity: int) -> Callable:
+    """``lambda data, a, b, ...: kernel(data, a, b, ...)`` with ``arity`` parameters (numba inlines
+    only functions with named parameters)."""
+    forwards = {1: lambda d: kernel(d),
+                2: lambda d, a: kernel(d, a),
+                3: lambda d, a, b: kernel(d, a, b),
+                4: lambda d, a, b, c: kernel(d, a, b, c),
+                5: lambda d, a, b, c, e: kernel(d, a, b, c, e),
+                6: lambda d, a, b, c, e, f: kernel(d, a, b, c, e, f),
+                7: lambda d, a, b, c, e, f, g: kernel(d, a, b, c, e, f, g),
+                8: lambda d, a, b, c, e, f, g, h: kernel(d, a, b, c, e, f, g, h)}
+    return forwards[arity]
 
 
 #: ``numba.prange`` (parallel loop over independent iterations) with numba, else ``range``.
