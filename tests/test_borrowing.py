@@ -9,7 +9,7 @@ for the data and for their owners (meminfos).  A fixed-step loop that allocated 
 step or per stage would allocate more in a run twice as long: the four-bar's RK4 run allocates
 the same in 50 and in 100 steps.  The statistics are switched on at interpreter start (NUMBA_NRT_STATS),
 so the paths run in a subprocess.  The paths that must create arrays in compiled code (the SVD,
-the adaptive loop, the sweep) are checked to have allocated, so the statistics were on.
+numba's lstsq, the adaptive loop, the sweep) are checked to have allocated, so the statistics were on.
 """
 
 import json
@@ -52,6 +52,8 @@ SCRIPT = textwrap.dedent("""
             slider, t_end=1.0, integrator="rk4", dt=1e-3, formulation="projection")
         yield "rk4 lagrange stopped at the singular position", lambda: cmbs.simulate(
             slider, t_end=1.0, integrator="rk4", dt=1e-3)
+        yield "rk4 lagrange, least squares (lstsq)", lambda: cmbs.simulate(
+            four_bar, t_end=0.05, integrator="rk4", dt=1e-3, formulation_options={"least_squares": True})
         yield "rk4 computed torque", lambda: cmbs.simulate(four_bar, t_end=0.05, integrator="rk4", dt=1e-3, u=law)
         yield "dop853", lambda: cmbs.simulate(four_bar, t_end=0.05, integrator="dop853")
         yield "matrix R", lambda: cmbs.simulate(four_bar, t_end=0.05, integrator="rk4", dt=1e-3,
@@ -95,8 +97,8 @@ def test_compiled_paths_free_every_array_they_allocate_and_fixed_step_loops_allo
     assert unbalanced == {}, done.stdout
     # the statistics are on: the paths that create arrays in compiled code did allocate (the SVD,
     # the adaptive loop's records, the sweep's per-variant workspace)
-    for name in ("rk4 projection through the singular position (SVD)", "dop853", "matrix R", "batched sweep",
-                 "CompiledDynamics"):
+    for name in ("rk4 projection through the singular position (SVD)", "rk4 lagrange, least squares (lstsq)",
+                 "dop853", "matrix R", "batched sweep", "CompiledDynamics"):
         assert allocations[name][0] > 0, (name, allocations)
     # the RK4 loop's work arrays are allocated once per run, none per step (the joint model's
     # runs allocate per record outside the loop: its energy kernel's work array)

@@ -43,8 +43,8 @@ def test_compiled_loop_refuses_what_it_cannot_run():
     with pytest.raises(CmbsError, match="compiled loop cannot run"):
         simulate(model, t_end=0.1, integrator="rk45", u=lambda t, q, qd: np.zeros(model.n_u), compiled=True)
     with pytest.raises(CmbsError, match="compiled loop cannot run"):
-        simulate(model, t_end=0.1, integrator="rk4", formulation="lagrange",
-                 formulation_options={"least_squares": True}, compiled=True)
+        simulate(model, t_end=0.1, integrator="rk4", formulation="udwadia-kalaba",
+                 formulation_options={"nonideal": lambda t, q, qd: np.zeros(model.n)}, compiled=True)
 
 
 @pytest.mark.parametrize("integrator", ["rk4", "dop853"])
@@ -303,7 +303,7 @@ def test_compiled_dynamics_names_the_constraints_at_a_singular_position_and_chec
     with pytest.raises(CmbsError, match="non-finite"):
         CompiledDynamics(model, "projection").accelerations(q * np.nan, np.zeros(model.n))
     with pytest.raises(CmbsError, match="cannot run"):
-        CompiledDynamics(model, cmbs.formulation("lagrange", least_squares=True))
+        CompiledDynamics(model, cmbs.formulation("udwadia-kalaba", nonideal=lambda t, q, qd: np.zeros(model.n)))
 
 
 def test_a_diverging_compiled_run_fails_with_a_message_not_an_exception():
@@ -321,14 +321,14 @@ def test_a_diverging_compiled_run_fails_with_a_message_not_an_exception():
 def test_runs_on_the_python_loop_say_why():
     model = cmbs.load("four-bar").without_drivers()
     notes = {
-        "least squares": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, formulation="lagrange",
-                                  formulation_options={"least_squares": True}).info["note"],
+        "nonideal": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, formulation="udwadia-kalaba",
+                             formulation_options={"nonideal": lambda t, q, qd: np.zeros(model.n)}).info["note"],
         "callable": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3,
                              u=lambda t, q, qd: np.zeros(model.n_u)).info["note"],
         "project": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, project=True).info["note"],
         "off": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, compiled=False).info["note"],
     }
-    assert "'lagrange' with these options has no compiled solve" in notes["least squares"]
+    assert "'udwadia-kalaba' with these options has no compiled solve" in notes["nonideal"]
     assert "Python callable" in notes["callable"] and "project=True" in notes["project"]
     assert notes["off"] == "Python loop: compiled=False"
     compiled = simulate(model, t_end=0.01, integrator="rk4", dt=1e-3)

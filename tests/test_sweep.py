@@ -118,8 +118,7 @@ def test_sweep_refuses_bad_variants(four_bar):
     with pytest.raises(CmbsError, match="no variants"):
         sweep(four_bar, [], t_end=0.1)
     with pytest.raises(CmbsError, match="batched path needs"):
-        sweep(four_bar, [Variant()], t_end=0.1, formulation="lagrange", formulation_options={"least_squares": True},
-              batched=True)
+        sweep(four_bar, [Variant()], t_end=0.1, project=True, batched=True)
     with pytest.raises(CmbsError, match="no parameter"):
         sweep("slider-crank", [Variant(parameters={"colour": 1})], t_end=0.1)
 
@@ -165,7 +164,7 @@ def cluster(tmp_path):
 
 
 def test_dask_sweep_equals_the_serial_run_and_survives_a_killed_worker(cluster, capsys):
-    """Eight runs of least-squares Lagrange (Python loop, a fraction of a second each) on two
+    """Eight runs with drift projection (Python loop, a fraction of a second each) on two
     workers; one worker is killed once tasks are running: its tasks run again on the other, nothing is lost, and
     every variant equals the serial run; the progress bar counts all eight."""
     import os
@@ -175,8 +174,7 @@ def test_dask_sweep_equals_the_serial_run_and_survives_a_killed_worker(cluster, 
     address, workers = cluster
     model = cmbs.load("four-bar").without_drivers()
     variants = _initial_states(model, 8)
-    options = dict(t_end=0.4, dt=1e-3, every=20, formulation="lagrange",
-                   formulation_options={"least_squares": True})
+    options = dict(t_end=0.4, dt=1e-3, every=20, project=True)
     serial = sweep(model, variants, workers=1, **options)
     done = {}
     capsys.readouterr()
@@ -216,8 +214,7 @@ def test_dask_sweep_whose_last_worker_dies_stops_with_a_message(cluster):
     variants = _initial_states(model, 8)
     done = {}
     thread = threading.Thread(target=lambda: done.setdefault("result", sweep(
-        model, variants, scheduler=address, worker_timeout=1.0, t_end=0.4, dt=1e-3, every=20,
-        formulation="lagrange", formulation_options={"least_squares": True})))
+        model, variants, scheduler=address, worker_timeout=1.0, t_end=0.4, dt=1e-3, every=20, project=True)))
     thread.start()
     with distributed.Client(address, timeout=30) as client:
         deadline = time.monotonic() + 60

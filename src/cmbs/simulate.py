@@ -39,7 +39,7 @@ from cmbs.trajectory import Trajectory
 Inputs = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
 INDEX3 = {"backward-euler": BACKWARD_EULER, "generalized-alpha": generalized_alpha(0.9)}
 #: The formulations whose solve the compiled loops run, with the options they need.
-COMPILED_FORMULATIONS = ("lagrange and baumgarte without least_squares, penalty, projection (every inertia), "
+COMPILED_FORMULATIONS = ("lagrange and baumgarte (least_squares included), penalty, projection (every inertia), "
                          "udwadia-kalaba without a nonideal term")
 INTEGRATORS = (*EXPLICIT, "trapezoidal", *INDEX3)
 #: integrators whose dissipation of energy is part of their design (high-frequency damping)

@@ -6,9 +6,9 @@ with a leading variant dimension, on one common time grid).  It chooses how to r
 ``batched``
     Variants that differ only in the initial state and constant inputs, on a run the compiled
     loop takes (:mod:`cmbs.integrate.compiled_plan` with rk4), run as one compiled call parallel
-    over the variants (numba threads): natural-coordinate models under lagrange, baumgarte or
-    projection in blocks of eight variants that share each stage's bookkeeping
-    (:func:`cmbs.integrate.compiled_lanes.rk4_lanes`), other runs one variant at a time
+    over the variants (numba threads): natural-coordinate models under lagrange, baumgarte
+    (without ``least_squares``) or projection in blocks of eight variants that share each stage's
+    bookkeeping (:func:`cmbs.integrate.compiled_lanes.rk4_lanes`), other runs one variant at a time
     (:func:`cmbs.integrate.compiled_rk4.rk4_batch`); both give the numbers of
     :func:`cmbs.integrate.compiled_rk4.rk4` bit for bit.
 ``processes``

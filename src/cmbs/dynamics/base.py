@@ -75,11 +75,6 @@ class StatelessSolver:
         return q, qd
 
 
-def constraint_velocity(terms: Terms, qd: np.ndarray) -> np.ndarray:
-    """Φ̇ = A q̇ + Φ_t."""
-    return terms.A @ qd + terms.phi_t
-
-
 def check_parameters(formulation: object, **rules: str) -> None:
     """Validate a formulation's options: each rule is ``"positive"``, ``"non-negative"``,
     ``"count"`` (integer ≥ 0), ``"above-one"``, ``"optional-positive"`` (None allowed) or

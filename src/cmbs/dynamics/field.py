@@ -108,7 +108,7 @@ class CompiledDynamics:
         A natural- or joint-coordinate model without Python-callable time functions.
     formulation
         A name or a :class:`~cmbs.dynamics.Formulation` with a compiled solve (``lagrange`` and
-        ``baumgarte`` without ``least_squares``, ``penalty``, ``projection`` with any inertia,
+        ``baumgarte``, ``least_squares`` included, ``penalty``, ``projection`` with any inertia,
         ``udwadia-kalaba`` without a non-ideal term).
     """
 
@@ -123,8 +123,8 @@ class CompiledDynamics:
         if solve_kernel is None:
             raise CmbsError(f"the compiled field cannot run model {model.name!r} with formulation {chosen.name!r}: "
                             "it takes natural- or joint-coordinate models without Python time functions, with "
-                            "a formulation that has a compiled solve (lagrange and baumgarte without least_squares, "
-                            "penalty, projection, udwadia-kalaba without a nonideal term)")
+                            "a formulation that has a compiled solve (lagrange, baumgarte, penalty, projection, "
+                            "udwadia-kalaba without a nonideal term)")
         # bound once: a call then passes (and numba unboxes) only the state and the outputs
         self._field = functools.partial(_bound_field_at, Bound(kernel, solve_kernel, model.new_terms().buffer))
         self._no_input = np.zeros(model.n_u)

@@ -8,7 +8,9 @@ Index-1 augmented system (García de Jalón & Bayo 1994, eq. 5.4)::
 
 A rank-deficient A (redundant constraints or a singular configuration) makes the matrix
 singular: the solver raises :class:`~cmbs.errors.SingularSystemError` naming the dependent
-constraints, unless ``least_squares`` asks for the minimum-norm least-squares solution.
+constraints, unless ``least_squares`` asks for the minimum-norm least-squares solution (LAPACK's
+SVD-based gelsd, numpy's ``np.linalg.lstsq`` with its default cut-off).  Both options are one
+compiled solve (:func:`_solve`), the one the compiled integration loops run.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from cmbs.dynamics.base import OK, SINGULAR, Accelerations, StatelessSolver, check_parameters, constraint_velocity
+from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
+from cmbs.dynamics.dense import all_finite
 from cmbs.dynamics.kkt import band_kkt, certify, full_system, gram_singular, packed_workspace, schur_solve, \
     unpack_workspace
 from cmbs.errors import SingularSystemError
@@ -54,8 +57,8 @@ class Lagrange:
     def bind(self, model: Model) -> "KKTSolver":
         return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=0.0, omega=0.0)
 
-    def compiled(self, solver: "KKTSolver", model: Model) -> "LagrangeKernel | None":
-        """The solve of the compiled loops: the bound solver's own (None for ``least_squares``)."""
+    def compiled(self, solver: "KKTSolver", model: Model) -> "LagrangeKernel":
+        """The solve of the compiled loops: the bound solver's own."""
         return solver.kernel
 
 
@@ -79,15 +82,15 @@ class Baumgarte:
     def bind(self, model: Model) -> "KKTSolver":
         return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=self.xi, omega=self.omega)
 
-    def compiled(self, solver: "KKTSolver", model: Model) -> "LagrangeKernel | None":
-        """The solve of the compiled loops: the bound solver's own (None for ``least_squares``)."""
+    def compiled(self, solver: "KKTSolver", model: Model) -> "LagrangeKernel":
+        """The solve of the compiled loops: the bound solver's own."""
         return solver.kernel
 
 
 class KKTSolver(StatelessSolver):
-    """Solves the augmented (KKT) system with an optional Baumgarte right-hand side: one call of
-    the compiled :func:`_solve` on the :class:`LagrangeKernel` made here (the compiled loops call
-    the same), or with ``least_squares`` numpy's minimum-norm least-squares solution."""
+    """Solves the augmented (KKT) system with an optional Baumgarte right-hand side, or with
+    ``least_squares`` its minimum-norm least-squares solution: one call of the compiled
+    :func:`_solve` on the :class:`LagrangeKernel` made here (the compiled loops call the same)."""
 
     def __init__(self, model: Model, least_squares: bool, singular_tolerance: float, *, xi: float, omega: float):
         super().__init__(model)
@@ -96,30 +99,18 @@ class KKTSolver(StatelessSolver):
         self.xi, self.omega = xi, omega
         norms = np.linalg.norm(model.jacobian(model.q0, 0.0), axis=1)
         self.row_scale = 1.0 / np.where(norms > 0, norms, 1.0)
-        self.kernel = None if least_squares else lagrange_kernel(self, model)
+        self.kernel = lagrange_kernel(self, model)
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
-        if self.least_squares:
-            return self._least_squares(terms, qd)
+        """Accelerations, multipliers and f_c = -Aᵀλ at one state; raises
+        :class:`~cmbs.errors.SingularSystemError` at a rank-deficient A (without
+        ``least_squares``).  With ``least_squares``, non-finite terms give NaN accelerations (the
+        integrator reports the non-finite state)."""
         qdd, lam = np.empty(self.model.n), np.empty(self.model.m)
         status = _solve(self.kernel, (terms.Q, terms.phi, terms.A, terms.gamma, terms.phi_t, terms.M), t, qd, qdd, lam)
-        if status != OK:
+        if status == SINGULAR:
             raise SingularSystemError(self._singular_message(terms, t))
         return Accelerations(qdd, lam, -terms.A.T @ lam)
-
-    def _least_squares(self, terms: Terms, qd: np.ndarray) -> Accelerations:
-        """The minimum-norm least-squares solution of the augmented system (any rank of A)."""
-        n, m = self.model.n, self.model.m
-        gamma = terms.gamma
-        if self.omega:
-            gamma = gamma - 2.0 * self.xi * self.omega * constraint_velocity(terms, qd) - self.omega**2 * terms.phi
-        K = np.zeros((n + m, n + m))
-        K[:n, :n] = terms.M
-        K[:n, n:] = terms.A.T
-        K[n:, :n] = terms.A
-        solution = np.linalg.lstsq(K, np.concatenate([terms.Q, gamma]), rcond=None)[0]
-        lam = solution[n:]
-        return Accelerations(solution[:n], lam, -terms.A.T @ lam)
 
     def _singular_message(self, terms: Terms, t: float) -> str:
         """Why :func:`_solve` found the system singular, naming the dependent constraints (the
@@ -142,12 +133,14 @@ class KKTSolver(StatelessSolver):
 
 class LagrangeKernel(NamedTuple):
     """Lagrange's or Baumgarte's equations as the compiled loops take them (ξ = ω = 0: Lagrange):
-    the singularity tolerance on σ_min/σ_max of the row-scaled A, the row scale, the packed
-    :func:`cmbs.dynamics.kkt.schur_workspace` and the augmented system's work arrays."""
+    the singularity tolerance on σ_min/σ_max of the row-scaled A, whether to solve by least
+    squares instead, the row scale, the packed :func:`cmbs.dynamics.kkt.schur_workspace` and the
+    augmented system's work arrays."""
 
     xi: float
     omega: float
     tolerance: float
+    least_squares: bool
     row_scale: np.ndarray
     floats: np.ndarray
     integers: np.ndarray
@@ -160,20 +153,27 @@ def lagrange_kernel(solver: KKTSolver, model: Model) -> LagrangeKernel:
     """The :class:`LagrangeKernel` of a bound solver, with work arrays of its own."""
     n, m = model.n, model.m
     return LagrangeKernel(float(solver.xi), float(solver.omega), float(solver.singular_tolerance),
-                          np.ascontiguousarray(solver.row_scale, dtype=float), *packed_workspace(model),
-                          np.empty((n + m, n + m)), np.empty(n + m))
+                          bool(solver.least_squares), np.ascontiguousarray(solver.row_scale, dtype=float),
+                          *packed_workspace(model), np.empty((n + m, n + m)), np.empty(n + m))
 
 
 @njit_borrowing(cache=True)
 def _solve(kernel, terms, t, qd, qdd, lam):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c], c = γ (Lagrange) or γ - 2ξωΦ̇ - ω²Φ with
-    Φ̇ = Aq̇ + Φ_t (Baumgarte), at the terms (Q, Φ, A, γ, Φ_t, M); SINGULAR when σ_min/σ_max of
-    the row-scaled A is below the tolerance (:func:`~cmbs.dynamics.kkt.certify`, then the
-    Gram matrix's eigenvalues where its bounds are inconclusive); :meth:`KKTSolver._singular_message`
-    names the constraints.  Band LU for large natural models (when the workspace chose it), the Schur
-    complement when A is certified regular and M's block positive definite, else the full system.
+    Φ̇ = Aq̇ + Φ_t (Baumgarte), at the terms (Q, Φ, A, γ, Φ_t, M).
+
+    With the kernel's ``least_squares``: the minimum-norm least-squares solution
+    (:func:`_minimum_norm`), for any rank of A; OK, or NON_FINITE for non-finite terms.
+    Otherwise SINGULAR when σ_min/σ_max of the row-scaled A is below the tolerance
+    (:func:`~cmbs.dynamics.kkt.certify`, then the Gram matrix's eigenvalues where its bounds are
+    inconclusive); :meth:`KKTSolver._singular_message` names the constraints.  Band LU for large
+    natural models (when the workspace chose it), the Schur complement when A is certified regular
+    and M's block positive definite, else the full system.
     """
     Q, phi, A, gamma, phi_t, M = terms
+    if kernel.least_squares:
+        _constraint_rhs(kernel, phi, A, gamma, phi_t, qd)
+        return _minimum_norm(M, Q, A, kernel.K, kernel.rhs, qdd, lam)
     schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
     singular, certified, decided = certify(A, kernel.row_scale, kernel.tolerance, schur[27], schur[28], schur[7],
                                            schur[8], schur[13], schur[14], schur[15])
@@ -184,15 +184,7 @@ def _solve(kernel, terms, t, qd, qdd, lam):
     n = Q.shape[0]
     m = gamma.shape[0]
     rhs = kernel.rhs
-    xi, omega = kernel.xi, kernel.omega
-    for r in range(m):
-        value = gamma[r]
-        if omega != 0.0:
-            rate = phi_t[r]
-            for j in range(n):
-                rate += A[r, j] * qd[j]
-            value -= 2.0 * xi * omega * rate + omega * omega * phi[r]
-        rhs[n + r] = value
+    _constraint_rhs(kernel, phi, A, gamma, phi_t, qd)
     c = rhs[n:n + m]
     if schur[16] == 1:                      # large natural model: band LU of the KKT matrix
         solved = band_kkt(Q, A, c, schur, qdd, lam)
@@ -202,10 +194,62 @@ def _solve(kernel, terms, t, qd, qdd, lam):
     return OK if solved else SINGULAR
 
 
+@njit_borrowing(cache=True, inline="always")
+def _constraint_rhs(kernel, phi, A, gamma, phi_t, qd):
+    """c into ``kernel.rhs[n:]``: γ, or with Baumgarte's ω ≠ 0 γ - 2ξωΦ̇ - ω²Φ, Φ̇ = Aq̇ + Φ_t."""
+    n = qd.shape[0]
+    rhs = kernel.rhs
+    xi, omega = kernel.xi, kernel.omega
+    for r in range(gamma.shape[0]):
+        value = gamma[r]
+        if omega != 0.0:
+            rate = phi_t[r]
+            for j in range(n):
+                rate += A[r, j] * qd[j]
+            value -= 2.0 * xi * omega * rate + omega * omega * phi[r]
+        rhs[n + r] = value
+
+
+#: The machine epsilon of float64, for numpy's default cut-off of ``np.linalg.lstsq``.
+EPSILON = float(np.finfo(np.float64).eps)
+
+
+@njit(cache=True)
+def _minimum_norm(M, Q, A, K, rhs, qdd, lam):
+    """q̈, λ as the minimum-norm least-squares solution of [M Aᵀ; A 0][q̈; λ] = [Q; c] (c given in
+    ``rhs[n:]``; K and ``rhs[:n]`` written here), for any rank of A: LAPACK's gelsd (the SVD of
+    K) through ``np.linalg.lstsq`` with numpy's default ``rcond=None``, i.e. singular values up to
+    ε·max(rows, columns)·σ_max = ε·(n + m)·σ_max count as zero (numba passes ``rcond`` to gelsd as
+    it is, numpy computes this value from None: the same call).  Returns OK, or NON_FINITE with
+    NaN outputs when K or the right-hand side is not finite (gelsd would refuse them)."""
+    n, m = qdd.shape[0], lam.shape[0]
+    for i in range(n):
+        for j in range(n):
+            K[i, j] = M[i, j]
+        rhs[i] = Q[i]
+    for r in range(m):
+        for j in range(n):
+            K[n + r, j] = A[r, j]
+            K[j, n + r] = A[r, j]
+        for j in range(m):
+            K[n + r, n + j] = 0.0
+    if not (all_finite(K) and all_finite(rhs)):
+        qdd[:] = np.nan
+        lam[:] = np.nan
+        return NON_FINITE
+    solution = np.linalg.lstsq(K, rhs, EPSILON * (n + m))[0]
+    for i in range(n):
+        qdd[i] = solution[i]
+    for r in range(m):
+        lam[r] = solution[n + r]
+    return OK
+
+
 @njit(cache=True)
 def _fresh(kernel):
     """A copy of ``kernel`` with work arrays of its own (for runs beside each other)."""
-    return LagrangeKernel(kernel.xi, kernel.omega, kernel.tolerance, kernel.row_scale, kernel.floats.copy(),
+    return LagrangeKernel(kernel.xi, kernel.omega, kernel.tolerance, kernel.least_squares, kernel.row_scale,
+                          kernel.floats.copy(),
                           kernel.integers.copy(), kernel.layout, np.empty_like(kernel.K), np.empty_like(kernel.rhs))
 
 

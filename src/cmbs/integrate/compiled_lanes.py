@@ -51,11 +51,12 @@ LAGRANGE, BAUMGARTE, PROJECTION = 0, 1, 2
 def lane_setup(model: NamedTuple, formulation: NamedTuple, m: int, n: int) -> tuple | None:
     """(method, parameters, schur, plan) of :func:`rk4_lanes` for a model's and a formulation's
     kernels, or None when lanes cannot run the batch: a natural-coordinate model under Lagrange,
-    Baumgarte or the projection with any inertia (``parameters`` = (ξ, ω, tolerance or threshold,
-    s, semi-definite flag); ``schur`` the formulation's unpacked workspace), with :func:`lane_plan`."""
+    Baumgarte (without ``least_squares``: the lanes solve the regular augmented system) or the
+    projection with any inertia (``parameters`` = (ξ, ω, tolerance or threshold, s, semi-definite
+    flag); ``schur`` the formulation's unpacked workspace), with :func:`lane_plan`."""
     if not isinstance(model, NaturalKernel):
         return None
-    if isinstance(formulation, LagrangeKernel):
+    if isinstance(formulation, LagrangeKernel) and not formulation.least_squares:
         method = BAUMGARTE if formulation.omega != 0.0 else LAGRANGE
         parameters = np.array([formulation.xi, formulation.omega, formulation.tolerance, 0.0, 0.0])
     elif isinstance(formulation, ProjectionKernel):
