@@ -643,8 +643,6 @@ def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, l
     ``last`` into ``full``, whose check asks for a new partition as
     :meth:`MatrixRSolver.update_partition` would, and which records ``full`` into ``y``, ``dy``.
     Returns the maker of the problem for the current partition."""
-    from cmbs.dynamics.matrix_r import partition_condition
-    from cmbs.integrate.compiled_reduced import partition_limit
     from cmbs.integrate.implicit import CallbackProblem
 
     terms = model.new_terms()
@@ -674,9 +672,7 @@ def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, l
             full[2][independent]
 
     def check(t: float) -> bool:
-        part = solver.partition
-        condition = partition_condition(model.jacobian(full[0], t)[part.rows], part.dependent, 2)
-        return condition > partition_limit(solver)
+        return solver.exceeds_limit(model.jacobian(full[0], t))
 
     def keep(row: int, t: float, state: tuple) -> None:
         y[row] = np.concatenate([full[0], full[1]])
