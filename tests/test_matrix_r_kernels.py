@@ -125,3 +125,24 @@ def test_condition_kernels_against_numpy_norms():
         kappa = np.linalg.svd(A[rows], compute_uv=False)[0] / np.linalg.svd(block, compute_uv=False)[-1]
         assert exceeds(A, rows, dependent, Ad, pivots, side, 0.99 * kappa)
         assert not exceeds(A, rows, dependent, Ad, pivots, side, 1.01 * kappa)
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_dependent_accelerations_satisfy_the_acceleration_constraints(name):
+    """The trapezoidal rule's expansion of z̈: with random independent accelerations held (bit for
+    bit), the dependent ones make A q̈ = γ on every row (numpy's evaluation), and they are those
+    of R z̈ + S (the velocity matrix and the KKT solution's S = q̈ - R z̈ at z̈ = 0)."""
+    model = _load(name)
+    solver = cmbs.formulation("matrix-r").bind(model)
+    q, qd = _consistent_state(model)
+    terms = model.evaluate(q, qd, 0.0)
+    generator = np.random.default_rng(17)
+    guess = generator.normal(size=model.n)
+    qdd = solver.dependent_accelerations(terms, guess)
+    independent = solver.partition.independent
+    np.testing.assert_array_equal(qdd[independent], guess[independent])
+    scale = max(1.0, np.abs(qdd).max(), np.abs(terms.gamma).max())
+    assert np.abs(terms.A @ qdd - terms.gamma).max() < 1e-11 * scale
+    at_rest = solver.dependent_accelerations(terms, np.zeros(model.n))
+    R = solver.velocity_matrix(terms)
+    np.testing.assert_allclose(qdd, R @ guess[independent] + at_rest, rtol=0, atol=1e-11 * scale)

@@ -32,7 +32,6 @@ from cmbs.integrate.grid import whole_steps
 from cmbs.integrate.implicit import BACKWARD_EULER, TRAPEZOIDAL, Scheme, generalized_alpha, integrate_index3
 from cmbs.integrate.tableaus import NAMES as EXPLICIT, tableau as explicit_method
 from cmbs.jit import compile_seconds
-from cmbs.kinematics import accelerations as acceleration_analysis
 from cmbs.model.model import Model
 from cmbs.trajectory import Trajectory
 
@@ -652,10 +651,10 @@ def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, l
         guess, qd, qdd = full[0].copy(), full[1].copy(), full[2].copy()
         guess[independent], qd[independent], qdd[independent] = z, zd, zdd
         q, qd = solver.recover(guess, qd, t, integrated_velocities=False)
-        qdd = acceleration_analysis(model, q, qd, t, qdd=qdd, fixed=independent)
+        model.evaluate(q, qd, t, inputs(t, q, qd), out=terms)
+        qdd = solver.dependent_accelerations(terms, qdd)
         for target, value in zip(last, (q, qd, qdd)):
             target[:] = value
-        model.evaluate(q, qd, t, inputs(t, q, qd), out=terms)
         if not (np.all(np.isfinite(terms.Q)) and np.all(np.isfinite(terms.M))):
             raise CmbsError(f"model {model.name!r} at t={t:.6g}: non-finite forces or mass matrix")
         R = solver.velocity_matrix(terms)

@@ -266,6 +266,16 @@ class MatrixRSolver:
             raise SingularSystemError(f"model {self.model.name!r}: matrix-r's dependent block A_d is singular")
         return R
 
+    def dependent_accelerations(self, terms: Terms, qdd: np.ndarray) -> np.ndarray:
+        """``qdd`` with its dependent accelerations from A_r q̈ = γ_r, the independent ones held
+        (:func:`~cmbs.dynamics.matrix_r_kernels.dependent_accelerations`)."""
+        Ad, pivots, side = self.work[:3]
+        qdd = np.array(qdd, dtype=float)
+        rows, dependent, _ = self._indices
+        if not kernels.factored_dependent_accelerations(terms.A, terms.gamma, rows, dependent, Ad, pivots, side, qdd):
+            raise SingularSystemError(f"model {self.model.name!r}: matrix-r's dependent block A_d is singular")
+        return qdd
+
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
         """q̈, λ and f_c = -Aᵀλ by :func:`~cmbs.dynamics.matrix_r_kernels.accelerations`; raises
         :class:`~cmbs.errors.SingularSystemError` where A_d or Rᵀ M R is singular."""

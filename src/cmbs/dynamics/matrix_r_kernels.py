@@ -211,6 +211,31 @@ def velocity_matrix(A, rows, dependent, independent, Ad, pivots, side, R):
             R[dependent[j], b] = -side[j]
 
 
+@njit(cache=True)
+def dependent_accelerations(A, gamma, rows, dependent, Ad, pivots, side, qdd):
+    """The dependent accelerations of ``qdd`` in place from A_r q̈ = γ_r with the independent ones
+    held: q̈_d += A_d⁻¹ (γ_r - A_r q̈)."""
+    r, n = rows.shape[0], A.shape[1]
+    for a in range(r):
+        total = gamma[rows[a]]
+        for j in range(n):
+            total -= A[rows[a], j] * qdd[j]
+        side[a] = total
+    lu_solve(Ad, pivots, side)
+    for j in range(r):
+        qdd[dependent[j]] += side[j]
+
+
+@njit(cache=True)
+def factored_dependent_accelerations(A, gamma, rows, dependent, Ad, pivots, side, qdd):
+    """:func:`dependent_accelerations` after factoring A_d of ``A``; False when A_d is exactly
+    singular."""
+    if not factor_dependent(A, rows, dependent, Ad, pivots):
+        return False
+    dependent_accelerations(A, gamma, rows, dependent, Ad, pivots, side, qdd)
+    return True
+
+
 def accelerations_work(n: int, k: int, r: int) -> tuple:
     """The work arrays of :func:`accelerations` for n coordinates, k independent and r dependent
     ones: A_d's LU factors and pivots, a side vector (r), R (n, k), Rᵀ M R (k, k), its

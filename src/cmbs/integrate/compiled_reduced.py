@@ -7,7 +7,7 @@ The unknowns are the independent coordinates z of the partition (thesis eq. 3.51
 iterate (z, ż, z̈) the residual kernel expands it to the full state, from the last accepted one
 with z, ż, z̈ put in: dependent coordinates by Newton on Φ_r = 0 and their velocities from
 A_d ḋ = -A_z ż - Φ_t (:func:`cmbs.dynamics.matrix_r_kernels.recover`), dependent accelerations
-from A_d q̈_d = γ_r - A_z z̈; then, with R = [-A_d⁻¹A_z; I] (rows in the partition's order)::
+from A_d q̈_d = γ_r - A_z z̈ (``dependent_accelerations``); then, with R = [-A_d⁻¹A_z; I] (rows in the partition's order)::
 
     f = Rᵀ(M q̈ - Q),   M̄ = Rᵀ M R,   C̄ = Rᵀ C_t R,   K̄ = Rᵀ K_t R
 
@@ -28,8 +28,9 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import OK
-from cmbs.dynamics.kkt import lu_solve, solve_in_place
-from cmbs.dynamics.matrix_r_kernels import NOT_CONVERGED, exceeds, factor_dependent, recover, velocity_matrix
+from cmbs.dynamics.kkt import solve_in_place
+from cmbs.dynamics.matrix_r_kernels import (NOT_CONVERGED, dependent_accelerations, exceeds, factor_dependent, recover,
+                                            velocity_matrix)
 from cmbs.integrate.implicit import HANDED_BACK, STOPPED
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
@@ -140,14 +141,7 @@ def _expand(problem, t, z, zd, zdd):
         return STOPPED
     evaluate(problem.model, q, qd, t, problem.u, problem.buffer)
     Q, _, A, gamma, _, M = terms_views(problem.model, n, m, problem.buffer)
-    for a in range(r):                      # A_d q̈_d = γ_r - A_z z̈ (A_d's factors are recover's)
-        total = gamma[rows[a]]
-        for j in range(n):
-            total -= A[rows[a], j] * qdd[j]
-        side[a] = total
-    lu_solve(Ad, pivots, side)
-    for j in range(r):
-        qdd[dependent[j]] += side[j]
+    dependent_accelerations(A, gamma, rows, dependent, Ad, pivots, side, qdd)   # A_d's factors: recover's
     for i in range(n):
         if not math.isfinite(Q[i]):
             problem.failure[0], problem.failure[1], problem.failure[2] = NON_FINITE_TERMS, 0.0, t
