@@ -597,7 +597,7 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
             except CmbsError as error:
                 message, stored = str(error), reached // every + 1
                 break
-            if solver.repartitions == before:        # the loop's κ₂ and numpy's disagree: cannot go on
+            if solver.repartitions == before:        # Python's A and the loop's disagree: cannot go on
                 message = (f"model {model.name!r} at t={grid[reached]:.6g}: the partition's condition calls for a "
                            "new partition but none was chosen")
                 stored = reached // every + 1

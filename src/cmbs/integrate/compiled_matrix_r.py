@@ -155,7 +155,7 @@ def run(model: Model, solver: MatrixRSolver, u: np.ndarray, q0: np.ndarray, qd0:
             solver.update_partition(model.jacobian(q, t), t)
         except CmbsError as error:
             return records, recorded, reached, str(error), repartitions
-        if solver.repartitions == before:    # numpy's κ₂ disagrees with the loop's: cannot go on
+        if solver.repartitions == before:    # Python's A disagrees with the loop's: cannot go on
             return records, recorded, reached, (f"model {model.name!r} at t={t:.6g}: the partition's condition calls "
                                                 "for a new partition but none was chosen"), repartitions
         repartitions += 1
