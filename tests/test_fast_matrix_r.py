@@ -122,7 +122,7 @@ def test_condition_bound_brackets_the_two_norm_partition_condition():
     """The step-end test's filter: κ₂ ≤ sqrt(κ₁ κ_∞) ≤ (r n)^¼ √r κ₂ (κ_p = ‖A_r‖_p ‖A_d⁻¹‖_p;
     ‖B‖₁ ≤ √rows ‖B‖₂ and ‖B‖∞ ≤ √columns ‖B‖₂), on random and nearly singular partitions (the
     bound comes from the LU factors of A_d, the reference from numpy's norms and inverse)."""
-    from cmbs.integrate.compiled_matrix_r import _condition_two_bound, _factor_dependent
+    from cmbs.dynamics.matrix_r_kernels import condition_two_bound, factor_dependent
 
     generator = np.random.default_rng(7)
     n, m = 7, 5
@@ -130,12 +130,10 @@ def test_condition_bound_brackets_the_two_norm_partition_condition():
         A = generator.normal(size=(m, n))
         A[3] = A[1] + scale * generator.normal(size=n)         # rows 1 and 3 nearly dependent
         rows, dependent = np.array([0, 1, 3, 4]), np.array([0, 2, 5, 6])
-        buffer = np.zeros(n + 3 * m + m * n)
-        buffer[n + m:n + m + m * n] = A.ravel()
         r = rows.size
         Ad, pivots, side = np.empty((r, r)), np.empty(r, dtype=np.int64), np.empty(r)
-        assert _factor_dependent(buffer, n, m, rows, dependent, Ad, pivots)
-        bound = _condition_two_bound(buffer, n, m, rows, dependent, Ad, pivots, side)
+        assert factor_dependent(A, rows, dependent, Ad, pivots)
+        bound = condition_two_bound(A, rows, Ad, pivots, side)
         A_r, inverse = A[rows], np.linalg.inv(A[np.ix_(rows, dependent)])
         exact = np.linalg.svd(A_r, compute_uv=False)[0] / np.linalg.svd(A[np.ix_(rows, dependent)],
                                                                          compute_uv=False)[-1]

@@ -32,7 +32,6 @@ from cmbs.integrate.grid import whole_steps
 from cmbs.integrate.implicit import BACKWARD_EULER, TRAPEZOIDAL, Scheme, generalized_alpha, integrate_index3
 from cmbs.integrate.tableaus import NAMES as EXPLICIT, tableau as explicit_method
 from cmbs.jit import compile_seconds
-from cmbs.kinematics import accelerations as acceleration_analysis
 from cmbs.model.model import Model
 from cmbs.trajectory import Trajectory
 
@@ -598,7 +597,7 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
             except CmbsError as error:
                 message, stored = str(error), reached // every + 1
                 break
-            if solver.repartitions == before:        # the loop's κ₂ and numpy's disagree: cannot go on
+            if solver.repartitions == before:        # Python's A and the loop's disagree: cannot go on
                 message = (f"model {model.name!r} at t={grid[reached]:.6g}: the partition's condition calls for a "
                            "new partition but none was chosen")
                 stored = reached // every + 1
@@ -643,8 +642,6 @@ def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, l
     ``last`` into ``full``, whose check asks for a new partition as
     :meth:`MatrixRSolver.update_partition` would, and which records ``full`` into ``y``, ``dy``.
     Returns the maker of the problem for the current partition."""
-    from cmbs.dynamics.matrix_r import partition_condition
-    from cmbs.integrate.compiled_reduced import partition_limit
     from cmbs.integrate.implicit import CallbackProblem
 
     terms = model.new_terms()
@@ -654,10 +651,10 @@ def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, l
         guess, qd, qdd = full[0].copy(), full[1].copy(), full[2].copy()
         guess[independent], qd[independent], qdd[independent] = z, zd, zdd
         q, qd = solver.recover(guess, qd, t, integrated_velocities=False)
-        qdd = acceleration_analysis(model, q, qd, t, qdd=qdd, fixed=independent)
+        model.evaluate(q, qd, t, inputs(t, q, qd), out=terms)
+        qdd = solver.dependent_accelerations(terms, qdd)
         for target, value in zip(last, (q, qd, qdd)):
             target[:] = value
-        model.evaluate(q, qd, t, inputs(t, q, qd), out=terms)
         if not (np.all(np.isfinite(terms.Q)) and np.all(np.isfinite(terms.M))):
             raise CmbsError(f"model {model.name!r} at t={t:.6g}: non-finite forces or mass matrix")
         R = solver.velocity_matrix(terms)
@@ -674,9 +671,7 @@ def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, l
             full[2][independent]
 
     def check(t: float) -> bool:
-        part = solver.partition
-        condition = partition_condition(model.jacobian(full[0], t)[part.rows], part.dependent, 2)
-        return condition > partition_limit(solver)
+        return solver.exceeds_limit(model.jacobian(full[0], t))
 
     def keep(row: int, t: float, state: tuple) -> None:
         y[row] = np.concatenate([full[0], full[1]])

@@ -33,9 +33,12 @@ from typing import ClassVar
 
 import numpy as np
 
-from cmbs.dynamics.base import Accelerations, check_parameters
+from cmbs.dynamics import matrix_r_kernels as kernels
+from cmbs.dynamics.base import NON_FINITE, SINGULAR, Accelerations, check_parameters
 from cmbs.errors import CmbsError, ConvergenceError, SingularSystemError
+from cmbs.jit import interpreted
 from cmbs.lazy import on_first_use
+from cmbs.model.compiled import model_kernel
 from cmbs.model.model import Model, Terms
 
 linalg = on_first_use("scipy.linalg")
@@ -150,21 +153,26 @@ def partition_condition(A_rows: np.ndarray, dependent: np.ndarray, norm: int) ->
     coordinates (x, z) with x dependent has A_d = [2x], of condition 1 at every x, while its
     velocity transformation ẋ = -(z/x) ż grows without bound as the pendulum swings under its
     pivot; κ = ‖[2x, 2z]‖ / |2x| = L/|x| does.  Since ‖A_r‖ ≥ ‖A_d‖, κ ≥ cond(A_d), and both grow
-    alike where A_r itself loses rank (a singular position).  1 without dependent coordinates."""
-    if dependent.size == 0:
-        return 1.0
-    block = A_rows[:, dependent]
+    alike where A_r itself loses rank (a singular position).  1 without dependent coordinates.
+    (:func:`~cmbs.dynamics.matrix_r_kernels.condition_two` and
+    :func:`~cmbs.dynamics.matrix_r_kernels.condition_one`.)"""
+    A_rows = np.ascontiguousarray(A_rows, dtype=float)
+    rows = np.arange(A_rows.shape[0], dtype=np.int64)
+    dependent = np.ascontiguousarray(dependent, dtype=np.int64)
     if norm == 2:
-        smallest = np.linalg.svd(block, compute_uv=False)[-1]
-        return float(np.linalg.norm(A_rows, 2) / smallest) if smallest > 0 else np.inf
-    try:
-        inverse = np.linalg.inv(block)
-    except np.linalg.LinAlgError:
+        return float(kernels.condition_two(A_rows, rows, dependent))
+    r = rows.size
+    Ad, pivots = np.empty((r, r)), np.empty(r, dtype=np.int64)
+    if not kernels.factor_dependent(A_rows, rows, dependent, Ad, pivots):
         return np.inf
-    return float(np.linalg.norm(A_rows, 1) * np.linalg.norm(inverse, 1))
+    return float(kernels.condition_one(A_rows, rows, Ad, pivots, np.empty(r)))
 
 
 class MatrixRSolver:
+    """Matrix R for one run: the partition (chosen here, in :meth:`repartition`) and the work
+    arrays of the kernels of :mod:`cmbs.dynamics.matrix_r_kernels`, which do every evaluation's
+    numerical work (the compiled loops call the same kernels)."""
+
     adjusts_state = True
 
     def __init__(self, model: Model, parameters: MatrixR):
@@ -178,26 +186,55 @@ class MatrixRSolver:
                 f"matrix-r: {len(self.user)} independent coordinates given, but the model has "
                 f"{model.n - len(self.partition.rows)} degrees of freedom")
         self.repartitions = 0
-        self.reference_condition: float | None = None
         self.worst_condition = 0.0     # largest κ₁ met by a recovery, and its time
         self.worst_time = 0.0
+        self.work = kernels.accelerations_work(model.n, self.partition.independent.size, self.partition.rows.size)
+        self._set_partition(self.partition)
         #: κ₁ above which the velocities are not recovered (``velocity_recovery_growth``)
-        self.recovery_limit = parameters.velocity_recovery_growth * self._condition_one(A0)
+        self.recovery_limit = parameters.velocity_recovery_growth * partition_condition(
+            A0[self.partition.rows], self.partition.dependent, 1)
+        #: κ₂ of the partition when it was chosen
+        self.reference_condition = self._condition(A0)
         self.update_partition(A0, 0.0)
+        kernel = model_kernel(model)
+        self._terms = model.new_terms()
+        self._equations = kernel if kernel is not None else kernels.PythonEquations(model, self._terms)
+        self._recover = kernels.recover if kernel is not None else interpreted(kernels.recover)
+        self._no_input = np.zeros(model.n_u)
+        self._worst = np.zeros(2)
 
-    def _block(self, A: np.ndarray) -> np.ndarray:
-        """A_d: the partition's rows and dependent columns of A."""
-        return A[np.ix_(self.partition.rows, self.partition.dependent)]
+    def _set_partition(self, partition: Partition) -> None:
+        """Keep ``partition`` and its index arrays as the kernels take them."""
+        self.partition = partition
+        self._indices = tuple(np.ascontiguousarray(part, dtype=np.int64)
+                              for part in (partition.rows, partition.dependent, partition.independent))
+
+    def partition_limit(self) -> float:
+        """κ₂ of the partition above which :meth:`update_partition` acts: ``condition_growth``
+        times its value when chosen (automatic partition), at most SINGULAR_CONDITION, where it
+        raises for a user's partition."""
+        if self.user is not None:
+            return kernels.SINGULAR_CONDITION
+        return min(self.p.condition_growth * self.reference_condition, kernels.SINGULAR_CONDITION)
+
+    def exceeds_limit(self, A: np.ndarray) -> bool:
+        """True when κ₂ of the partition at ``A`` exceeds :meth:`partition_limit` or A_d is
+        singular (:func:`~cmbs.dynamics.matrix_r_kernels.exceeds`, the compiled loops' test)."""
+        rows, dependent, _ = self._indices
+        Ad, pivots, side = self.work[:3]
+        return not kernels.factor_dependent(A, rows, dependent, Ad, pivots) or \
+            bool(kernels.exceeds(A, rows, dependent, Ad, pivots, side, self.partition_limit()))
 
     def update_partition(self, A: np.ndarray, t: float) -> None:
         """Choose the partition again when κ₂ has grown by ``condition_growth`` since it was
         chosen (automatic partition), or raise when A_d is singular (user partition)."""
+        A = np.ascontiguousarray(A, dtype=float)
+        if not self.exceeds_limit(A):
+            return
         condition = self._condition(A)
-        if self.reference_condition is None:
-            self.reference_condition = condition
         if self.user is None and condition > self.p.condition_growth * self.reference_condition:
             condition = self.repartition(A)
-        if condition > 1e12:
+        if condition > kernels.SINGULAR_CONDITION:
             names = [self.model.coordinate_names[k] for k in self.partition.independent]
             raise SingularSystemError(
                 f"model {self.model.name!r} at t={t:.6g}: the dependent block A_d is singular (condition ‖A_r‖‖A_d⁻¹‖ "
@@ -210,7 +247,7 @@ class MatrixRSolver:
         The number of dependent coordinates stays the rank found at the initial configuration:
         near a singular position the numerical rank of A drops for an instant, and taking that
         drop for a change of mobility would release a constraint the mechanism still obeys."""
-        self.partition = choose_partition(A, self.p.rank_tolerance, self.user, rank=self.partition.rows.size)
+        self._set_partition(choose_partition(A, self.p.rank_tolerance, self.user, rank=self.partition.rows.size))
         self.repartitions += 1
         self.reference_condition = self._condition(A)
         return self.reference_condition
@@ -218,35 +255,36 @@ class MatrixRSolver:
     def _condition(self, A: np.ndarray) -> float:
         """κ₂: the partition's condition in the 2-norm (the re-partition test); see
         :func:`partition_condition`."""
-        return partition_condition(A[self.partition.rows], self.partition.dependent, 2)
-
-    def _condition_one(self, A: np.ndarray) -> float:
-        """κ₁: the partition's condition in the 1-norm (the recovery's measure; the compiled loop's,
-        from its LU factors)."""
-        return partition_condition(A[self.partition.rows], self.partition.dependent, 1)
+        rows, dependent, _ = self._indices
+        return float(kernels.condition_two(np.ascontiguousarray(A, dtype=float), rows, dependent))
 
     def velocity_matrix(self, terms: Terms) -> np.ndarray:
         """R (n, n - r) with q̇ = R ż for the current partition."""
-        part = self.partition
-        A = terms.A[part.rows]
-        R = np.zeros((self.model.n, part.independent.size))
-        R[part.independent, np.arange(part.independent.size)] = 1.0
-        if part.dependent.size:
-            R[part.dependent] = -np.linalg.solve(A[:, part.dependent], A[:, part.independent])
+        Ad, pivots, side = self.work[:3]
+        R = np.empty((self.model.n, self.partition.independent.size))
+        if not kernels.factored_velocity_matrix(terms.A, *self._indices, Ad, pivots, side, R):
+            raise SingularSystemError(f"model {self.model.name!r}: matrix-r's dependent block A_d is singular")
         return R
 
+    def dependent_accelerations(self, terms: Terms, qdd: np.ndarray) -> np.ndarray:
+        """``qdd`` with its dependent accelerations from A_r q̈ = γ_r, the independent ones held
+        (:func:`~cmbs.dynamics.matrix_r_kernels.dependent_accelerations`)."""
+        Ad, pivots, side = self.work[:3]
+        qdd = np.array(qdd, dtype=float)
+        rows, dependent, _ = self._indices
+        if not kernels.factored_dependent_accelerations(terms.A, terms.gamma, rows, dependent, Ad, pivots, side, qdd):
+            raise SingularSystemError(f"model {self.model.name!r}: matrix-r's dependent block A_d is singular")
+        return qdd
+
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
-        part = self.partition
-        R = self.velocity_matrix(terms)
-        S = np.zeros(self.model.n)
-        A_d = self._block(terms.A)
-        if part.dependent.size:
-            S[part.dependent] = np.linalg.solve(A_d, terms.gamma[part.rows])
-        zdd = np.linalg.solve(R.T @ terms.M @ R, R.T @ (terms.Q - terms.M @ S))
-        qdd = R @ zdd + S
-        lam = np.zeros(self.model.m)
-        if part.dependent.size:  # (M q̈ - Q)_d = -A_dᵀ λ
-            lam[part.rows] = -np.linalg.solve(A_d.T, (terms.M @ qdd - terms.Q)[part.dependent])
+        """q̈, λ and f_c = -Aᵀλ by :func:`~cmbs.dynamics.matrix_r_kernels.accelerations`; raises
+        :class:`~cmbs.errors.SingularSystemError` where A_d or Rᵀ M R is singular."""
+        qdd, lam = np.empty(self.model.n), np.empty(self.model.m)
+        status = kernels.factored_accelerations(terms.Q, terms.A, terms.gamma, terms.M, *self._indices, self.work,
+                                                qdd, lam)
+        if status == SINGULAR:
+            raise SingularSystemError(f"model {self.model.name!r} at t={t:.6g}: matrix-r's dependent block A_d or "
+                                      "reduced mass matrix Rᵀ M R is singular")
         return Accelerations(qdd, lam, -terms.A.T @ lam)
 
     def note_condition(self, condition: float, t: float) -> None:
@@ -267,44 +305,39 @@ class MatrixRSolver:
         return self.recover(q, qd, t)
 
     def after_step(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Recover the dependent coordinates and velocities, then re-partition if needed."""
+        """Recover the dependent coordinates and velocities, then re-partition if needed (at the
+        recovered q, whose A the recovery left in its terms)."""
         q, qd = self.recover(q, qd, t)
-        self.update_partition(self.model.jacobian(q, t), t)
+        self.update_partition(self._terms.A, t)
         return q, qd
 
     def recover(self, q: np.ndarray, qd: np.ndarray, t: float,
                 integrated_velocities: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Dependent coordinates by Newton on Φ = 0 and their velocities from A_d ḋ = -A_z ż - Φ_t,
-        with the independent coordinates and velocities held.  When ``qd`` holds integrated
+        with the independent coordinates and velocities held
+        (:func:`~cmbs.dynamics.matrix_r_kernels.recover`).  When ``qd`` holds integrated
         velocities, they are kept as given where κ₁ at the given q exceeds
         ``recovery_limit`` (``velocity_recovery_growth``); False (an integrator of z and ż alone,
         whose ḋ is only a guess) recovers them everywhere."""
-        model, part = self.model, self.partition
-        q = q.copy()
-        terms = model.new_terms()
-        zeros = np.zeros(model.n)
-        velocities_kept = False
-        for iteration in range(self.p.max_iterations):
-            model.evaluate(q, zeros, t, out=terms)
-            if iteration == 0 and part.dependent.size:
-                condition = self._condition_one(terms.A)
-                self.note_condition(condition, t)
-                velocities_kept = integrated_velocities and condition > self.recovery_limit
-            residual = terms.phi[part.rows]
-            if np.max(np.abs(residual), initial=0.0) < self.p.position_tolerance:
-                break
-            q[part.dependent] -= np.linalg.solve(self._block(terms.A), residual)
-        else:
+        model = self.model
+        q, qd = np.array(q, dtype=float), np.array(qd, dtype=float)
+        Ad, pivots, side = self.work[:3]
+        worst = self._worst
+        worst[0] = 0.0
+        status = self._recover(self._equations, q, qd, float(t), self._no_input, self._terms.buffer, model.n, model.m,
+                               *self._indices, float(self.p.position_tolerance), int(self.p.max_iterations),
+                               float(self.recovery_limit if integrated_velocities else np.inf), Ad, pivots, side,
+                               worst)
+        if worst[0] > 0.0:
+            self.note_condition(worst[0], worst[1])
+        if status == kernels.NOT_CONVERGED:
+            residual = np.max(np.abs(self._terms.phi[self.partition.rows]))
             raise ConvergenceError(
                 f"model {model.name!r} at t={t:.6g}: matrix-r position recovery did not converge in "
-                f"{self.p.max_iterations} iterations (residual {np.max(np.abs(residual)):.3g})")
-        qd = qd.copy()
-        if velocities_kept:
-            return q, qd
-        A = terms.A[part.rows]               # the loop's last evaluation was at the recovered q
-        if part.dependent.size:
-            side = -A[:, part.independent] @ qd[part.independent] - terms.phi_t[part.rows]
-            qd[part.dependent] = np.linalg.solve(A[:, part.dependent], side)
+                f"{self.p.max_iterations} iterations (residual {residual:.3g})")
+        if status == NON_FINITE:
+            raise SingularSystemError(f"model {model.name!r} at t={t:.6g}: matrix-r position recovery met non-finite "
+                                      "constraints or a singular block A_d")
         return q, qd
 
 

@@ -6,16 +6,16 @@ with Python callables, whose problem is a :class:`~cmbs.integrate.implicit.Callb
 The unknowns are the independent coordinates z of the partition (thesis eq. 3.51-3.57).  At an
 iterate (z, ż, z̈) the residual kernel expands it to the full state, from the last accepted one
 with z, ż, z̈ put in: dependent coordinates by Newton on Φ_r = 0 and their velocities from
-A_d ḋ = -A_z ż - Φ_t (:func:`cmbs.integrate.compiled_matrix_r._recover`), dependent accelerations
-from A_d q̈_d = γ_r - A_z z̈; then, with R = [-A_d⁻¹A_z; I] (rows in the partition's order)::
+A_d ḋ = -A_z ż - Φ_t (:func:`cmbs.dynamics.matrix_r_kernels.recover`), dependent accelerations
+from A_d q̈_d = γ_r - A_z z̈ (``dependent_accelerations``); then, with R = [-A_d⁻¹A_z; I] (rows in the partition's order)::
 
     f = Rᵀ(M q̈ - Q),   M̄ = Rᵀ M R,   C̄ = Rᵀ C_t R,   K̄ = Rᵀ K_t R
 
 where C_t = -∂Q/∂q̇ and K_t = -∂Q/∂q are forward differences over all n coordinates with the
 steps 1e-7 max(1, |x_k|).  After a step the accepted full state is the expansion at the last
 iterate evaluated, and the integrator's z, ż, z̈ are taken from it.  At each output instant
-the partition's κ₂ is tested as :func:`cmbs.integrate.compiled_matrix_r.rk4` tests it (the bound
-from the LU factors first, the SVD where the bound cannot rule it out); above the limit the run
+the partition's κ₂ is tested as :func:`cmbs.integrate.compiled_matrix_r.rk4` tests it
+(:func:`cmbs.dynamics.matrix_r_kernels.exceeds`); above the limit the run
 is handed back to Python, which chooses the partition again
 (:meth:`cmbs.dynamics.matrix_r.MatrixRSolver.update_partition`) and resumes.
 """
@@ -28,9 +28,9 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import OK
-from cmbs.dynamics.kkt import lu_solve, solve_in_place
-from cmbs.integrate.compiled_matrix_r import (NOT_CONVERGED, SINGULAR_CONDITION, _condition, _condition_two_bound,
-                                              _factor_dependent, _recover)
+from cmbs.dynamics.kkt import solve_in_place
+from cmbs.dynamics.matrix_r_kernels import (NOT_CONVERGED, dependent_accelerations, exceeds, factor_dependent, recover,
+                                            velocity_matrix)
 from cmbs.integrate.implicit import HANDED_BACK, STOPPED
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
@@ -81,14 +81,6 @@ class ReducedProblem(NamedTuple):
         return f"model {self.name!r} at t={t:.6g}: non-finite forces or mass matrix"
 
 
-def partition_limit(solver: object) -> float:
-    """κ₂ of the partition above which :meth:`MatrixRSolver.update_partition` acts: ``condition_growth``
-    times its value when chosen (automatic partition), at most 1e12, where it raises."""
-    if solver.user is not None:
-        return SINGULAR_CONDITION
-    return min(solver.p.condition_growth * solver.reference_condition, SINGULAR_CONDITION)
-
-
 def reduced_problems(kernel: NamedTuple, model: object, solver: object, u: np.ndarray, full: tuple, last: tuple,
                      outputs: int) -> Callable[[], ReducedProblem]:
     """The maker of the :class:`ReducedProblem` of ``model`` (``kernel``) with inputs ``u`` for
@@ -107,7 +99,7 @@ def reduced_problems(kernel: NamedTuple, model: object, solver: object, u: np.nd
                                         np.ascontiguousarray(part.independent, dtype=np.int64))
         return ReducedProblem(kernel, u, np.zeros(u.size), buffer, m, rows, dependent, independent,
                               float(parameters.position_tolerance), int(parameters.max_iterations),
-                              float(partition_limit(solver)), full, last,
+                              float(solver.partition_limit()), full, last,
                               reduced_work(n, independent.size, rows.size), worst, failure, records, model.name)
 
     return make
@@ -138,8 +130,8 @@ def _expand(problem, t, z, zd, zdd):
         q[independent[b]] = z[b]
         qd[independent[b]] = zd[b]
         qdd[independent[b]] = zdd[b]
-    status = _recover(problem.model, q, qd, t, problem.u_zero, problem.buffer, n, m, rows, dependent, independent,
-                      problem.tolerance, problem.iterations, np.inf, Ad, pivots, side, problem.worst)
+    status = recover(problem.model, q, qd, t, problem.u_zero, problem.buffer, n, m, rows, dependent, independent,
+                     problem.tolerance, problem.iterations, np.inf, Ad, pivots, side, problem.worst)
     if status != OK:
         largest = 0.0
         for a in range(r):
@@ -149,14 +141,7 @@ def _expand(problem, t, z, zd, zdd):
         return STOPPED
     evaluate(problem.model, q, qd, t, problem.u, problem.buffer)
     Q, _, A, gamma, _, M = terms_views(problem.model, n, m, problem.buffer)
-    for a in range(r):                      # A_d q̈_d = γ_r - A_z z̈ (A_d's factors are _recover's)
-        total = gamma[rows[a]]
-        for j in range(n):
-            total -= A[rows[a], j] * qdd[j]
-        side[a] = total
-    lu_solve(Ad, pivots, side)
-    for j in range(r):
-        qdd[dependent[j]] += side[j]
+    dependent_accelerations(A, gamma, rows, dependent, Ad, pivots, side, qdd)   # A_d's factors: recover's
     for i in range(n):
         if not math.isfinite(Q[i]):
             problem.failure[0], problem.failure[1], problem.failure[2] = NON_FINITE_TERMS, 0.0, t
@@ -197,16 +182,9 @@ def _residual(problem, step, stage, t, state, out):
     q, qd, qdd = problem.last
     Ad, pivots, side, R, mass, force, base, XR, K, C, shifted, _ = problem.work
     rows, dependent, independent = problem.rows, problem.dependent, problem.independent
-    n, m, k, r = q.shape[0], problem.m, independent.shape[0], rows.shape[0]
+    n, m, k = q.shape[0], problem.m, independent.shape[0]
     Q, _, A, _, _, M = terms_views(problem.model, n, m, problem.buffer)
-    R[:, :] = 0.0
-    for b in range(k):                      # R's column b: e_z(b) - A_d⁻¹ A_z e_b on the dependent rows
-        R[independent[b], b] = 1.0
-        for a in range(r):
-            side[a] = A[rows[a], independent[b]]
-        lu_solve(Ad, pivots, side)
-        for j in range(r):
-            R[dependent[j], b] = -side[j]
+    velocity_matrix(A, rows, dependent, independent, Ad, pivots, side, R)     # A_d's factors: _expand's
     for i in range(n):
         total = -Q[i]
         for j in range(n):
@@ -251,9 +229,10 @@ def _record(problem, row, step, stage, t, state):
     """Row ``row`` of the records: the accepted full state."""
     records_q, records_qd, records_qdd = problem.records
     full_q, full_qd, full_qdd = problem.full
-    records_q[row] = full_q
-    records_qd[row] = full_qd
-    records_qdd[row] = full_qdd
+    for i in range(full_q.shape[0]):        # element by element (cmbs.jit.njit)
+        records_q[row, i] = full_q[i]
+        records_qd[row, i] = full_qd[i]
+        records_qdd[row, i] = full_qdd[i]
 
 
 @njit(cache=True)
@@ -263,9 +242,10 @@ def _after_step(problem, t, state):
     z, zd, zdd, _, x = state
     full_q, full_qd, full_qdd = problem.full
     last_q, last_qd, last_qdd = problem.last
-    full_q[:] = last_q
-    full_qd[:] = last_qd
-    full_qdd[:] = last_qdd
+    for i in range(full_q.shape[0]):        # element by element (cmbs.jit.njit)
+        full_q[i] = last_q[i]
+        full_qd[i] = last_qd[i]
+        full_qdd[i] = last_qdd[i]
     for b in range(problem.independent.shape[0]):
         c = problem.independent[b]
         z[b] = full_q[c]
@@ -282,10 +262,9 @@ def _at_output(problem, t):
     Ad, pivots, side, zeros = problem.work[0], problem.work[1], problem.work[2], problem.work[11]
     n, m, rows, dependent = full_q.shape[0], problem.m, problem.rows, problem.dependent
     evaluate(problem.model, full_q, zeros, t, problem.u_zero, problem.buffer)
-    if not _factor_dependent(problem.buffer, n, m, rows, dependent, Ad, pivots):
-        return HANDED_BACK
-    if _condition_two_bound(problem.buffer, n, m, rows, dependent, Ad, pivots, side) > problem.limit \
-            and _condition(problem.buffer, n, m, rows, dependent) > problem.limit:
+    A = terms_views(problem.model, n, m, problem.buffer)[2]
+    if not factor_dependent(A, rows, dependent, Ad, pivots) or exceeds(A, rows, dependent, Ad, pivots, side,
+                                                                        problem.limit):
         return HANDED_BACK
     return OK
 

@@ -1,0 +1,322 @@
+"""The numerical work of matrix R (:mod:`cmbs.dynamics.matrix_r`), once: the kernels that
+:class:`~cmbs.dynamics.matrix_r.MatrixRSolver` calls on the Python loop and the compiled loops
+(:mod:`cmbs.integrate.compiled_matrix_r`, :mod:`cmbs.integrate.compiled_reduced`) call inside
+theirs.  Without numba they run as Python (:mod:`cmbs.jit`).
+
+With the partition's r constraint rows A_r = [A_d A_z] split into their dependent (d) and
+independent (z) columns (A_d regular; García de Jalón & Bayo 1994 ch. 5, thesis §3.5.4)::
+
+    R = [-A_d⁻¹ A_z ; I],   S = [A_d⁻¹ γ_r ; 0]   (rows in the partition's order),
+    Rᵀ M R z̈ = Rᵀ (Q - M S),   q̈ = R z̈ + S,   λ_r = -A_d⁻ᵀ (M q̈ - Q)_d,   λ = 0 on the other rows.
+
+Every kernel after :func:`factor_dependent` uses the LU factors of A_d it left in ``Ad``,
+``pivots``.  The recovery (:func:`recover`) evaluates the model through its kernel tuple
+(:func:`cmbs.model.compiled.evaluate`); a model with Python-callable terms is evaluated through
+:class:`PythonEquations` by the interpreted recovery (:func:`cmbs.jit.interpreted`).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
+from cmbs.dynamics.kkt import lu_in_place, lu_solve, lu_solve_transposed, solve_in_place
+from cmbs.jit import njit
+from cmbs.model.compiled import evaluate
+
+#: :func:`recover`'s status codes besides OK and NON_FINITE
+NOT_CONVERGED, VELOCITIES_KEPT = 4, 5
+#: κ₂ above which a partition's A_d counts as singular (a user partition fails, an automatic one
+#: is chosen again)
+SINGULAR_CONDITION = 1e12
+
+
+class PythonEquations(NamedTuple):
+    """A model whose terms only Python evaluates (user equations, Python-callable time
+    functions), as the interpreted :func:`recover` takes it: ``terms`` is a
+    :class:`~cmbs.model.model.Terms` of ``model`` whose buffer the recovery is given."""
+
+    model: object
+    terms: object
+
+    @staticmethod
+    def evaluate(equations: "PythonEquations", q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray,
+                 buffer: np.ndarray) -> None:
+        """The terms at (q, q̇, t, u) into ``buffer`` (``equations.terms.buffer``)."""
+        equations.model.evaluate(q, qd, t, u, out=equations.terms)
+
+
+@njit(cache=True)
+def factor_dependent(A, rows, dependent, Ad, pivots):
+    """LU factors (in ``Ad``, ``pivots``) of the dependent block A_d of ``A``: the partition's
+    constraint rows and dependent columns.  False when exactly singular."""
+    for a in range(rows.shape[0]):
+        for j in range(rows.shape[0]):
+            Ad[a, j] = A[rows[a], dependent[j]]
+    return lu_in_place(Ad, pivots)
+
+
+@njit(cache=True)
+def _norms(A, rows, Ad, pivots, side, rows_too):
+    """(‖A_r‖₁, ‖A_d⁻¹‖₁, ‖A_r‖∞, ‖A_d⁻¹‖∞) from ``A`` (A_r: the partition's rows, all columns)
+    and the LU factors of A_d: A_d⁻¹ column by column (r triangular solve pairs); the ∞-norms
+    only when ``rows_too`` (else 0).  ``side`` is overwritten."""
+    r, n = rows.shape[0], A.shape[1]
+    norm_one = inverse_one = norm_inf = inverse_inf = 0.0
+    for c in range(n):
+        column = 0.0
+        for a in range(r):
+            column += abs(A[rows[a], c])
+        norm_one = max(norm_one, column)
+    if rows_too:
+        for a in range(r):
+            row = 0.0
+            for c in range(n):
+                row += abs(A[rows[a], c])
+            norm_inf = max(norm_inf, row)
+    row_sums = np.zeros(r if rows_too else 0)
+    for j in range(r):
+        for a in range(r):
+            side[a] = 0.0
+        side[j] = 1.0
+        lu_solve(Ad, pivots, side)
+        column = 0.0
+        for a in range(r):
+            column += abs(side[a])
+            if rows_too:
+                row_sums[a] += abs(side[a])
+        inverse_one = max(inverse_one, column)
+    for a in range(row_sums.shape[0]):
+        inverse_inf = max(inverse_inf, row_sums[a])
+    return norm_one, inverse_one, norm_inf, inverse_inf
+
+
+@njit(cache=True)
+def condition_one(A, rows, Ad, pivots, side):
+    """κ₁ = ‖A_r‖₁ ‖A_d⁻¹‖₁ (:func:`cmbs.dynamics.matrix_r.partition_condition` with norm 1) from
+    the LU factors of A_d; 1 without dependent coordinates."""
+    if rows.shape[0] == 0:
+        return 1.0
+    norm_one, inverse_one, _, _ = _norms(A, rows, Ad, pivots, side, False)
+    return norm_one * inverse_one
+
+
+@njit(cache=True)
+def condition_two_bound(A, rows, Ad, pivots, side):
+    """An upper bound of κ₂ = ‖A_r‖₂ ‖A_d⁻¹‖₂: sqrt(κ₁ κ_∞) ≥ κ₂, since ‖B‖₂ ≤ sqrt(‖B‖₁ ‖B‖∞)
+    for every matrix B (Golub & Van Loan, Matrix Computations, 4th ed., §2.3.3), from the LU
+    factors of A_d: r triangular solve pairs instead of SVDs."""
+    if rows.shape[0] == 0:
+        return 1.0
+    norm_one, inverse_one, norm_inf, inverse_inf = _norms(A, rows, Ad, pivots, side, True)
+    return np.sqrt(norm_one * inverse_one * norm_inf * inverse_inf)
+
+
+@njit(cache=True)
+def condition_two(A, rows, dependent):
+    """κ₂ = ‖A_r‖₂ / σ_min(A_d) by SVDs; inf for a singular A_d, 1 without dependent
+    coordinates."""
+    r, n = rows.shape[0], A.shape[1]
+    if r == 0:
+        return 1.0
+    block = np.empty((r, r))
+    partition_rows = np.empty((r, n))
+    for a in range(r):
+        for c in range(n):
+            partition_rows[a, c] = A[rows[a], c]
+        for j in range(r):
+            block[a, j] = A[rows[a], dependent[j]]
+    smallest = np.linalg.svd(block)[1][-1]
+    return np.linalg.norm(partition_rows, 2) / smallest if smallest > 0 else np.inf
+
+
+@njit(cache=True)
+def exceeds(A, rows, dependent, Ad, pivots, side, limit):
+    """True when κ₂ of the partition exceeds ``limit`` (the re-partition test): the SVDs of
+    :func:`condition_two` only where :func:`condition_two_bound`, from the LU factors of A_d,
+    cannot rule it out."""
+    return condition_two_bound(A, rows, Ad, pivots, side) > limit and condition_two(A, rows, dependent) > limit
+
+
+@njit(cache=True)
+def recover(model, q, qd, t, u_zero, buffer, n, m, rows, dependent, independent, tolerance, iterations, limit, Ad,
+            pivots, side, worst):
+    """The consistent state with z and ż held: dependent coordinates by Newton on Φ_r = 0
+    (d ← d - A_d⁻¹ Φ_r, started from the given q, until max |Φ_r| < ``tolerance``, at most
+    ``iterations`` evaluations), in place in ``q``, and dependent velocities from
+    A_d ḋ = -A_z ż - Φ_t at the recovered q, in place in ``qd``.  Leaves the terms at the
+    recovered q (q̇ = 0, u = 0) in ``buffer`` and A_d's LU factors there in ``Ad``, ``pivots``.
+
+    Returns OK, NOT_CONVERGED, NON_FINITE (Φ_r not finite or A_d exactly singular), or
+    VELOCITIES_KEPT (positions recovered, q̇ unchanged) where κ₁ at the given q exceeds
+    ``limit`` (:attr:`~cmbs.dynamics.matrix_r.MatrixRSolver.recovery_limit`; inf recovers
+    them everywhere); raises ``worst`` = [κ₁, t] when that condition is the largest so far."""
+    r = rows.shape[0]
+    zeros = np.zeros(n)
+    converged = False
+    velocities_kept = False
+    A = buffer[n + m:n + m + m * n].reshape((m, n))
+    for iteration in range(iterations):
+        evaluate(model, q, zeros, t, u_zero, buffer)
+        largest = 0.0
+        for a in range(r):
+            value = abs(buffer[n + rows[a]])
+            if not value < np.inf:
+                return NON_FINITE
+            largest = max(largest, value)
+        if not factor_dependent(A, rows, dependent, Ad, pivots):
+            return NON_FINITE
+        if iteration == 0:
+            condition = condition_one(A, rows, Ad, pivots, side)
+            if condition > worst[0]:
+                worst[0], worst[1] = condition, t
+            velocities_kept = condition > limit
+        if largest < tolerance:
+            converged = True
+            break
+        for a in range(r):
+            side[a] = buffer[n + rows[a]]
+        lu_solve(Ad, pivots, side)
+        for j in range(r):
+            q[dependent[j]] -= side[j]
+    if not converged:
+        return NOT_CONVERGED
+    if velocities_kept:
+        return VELOCITIES_KEPT
+    phi_t = buffer[n + 2 * m + m * n:n + 3 * m + m * n]
+    for a in range(r):
+        total = -phi_t[rows[a]]
+        for j in range(independent.shape[0]):
+            total -= A[rows[a], independent[j]] * qd[independent[j]]
+        side[a] = total
+    lu_solve(Ad, pivots, side)
+    for j in range(r):
+        qd[dependent[j]] = side[j]
+    return OK
+
+
+@njit(cache=True)
+def velocity_matrix(A, rows, dependent, independent, Ad, pivots, side, R):
+    """R (n, k) into ``R``: column b is e_z(b) - A_d⁻¹ A_z e_b on the dependent rows."""
+    r = rows.shape[0]
+    R[:, :] = 0.0
+    for b in range(independent.shape[0]):
+        R[independent[b], b] = 1.0
+        for a in range(r):
+            side[a] = A[rows[a], independent[b]]
+        lu_solve(Ad, pivots, side)
+        for j in range(r):
+            R[dependent[j], b] = -side[j]
+
+
+@njit(cache=True)
+def dependent_accelerations(A, gamma, rows, dependent, Ad, pivots, side, qdd):
+    """The dependent accelerations of ``qdd`` in place from A_r q̈ = γ_r with the independent ones
+    held: q̈_d += A_d⁻¹ (γ_r - A_r q̈)."""
+    r, n = rows.shape[0], A.shape[1]
+    for a in range(r):
+        total = gamma[rows[a]]
+        for j in range(n):
+            total -= A[rows[a], j] * qdd[j]
+        side[a] = total
+    lu_solve(Ad, pivots, side)
+    for j in range(r):
+        qdd[dependent[j]] += side[j]
+
+
+@njit(cache=True)
+def factored_dependent_accelerations(A, gamma, rows, dependent, Ad, pivots, side, qdd):
+    """:func:`dependent_accelerations` after factoring A_d of ``A``; False when A_d is exactly
+    singular."""
+    if not factor_dependent(A, rows, dependent, Ad, pivots):
+        return False
+    dependent_accelerations(A, gamma, rows, dependent, Ad, pivots, side, qdd)
+    return True
+
+
+def accelerations_work(n: int, k: int, r: int) -> tuple:
+    """The work arrays of :func:`accelerations` for n coordinates, k independent and r dependent
+    ones: A_d's LU factors and pivots, a side vector (r), R (n, k), Rᵀ M R (k, k), its
+    right-hand side (k), S (n), M R (n, k), Q - M S (n)."""
+    return (np.empty((r, r)), np.empty(r, dtype=np.int64), np.empty(r), np.empty((n, k)), np.empty((k, k)),
+            np.empty(k), np.empty(n), np.empty((n, k)), np.empty(n))
+
+
+@njit(cache=True)
+def accelerations(Q, A, gamma, M, rows, dependent, independent, work, qdd, lam):
+    """q̈ and λ by matrix R (module docstring) at the terms (Q, A, γ, M), with A_d's LU factors
+    in ``work`` (:func:`accelerations_work`).  Returns OK, SINGULAR (Rᵀ M R exactly singular)
+    or NON_FINITE."""
+    Ad, pivots, side, R, reduced, zrhs, S, MR, force = work
+    n, m = Q.shape[0], A.shape[0]
+    r, k = rows.shape[0], independent.shape[0]
+    velocity_matrix(A, rows, dependent, independent, Ad, pivots, side, R)
+    S[:] = 0.0
+    for a in range(r):
+        side[a] = gamma[rows[a]]
+    lu_solve(Ad, pivots, side)
+    for j in range(r):
+        S[dependent[j]] = side[j]
+    for i in range(n):                       # M R (skipping M's zeros: a natural model's M is sparse) and Q - M S
+        force[i] = Q[i]
+        for c in range(k):
+            MR[i, c] = 0.0
+        for j in range(n):
+            mass_ij = M[i, j]
+            if mass_ij != 0.0:
+                force[i] -= mass_ij * S[j]
+                for c in range(k):
+                    MR[i, c] += mass_ij * R[j, c]
+    for b in range(k):                       # Rᵀ (M R), symmetric, and Rᵀ (Q - M S)
+        for c in range(b, k):
+            total = 0.0
+            for i in range(n):
+                total += R[i, b] * MR[i, c]
+            reduced[b, c] = total
+            reduced[c, b] = total
+        total = 0.0
+        for i in range(n):
+            total += R[i, b] * force[i]
+        zrhs[b] = total
+    if not solve_in_place(reduced, zrhs):
+        return SINGULAR
+    for i in range(n):
+        total = S[i]
+        for b in range(k):
+            total += R[i, b] * zrhs[b]
+        qdd[i] = total
+    for a in range(m):
+        lam[a] = 0.0
+    for j in range(r):                       # (M q̈ - Q)_d = -A_dᵀ λ_r
+        c = dependent[j]
+        total = -Q[c]
+        for i in range(n):
+            total += M[c, i] * qdd[i]
+        side[j] = -total
+    lu_solve_transposed(Ad, pivots, side)
+    for a in range(r):
+        lam[rows[a]] = side[a]
+    for i in range(n):
+        if not (abs(qdd[i]) < np.inf):
+            return NON_FINITE
+    return OK
+
+
+@njit(cache=True)
+def factored_accelerations(Q, A, gamma, M, rows, dependent, independent, work, qdd, lam):
+    """:func:`accelerations` after factoring A_d of ``A`` into ``work``; SINGULAR also when A_d
+    is exactly singular."""
+    if not factor_dependent(A, rows, dependent, work[0], work[1]):
+        return SINGULAR
+    return accelerations(Q, A, gamma, M, rows, dependent, independent, work, qdd, lam)
+
+
+@njit(cache=True)
+def factored_velocity_matrix(A, rows, dependent, independent, Ad, pivots, side, R):
+    """:func:`velocity_matrix` after factoring A_d of ``A``; False when A_d is exactly singular."""
+    if not factor_dependent(A, rows, dependent, Ad, pivots):
+        return False
+    velocity_matrix(A, rows, dependent, independent, Ad, pivots, side, R)
+    return True
