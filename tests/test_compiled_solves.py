@@ -353,18 +353,16 @@ def test_udwadia_kalaba_regular_path_gives_the_svd_formulas_solution(name, param
     """Where A is certified regular, Udwadia-Kalaba's solve takes the augmented system
     (``_regular``): q̈, λ and the constraint force are those of its SVD formulas
     (``udwadia_kalaba_solve``, called directly) to rounding."""
-    from cmbs.dynamics.kkt import workspace_views
     from cmbs.dynamics.udwadia_kalaba import _regular, udwadia_kalaba_solve
 
     model = cmbs.load(name, **parameters)
     solver = UdwadiaKalaba().bind(model)
     kernel = solver.kernel
-    schur = workspace_views(kernel.floats, kernel.integers, kernel.layout)
     for seed in (1, 2):
         q, qd = state_off_the_constraints(model, seed)
         terms = terms_copy(model, q, qd, 0.3)
         qdd, lam = np.empty(model.n), np.empty(model.m)
-        assert _regular(kernel, schur, terms.M, terms.Q, terms.A, terms.gamma, qdd, lam)
+        assert _regular(kernel, terms.M, terms.Q, terms.A, terms.gamma, qdd, lam)
         force = kernel.force.copy()
         expected = np.empty(model.n), np.empty(model.m), np.empty(model.n)
         work = (np.array(kernel.factor), np.zeros((model.m, model.n)), np.zeros((3, model.n)), np.zeros((2, model.m)))
@@ -379,11 +377,9 @@ def test_udwadia_kalaba_regular_path_gives_the_svd_formulas_solution(name, param
 def test_udwadia_kalaba_regular_path_declines_redundant_constraints():
     """A doubled constraint makes A rank deficient: the certificate cannot hold, the SVD formulas
     decide (and give the minimum-norm multipliers, test above)."""
-    from cmbs.dynamics.kkt import workspace_views
     from cmbs.dynamics.udwadia_kalaba import _regular
 
     model = redundant_four_bar()
     kernel = UdwadiaKalaba().bind(model).kernel
     terms = terms_copy(model, model.q0, np.zeros(model.n))
-    schur = workspace_views(kernel.floats, kernel.integers, kernel.layout)
-    assert not _regular(kernel, schur, terms.M, terms.Q, terms.A, terms.gamma, np.empty(model.n), np.empty(model.m))
+    assert not _regular(kernel, terms.M, terms.Q, terms.A, terms.gamma, np.empty(model.n), np.empty(model.m))

@@ -16,19 +16,12 @@ from typing import ClassVar, Protocol
 
 import numpy as np
 
-from cmbs.jit import njit
 from cmbs.model.model import Model, Terms
 
 #: Status codes of the compiled solves (:func:`cmbs.dynamics.field.field`): the accelerations were
 #: found; the system is singular (the formulation cannot go on at this state); a term or an
 #: acceleration is not finite (the motion diverged).
 OK, SINGULAR, NON_FINITE = 0, 1, 2
-
-
-@njit(cache=True, inline="always")
-def as_is(kernel):
-    """The ``prepare`` of a formulation kernel that a run solves with as it is."""
-    return kernel
 
 
 @dataclass(frozen=True)

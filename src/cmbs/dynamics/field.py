@@ -2,11 +2,8 @@
 
 A formulation that runs in the compiled loops gives its dataclass a ``compiled(solver, model)``
 method returning a :class:`typing.NamedTuple` of its parameters and work arrays whose class
-carries ``prepare(kernel)`` (what a run solves with, made once per run: the kernel itself, or
-:class:`cmbs.dynamics.kkt.Unpacked` with its Schur workspace's views), ``fresh(kernel)`` (a copy
-with work arrays of its own) and, on the prepared tuple's class, ``solve(prepared, terms, t, q̇,
-q̈, λ) -> status`` (:class:`cmbs.dynamics.lagrange.LagrangeKernel`,
-:class:`cmbs.dynamics.projection.ProjectionKernel`, ...); a model gives its kernel tuple
+carries ``solve(kernel, terms, t, q̇, q̈, λ) -> status`` (:class:`cmbs.dynamics.lagrange.LagrangeKernel`,
+:class:`cmbs.dynamics.projection.ProjectionKernel`); a model gives its kernel tuple
 (:mod:`cmbs.model.compiled`).  :func:`field` evaluates the one and solves with the other, each
 chosen by its tuple's class when the caller is compiled (:func:`cmbs.jit.type_dispatch`): the
 integration loops (:mod:`cmbs.integrate.compiled_rk4`, :mod:`cmbs.integrate.compiled_adaptive`)
@@ -27,11 +24,7 @@ from cmbs.jit import COMPILED, njit, njit_borrowing, type_dispatch
 from cmbs.model.compiled import evaluate, model_kernel, terms_finite, terms_views
 from cmbs.model.model import Model
 
-#: ``prepare(kernel)``: what a run solves with, made once per run from a formulation's kernel
-#: (the kernel itself, or :class:`cmbs.dynamics.kkt.Unpacked` for one with a Schur workspace).
-prepare = type_dispatch("prepare")
-#: ``solve(prepared, terms, t, qd, qdd, lam) -> status``: the formulation's solve on what
-#: :data:`prepare` made.
+#: ``solve(kernel, terms, t, qd, qdd, lam) -> status``: the solve of the formulation ``kernel`` describes.
 solve = type_dispatch("solve")
 
 
@@ -46,8 +39,7 @@ def formulation_kernel(chosen: Formulation, solver: object, model: Model) -> Nam
 def field(model, formulation, q, qd, t, u, buffer, terms, qdd, lam):
     """q̈ and λ at (q, q̇, t, u) into ``qdd``, ``lam``; returns OK, SINGULAR or NON_FINITE.
 
-    ``model`` is the model's kernel tuple, ``formulation`` what :data:`prepare` made of the
-    formulation's; ``buffer`` receives the terms and
+    ``model`` and ``formulation`` are the kernel tuples; ``buffer`` receives the terms and
     ``terms`` are its views (:func:`~cmbs.model.compiled.terms_views`), made once per run.  A
     state whose terms are not finite returns NON_FINITE before any factorisation."""
     evaluate(model, q, qd, t, u, buffer)
@@ -65,9 +57,9 @@ def field(model, formulation, q, qd, t, u, buffer, terms, qdd, lam):
 
 @njit_borrowing(cache=True)
 def _field_at(model, formulation, buffer, q, qd, t, u, qdd, lam):
-    """:func:`field` with the formulation prepared and the terms' views made here."""
+    """:func:`field` with the terms' views made here."""
     terms = terms_views(model, q.shape[0], lam.shape[0], buffer)
-    return field(model, prepare(formulation), q, qd, t, u, buffer, terms, qdd, lam)
+    return field(model, formulation, q, qd, t, u, buffer, terms, qdd, lam)
 
 
 @njit(cache=True)

@@ -9,8 +9,7 @@
   row-scaled A (Gram matrix traces, reused from step to step by Weyl's inequality) that prove A
   regular without an SVD at almost every evaluation.
 - :func:`schur_workspace` sizes every work array once per model; :func:`pack_workspace` and
-  :func:`unpack_workspace` carry them as three arrays, which a compiled run unpacks once
-  (:func:`unpacked`).
+  :func:`unpack_workspace` carry them as three arrays.
 
 The formulations (:mod:`cmbs.dynamics.lagrange`, :mod:`cmbs.dynamics.projection`) call these.
 """
@@ -19,12 +18,11 @@ from __future__ import annotations
 
 import math
 import weakref
-from typing import NamedTuple
 
 import numpy as np
 
 from cmbs.banded import band_factor, band_plan, band_solve, gram_profile, inverse_trace, jacobian_pattern
-from cmbs.jit import njit, njit_borrowing, type_dispatch
+from cmbs.jit import njit, njit_borrowing
 from cmbs.model.compiled import model_kernel
 from cmbs.model.model import Model
 
@@ -85,36 +83,6 @@ def unpack_workspace(floats, integers, layout):
             _vector(integers, layout, 21), _vector(integers, layout, 22), _vector(integers, layout, 23),
             _vector(floats, layout, 24), _vector(integers, layout, 25), _vector(integers, layout, 26),
             _vector(floats, layout, 27), _matrix(floats, layout, 28))
-
-
-#: ``solve_unpacked(kernel, schur, terms, t, qd, qdd, lam) -> status``: the solve of a
-#: formulation kernel with a Schur workspace, on the workspace's unpacked views ``schur``.
-solve_unpacked = type_dispatch("solve_unpacked")
-
-
-class Unpacked(NamedTuple):
-    """A formulation kernel with its packed Schur workspace unpacked, as a compiled run solves
-    with it (:func:`unpacked`): the views are made once per run, not at each evaluation (nine of
-    them are reshapes, a call of numba's run-time helper each: about 0.16 µs per evaluation)."""
-
-    kernel: NamedTuple
-    schur: tuple
-
-
-@njit_borrowing(cache=True, inline="always")
-def unpacked(kernel):
-    """The :class:`Unpacked` of a kernel with ``floats``, ``integers`` and ``layout`` (a
-    formulation kernel's ``prepare``)."""
-    return Unpacked(kernel, unpack_workspace(kernel.floats, kernel.integers, kernel.layout))
-
-
-@njit_borrowing(cache=True, inline="always")
-def _solve_unpacked_run(run, terms, t, qd, qdd, lam):
-    """The solve of an :class:`Unpacked`: its kernel's ``solve_unpacked`` on its views."""
-    return solve_unpacked(run.kernel, run.schur, terms, t, qd, qdd, lam)
-
-
-Unpacked.solve = staticmethod(_solve_unpacked_run)
 
 
 @njit_borrowing(cache=True)

@@ -23,7 +23,7 @@ import numpy as np
 from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.dense import all_finite
 from cmbs.dynamics.kkt import assemble_kkt, band_kkt, certify, full_system, gram_singular, packed_workspace, \
-    schur_solve, unpack_workspace, unpacked
+    schur_solve, unpack_workspace
 from cmbs.errors import SingularSystemError
 from cmbs.jit import njit, njit_borrowing
 from cmbs.lazy import on_first_use
@@ -159,13 +159,6 @@ def lagrange_kernel(solver: KKTSolver, model: Model) -> LagrangeKernel:
 
 @njit_borrowing(cache=True)
 def _solve(kernel, terms, t, qd, qdd, lam):
-    """:func:`_solve_unpacked` with the kernel's workspace unpacked here (a call from Python)."""
-    return _solve_unpacked(kernel, unpack_workspace(kernel.floats, kernel.integers, kernel.layout), terms, t, qd,
-                           qdd, lam)
-
-
-@njit_borrowing(cache=True, inline="always")
-def _solve_unpacked(kernel, schur, terms, t, qd, qdd, lam):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c], c = γ (Lagrange) or γ - 2ξωΦ̇ - ω²Φ with
     Φ̇ = Aq̇ + Φ_t (Baumgarte), at the terms (Q, Φ, A, γ, Φ_t, M).
 
@@ -181,6 +174,7 @@ def _solve_unpacked(kernel, schur, terms, t, qd, qdd, lam):
     if kernel.least_squares:
         _constraint_rhs(kernel, phi, A, gamma, phi_t, qd)
         return _minimum_norm(M, Q, A, kernel.K, kernel.rhs, qdd, lam)
+    schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
     singular, certified, decided = certify(A, kernel.row_scale, kernel.tolerance, schur[27], schur[28], schur[7],
                                            schur[8], schur[13], schur[14], schur[15])
     if not decided:
@@ -250,6 +244,5 @@ def _fresh(kernel):
                           kernel.integers.copy(), kernel.layout, np.empty_like(kernel.K), np.empty_like(kernel.rhs))
 
 
-LagrangeKernel.prepare = staticmethod(unpacked)
-LagrangeKernel.solve_unpacked = staticmethod(_solve_unpacked)
+LagrangeKernel.solve = staticmethod(_solve)
 LagrangeKernel.fresh = staticmethod(_fresh)

@@ -40,7 +40,7 @@ from typing import ClassVar, NamedTuple
 
 import numpy as np
 
-from cmbs.dynamics.base import OK, Accelerations, StatelessSolver, as_is, check_parameters
+from cmbs.dynamics.base import OK, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, add_scaled_gram, all_finite, fill_nan, max_abs, multiply,
                                  multiply_transposed)
 from cmbs.dynamics.kkt import DENSE, cholesky_in_place, solve_lower, solve_lower_transposed
@@ -275,6 +275,5 @@ def _fresh(kernel):
                          kernel.force.copy(), kernel.worst.copy())
 
 
-PenaltyKernel.prepare = staticmethod(as_is)
 PenaltyKernel.solve = staticmethod(_kernel_solve)
 PenaltyKernel.fresh = staticmethod(_fresh)

@@ -34,7 +34,7 @@ import numpy as np
 
 from cmbs.dynamics.base import OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.kkt import band_kkt, bounds_meeting, packed_workspace, schur_solve, solve_in_place, \
-    unpack_workspace, unpacked
+    unpack_workspace
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.jit import njit, njit_borrowing
 from cmbs.model.model import Model, Terms
@@ -167,18 +167,12 @@ class ProjectionKernel(NamedTuple):
 
 @njit_borrowing(cache=True)
 def _solve(kernel, terms, t, qd, qdd, lam):
-    """:func:`_solve_unpacked` with the kernel's workspace unpacked here (a call from Python)."""
-    return _solve_unpacked(kernel, unpack_workspace(kernel.floats, kernel.integers, kernel.layout), terms, t, qd,
-                           qdd, lam)
-
-
-@njit_borrowing(cache=True, inline="always")
-def _solve_unpacked(kernel, schur, terms, t, qd, qdd, lam):
     """Aghili's projection with the kernel's constraint inertia at the terms (Q, Φ, A, γ, Φ_t, M):
     by the augmented system where A is certified regular (:func:`_by_schur`, the same solution
     there for every inertia), else by the SVD (:func:`_by_svd`); SINGULAR only when the
     constraint inertia matrix is exactly singular."""
     Q, phi, A, gamma, phi_t, M = terms
+    schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
     if _by_schur(M, Q, A, gamma, kernel.row_scale, kernel.threshold, schur, qdd, lam):
         return OK
     if _by_svd(M, Q, A, gamma, kernel.row_scale, kernel.threshold, kernel.inertia, kernel.mu, kernel.scale,
@@ -280,6 +274,5 @@ def _fresh(kernel):
                             kernel.row_scale, kernel.floats.copy(), kernel.integers.copy(), kernel.layout)
 
 
-ProjectionKernel.prepare = staticmethod(unpacked)
-ProjectionKernel.solve_unpacked = staticmethod(_solve_unpacked)
+ProjectionKernel.solve = staticmethod(_solve)
 ProjectionKernel.fresh = staticmethod(_fresh)

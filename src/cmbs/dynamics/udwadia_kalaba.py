@@ -36,7 +36,7 @@ from cmbs.dynamics.base import OK, Accelerations, StatelessSolver, check_paramet
 from cmbs.dynamics.dense import NOT_POSITIVE_DEFINITE, add_scaled_gram, all_finite, fill_nan, multiply, \
     multiply_transposed
 from cmbs.dynamics.kkt import DENSE, band_kkt, bounds_meeting, cholesky_in_place, packed_workspace, schur_solve, \
-    solve_lower, solve_lower_transposed, unpack_workspace, unpacked
+    solve_lower, solve_lower_transposed, unpack_workspace
 from cmbs.dynamics.projection import PROJECTION_REGULAR, reference_row_scale
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.jit import njit
@@ -287,18 +287,10 @@ NO_WORKSPACE = np.zeros((29, 5), dtype=np.int64)
 
 @njit(cache=True)
 def _solve_with(kernel, M, Q, A, gamma, c, qdd, lam):
-    """:func:`_solve_unpacked` with the kernel's workspace unpacked here (a call from Python)."""
-    return _solve_unpacked(kernel, unpack_workspace(kernel.floats, kernel.integers, kernel.layout), M, Q, A, gamma,
-                           c, qdd, lam)
-
-
-@njit(cache=True, inline="always")
-def _solve_unpacked(kernel, schur, M, Q, A, gamma, c, qdd, lam):
     """Udwadia-Kalaba's q̈, λ and constraint force (into ``kernel.force``) with the non-ideal
-    vector ``c`` (empty for none), on the unpacked Schur workspace ``schur``: :func:`_regular`
-    where it applies, else :func:`udwadia_kalaba_solve`.  Returns OK, NOT_POSITIVE_DEFINITE or
-    NON_FINITE."""
-    if c.size == 0 and _regular(kernel, schur, M, Q, A, gamma, qdd, lam):
+    vector ``c`` (empty for none): :func:`_regular` where it applies, else
+    :func:`udwadia_kalaba_solve`.  Returns OK, NOT_POSITIVE_DEFINITE or NON_FINITE."""
+    if c.size == 0 and _regular(kernel, M, Q, A, gamma, qdd, lam):
         return OK
     return udwadia_kalaba_solve(M, Q, A, gamma, c, kernel.augmentation, kernel.factored, kernel.threshold,
                                 kernel.row_scale, kernel.mass_scale, kernel.factor, kernel.work_matrix,
@@ -306,7 +298,7 @@ def _solve_unpacked(kernel, schur, M, Q, A, gamma, c, qdd, lam):
 
 
 @njit(cache=True)
-def _regular(kernel, schur, M, Q, A, gamma, qdd, lam):
+def _regular(kernel, M, Q, A, gamma, qdd, lam):
     """Udwadia-Kalaba's ideal solution where nothing is discarded, by the augmented system; False
     where that is not proven (the caller then takes the SVDs).
 
@@ -322,6 +314,7 @@ def _regular(kernel, schur, M, Q, A, gamma, qdd, lam):
     m, n = A.shape
     if not kernel.regular_path or m == 0 or m > n:
         return False
+    schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
     low, high = bounds_meeting(A, kernel.row_scale, PROJECTION_REGULAR, kernel.threshold, schur[27], schur[28],
                                schur[7], schur[8], schur[13], schur[14], schur[15])
     threshold = kernel.threshold
@@ -345,11 +338,11 @@ def _regular(kernel, schur, M, Q, A, gamma, qdd, lam):
 
 
 @njit(cache=True, inline="always")
-def _kernel_solve(kernel, schur, terms, t, qd, qdd, lam):
-    """:func:`_solve_unpacked` at the terms (Q, Φ, A, γ, Φ_t, M) without a non-ideal term; status OK,
+def _kernel_solve(kernel, terms, t, qd, qdd, lam):
+    """:func:`_solve_with` at the terms (Q, Φ, A, γ, Φ_t, M) without a non-ideal term; status OK,
     SINGULAR (the mass matrix to factor is not positive definite) or NON_FINITE."""
     Q, phi, A, gamma, phi_t, M = terms
-    return _solve_unpacked(kernel, schur, M, Q, A, gamma, kernel.no_nonideal, qdd, lam)
+    return _solve_with(kernel, M, Q, A, gamma, kernel.no_nonideal, qdd, lam)
 
 
 @njit(cache=True)
@@ -362,6 +355,5 @@ def _fresh(kernel):
                                kernel.layout)
 
 
-UdwadiaKalabaKernel.prepare = staticmethod(unpacked)
-UdwadiaKalabaKernel.solve_unpacked = staticmethod(_kernel_solve)
+UdwadiaKalabaKernel.solve = staticmethod(_kernel_solve)
 UdwadiaKalabaKernel.fresh = staticmethod(_fresh)

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
-from cmbs.dynamics.field import field, prepare
+from cmbs.dynamics.field import field
 from cmbs.integrate.compiled_rk4 import record_constraints
 from cmbs.model.compiled import terms_views
 from cmbs.jit import njit
@@ -146,7 +146,6 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
     LAMs, PHI, PHID, FORCE = np.zeros((count, m)), np.zeros(count), np.zeros(count), np.zeros((count, n))
     buffer = np.zeros(buffer_size)
     terms = terms_views(model, n, m, buffer)
-    solver = prepare(formulation)
     lam = np.empty(m)
     s = c.shape[0]
     extra = dense_c.shape[0]
@@ -162,12 +161,12 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
     k1 = np.empty(d)
     steps, rejected, evaluations, unsolved = 0, 0, 0, 0
     t = t_out[0]
-    status = _rhs(model, solver, y, t, u, buffer, terms, lam, k1)
+    status = _rhs(model, formulation, y, t, u, buffer, terms, lam, k1)
     evaluations += 1
     if status != OK:
         return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, 0, status, t, steps, rejected, evaluations, unsolved, y
     next_out = np.int64(0)   # not a literal 0: numba would compile _record once more for each constant
-    unsolved += _record(model, solver, t, y, k1, u, buffer, terms, next_out, T, Qs, QDs, QDDs, LAMs, PHI, PHID,
+    unsolved += _record(model, formulation, t, y, k1, u, buffer, terms, next_out, T, Qs, QDs, QDDs, LAMs, PHI, PHID,
                         FORCE)
     next_out += 1
     t_end = t_out[count - 1]
@@ -177,7 +176,7 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
     h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
     h0 = min(h0, t_end - t)
     probe = np.empty(d)
-    status = _rhs(model, solver, y + h0 * k1, t + h0, u, buffer, terms, lam, probe)
+    status = _rhs(model, formulation, y + h0 * k1, t + h0, u, buffer, terms, lam, probe)
     evaluations += 1
     d2 = _rms(probe - k1, scale) / h0
     h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** start_exponent
@@ -196,7 +195,7 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
         finite = True
         for i in range(1, s):
             _combination(y, h_try, a[i], stages, i, work)
-            status = _rhs(model, solver, work, t + c[i] * h_try, u, buffer, terms, lam, stages[i])
+            status = _rhs(model, formulation, work, t + c[i] * h_try, u, buffer, terms, lam, stages[i])
             evaluations += 1
             if status == SINGULAR:
                 return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, SINGULAR, t + c[i] * h_try, steps, \
@@ -249,7 +248,7 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
             for i in range(d):
                 k_new[i] = stages[s - 1, i]
         else:
-            status = _rhs(model, solver, y_new, t_new, u, buffer, terms, lam, k_new)
+            status = _rhs(model, formulation, y_new, t_new, u, buffer, terms, lam, k_new)
             evaluations += 1
             if status == SINGULAR:
                 return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, SINGULAR, t_new, steps, rejected, \
@@ -258,7 +257,7 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
         if extra > 0 and next_out < count and t_out[next_out] <= t_new + 1e-12 * max(1.0, abs(t_new)):
             for i in range(extra):              # the continuous extension's stages
                 _combination(y, h_try, dense_a[i], stages, s + i, work)
-                status = _rhs(model, solver, work, t + dense_c[i] * h_try, u, buffer, terms, lam,
+                status = _rhs(model, formulation, work, t + dense_c[i] * h_try, u, buffer, terms, lam,
                               stages[s + i])
                 evaluations += 1
                 if status != OK:
@@ -277,7 +276,7 @@ def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, 
                 for i in range(d):
                     value[i] = h00 * y[i] + h10 * h_try * k1[i] + h01 * y_new[i] + h11 * h_try * k_new[i]
                     slope[i] = d00 * y[i] + d10 * k1[i] + d01 * y_new[i] + d11 * k_new[i]
-            unsolved += _record(model, solver, t_out[next_out], value, slope, u, buffer, terms, next_out, T, Qs,
+            unsolved += _record(model, formulation, t_out[next_out], value, slope, u, buffer, terms, next_out, T, Qs,
                                 QDs, QDDs, LAMs, PHI, PHID, FORCE)
             next_out += 1
         t = t_new

@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import OK
-from cmbs.dynamics.field import field, prepare
+from cmbs.dynamics.field import field
 from cmbs.jit import interpreted, njit, njit_borrowing, prange, type_dispatch
 from cmbs.model.compiled import terms_views
 
@@ -79,7 +79,6 @@ def _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, wo
     buffer, kq, kv, lam, stage_lam = work
     T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE = records
     terms = terms_views(model, n, lam.shape[0], buffer)
-    solver = prepare(formulation)
     for step in range(start_step, steps + 1):
         t = step * h
         st = t
@@ -97,7 +96,7 @@ def _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, wo
             for i in range(n):
                 kq[stage, i] = sv[i]
             apply_inputs(inputs, step, stage, sq, sv, st, u)
-            status = field(model, solver, sq, sv, st, u, buffer, terms, kv[stage],
+            status = field(model, formulation, sq, sv, st, u, buffer, terms, kv[stage],
                            lam if stage == 0 else stage_lam)
             if status != OK:
                 return recorded, status, st, step
