@@ -105,8 +105,10 @@ def _residual(problem, step, stage, t, state, out):
 
 
 @njit(cache=True)
-def _solve(problem, matrix, rhs):
-    """The Newton correction into ``rhs`` (``matrix`` destroyed); False when exactly singular."""
+def dense_newton_solve(problem, matrix, rhs):
+    """The Newton correction into ``rhs`` by Gaussian elimination with partial pivoting
+    (``matrix`` destroyed); False when exactly singular.  The ``newton_solve`` of this module's
+    and :mod:`cmbs.integrate.compiled_reduced`'s problems."""
     return solve_in_place(matrix, rhs)
 
 
@@ -135,7 +137,7 @@ def _at_output(problem, t):
 
 
 Index3Problem.residual = staticmethod(_residual)
-Index3Problem.newton_solve = staticmethod(_solve)
+Index3Problem.newton_solve = staticmethod(dense_newton_solve)
 Index3Problem.record = staticmethod(_record)
 Index3Problem.after_step = staticmethod(_after_step)
 Index3Problem.at_output = staticmethod(_at_output)

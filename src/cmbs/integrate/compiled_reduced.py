@@ -28,9 +28,9 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import OK
-from cmbs.dynamics.kkt import solve_in_place
 from cmbs.dynamics.matrix_r_kernels import (NOT_CONVERGED, dependent_accelerations, exceeds, factor_dependent, recover,
                                             velocity_matrix)
+from cmbs.integrate.compiled_index3 import dense_newton_solve
 from cmbs.integrate.implicit import HANDED_BACK, STOPPED
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
@@ -219,12 +219,6 @@ def _residual(problem, step, stage, t, state, out):
 
 
 @njit(cache=True)
-def _solve(problem, matrix, rhs):
-    """The Newton correction into ``rhs`` (``matrix`` destroyed); False when exactly singular."""
-    return solve_in_place(matrix, rhs)
-
-
-@njit(cache=True)
 def _record(problem, row, step, stage, t, state):
     """Row ``row`` of the records: the accepted full state."""
     records_q, records_qd, records_qdd = problem.records
@@ -270,7 +264,7 @@ def _at_output(problem, t):
 
 
 ReducedProblem.residual = staticmethod(_residual)
-ReducedProblem.newton_solve = staticmethod(_solve)
+ReducedProblem.newton_solve = staticmethod(dense_newton_solve)
 ReducedProblem.record = staticmethod(_record)
 ReducedProblem.after_step = staticmethod(_after_step)
 ReducedProblem.at_output = staticmethod(_at_output)
