@@ -39,7 +39,7 @@ Inputs = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
 INDEX3 = {"backward-euler": BACKWARD_EULER, "generalized-alpha": generalized_alpha(0.9)}
 #: The formulations whose solve the compiled loops run, with the options they need.
 COMPILED_FORMULATIONS = ("lagrange and baumgarte (least_squares included), penalty, projection (every inertia), "
-                         "udwadia-kalaba without a nonideal term")
+                         "udwadia-kalaba without a nonideal term, matrix-r on a holonomic model")
 INTEGRATORS = (*EXPLICIT, "trapezoidal", *INDEX3)
 #: integrators whose dissipation of energy is part of their design (high-frequency damping)
 NUMERICALLY_DAMPED = tuple(INDEX3)
@@ -228,10 +228,8 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         :data:`COMPILED_FORMULATIONS`, constant inputs or a :class:`~cmbs.control.ComputedTorque`
         law alone or in a :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; with rk4,
         backward-euler or generalized-alpha (:mod:`cmbs.integrate.compiled_index3`) or, constant
-        inputs only, rk45/rk23/dop853 or trapezoidal (:mod:`cmbs.integrate.compiled_reduced`); or
-        matrix-r with constant inputs on a holonomic model and rk4,
-        :mod:`cmbs.integrate.compiled_matrix_r`; no projection), True requires it, False keeps the
-        Python loop.
+        inputs only, rk45/rk23/dop853 or trapezoidal (:mod:`cmbs.integrate.compiled_reduced`); no
+        projection), True requires it, False keeps the Python loop.
 
     Returns
     -------
@@ -291,18 +289,12 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     from cmbs.integrate.compiled_plan import compiled_run
 
     plan = compiled_run(model, chosen, solver, integrator, u, project, t_end, dt)
-    velocity_loop = False
-    if plan is None:
-        from cmbs.integrate import compiled_matrix_r      # imported only for the runs the first plan turned down
-
-        velocity_loop = compiled_matrix_r.runs(model, chosen, integrator, u, project, steps is not None)
-    if compiled and plan is None and not velocity_loop:
+    if compiled and plan is None:
         raise CmbsError(f"the compiled loop cannot run this simulation of model {model.name!r}: it needs a model, "
                         f"formulation and inputs without Python callables (formulations {COMPILED_FORMULATIONS}; "
                         "constant inputs or a ComputedTorque law, alone or in a ZeroOrderHold with period dt), "
                         "integrator rk4 with t_end a multiple of dt, backward-euler or generalized-alpha or, with "
-                        "constant inputs, rk45, rk23, dop853 or trapezoidal, and no --project; or matrix-r with rk4 "
-                        "and constant inputs on a holonomic model")
+                        "constant inputs, rk45, rk23, dop853 or trapezoidal, and no --project")
     run_options = {"integrator": integrator, "dt": dt, "every": every, "rtol": rtol, "atol": atol, "project": project}
     if plan is not None and compiled is not False and integrator in INDEX3:
         trajectory = _run_compiled_index3(model, plan, inputs, q_start, qd_start, grid, INDEX3[integrator],
@@ -316,9 +308,6 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     elif plan is not None and compiled is not False:
         trajectory = _run_compiled(model, solver, chosen, plan, inputs, q_start, qd_start, steps, dt, started,
                                    run_options)
-    elif velocity_loop and compiled is not False:
-        trajectory = _run_compiled_matrix_r(model, solver, chosen, inputs, q_start, qd_start, steps, dt, started,
-                                            run_options)
     else:
         with small_matrix_loop(model.n):         # one BLAS thread for small matrices (cmbs.blas)
             trajectory = _run_python(model, solver, chosen, inputs, q_start, qd_start, grid, every, integrator, u,
@@ -412,10 +401,10 @@ def _python_loop_note(model: Model, chosen: Formulation, solver: object, u: obje
         reason = "drift projection (project=True) runs in Python"
     elif callable(u):
         reason = "the inputs are a Python callable (only a plain ComputedTorque law is compiled)"
-    elif chosen.name != "matrix-r" and formulation_kernel(chosen, solver, model) is None:
+    elif formulation_kernel(chosen, solver, model) is None:
         reason = f"formulation {chosen.name!r} with these options has no compiled solve ({COMPILED_FORMULATIONS})"
     else:
-        reason = "t_end is not a multiple of dt, or the model has nonholonomic rows (matrix-r)"
+        reason = "t_end is not a multiple of dt"
     return f"Python loop: {reason}"
 
 
@@ -837,60 +826,42 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs
     """The whole RK4 loop in :func:`cmbs.integrate.compiled_rk4.rk4`, ``steps`` steps of dt;
     outputs at every ``options["every"]``-th step.  A computed-torque law runs compiled
     (:mod:`cmbs.control.compiled_torque`), recorded as :func:`_record` records a callable input."""
-    from cmbs.dynamics.base import OK, SINGULAR
+    from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
     from cmbs.integrate.compiled_rk4 import ConstantInputs, rk4
 
     model_part, formulation, law = plan
     u0 = np.array(inputs(0.0, q0, qd0), dtype=float) if isinstance(law, ConstantInputs) else np.zeros(model.n_u)
     loop_started = time.perf_counter()
-    T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, done, q_fail, qd_fail, u_fail = rk4(
-        model_part, formulation, law, np.array(q0), np.array(qd0), dt, steps, options["every"], u0,
-        model.new_terms().buffer.size, model.m)
+    (T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, done, q_fail, qd_fail, u_fail, message,
+     resumed) = rk4(model_part, formulation, law, np.array(q0), np.array(qd0), dt, steps, options["every"], u0,
+                    model.new_terms().buffer.size, model.m, getattr(solver, "resume", None))
     loop_wall = time.perf_counter() - loop_started
-    message = ""
     if status == SINGULAR:
         message = _singular_message(model, solver, q_fail, qd_fail, t_fail, u_fail)
-    elif status != OK:
+    elif status == NON_FINITE:
         message = (f"non-finite state or accelerations at t={t_fail:.6g}: the motion diverged; try a smaller "
                    "step, drift projection (project=True) or another formulation")
+    elif status != OK and not message:
+        message = solver.loop_failure(status, t_fail)     # the formulation's hooks failed
+    counters = {"steps": done, "evaluations": 4 * done, **_loop_counters(solver, resumed)}
     info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall}, "success" if status ==
-                 OK else "failed", message, {"steps": done, "evaluations": 4 * done})
+                 OK else "failed", message, counters)
     k = recorded
     trajectory = _trajectory(model, T[:k], Q[:k], QD[:k], QDD[:k], LAM[:k], U[:k], PHI[:k], PHID[:k], info,
                              FORCE[:k])
-    info["wall_time"] = time.perf_counter() - started
-    return trajectory
-
-
-def _run_compiled_matrix_r(model: Model, solver, chosen: Formulation, inputs: Inputs, q0: np.ndarray,
-                           qd0: np.ndarray, steps: int, dt: float, started: float, options: dict) -> Trajectory:
-    """The matrix-R RK4 loop of :mod:`cmbs.integrate.compiled_matrix_r`; outputs at every
-    ``options["every"]``-th step."""
-    from cmbs.integrate import compiled_matrix_r
-
-    u = np.array(inputs(0.0, q0, qd0), dtype=float)
-    loop_started = time.perf_counter()
-    records, recorded, reached, message, repartitions = compiled_matrix_r.run(model, solver, u, q0, qd0, dt, steps,
-                                                                          options["every"])
-    loop_wall = time.perf_counter() - loop_started
-    T, Q, QD, QDD, LAM, PHI, PHID, FORCE = (array[:recorded] for array in records)
-    status = "failed" if message else "success"
-    done = reached
-    info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall}, status, message,
-                 {"steps": done, "evaluations": 4 * done, "repartitions": repartitions})
-    trajectory = _trajectory(model, T, Q, QD, QDD, LAM, np.tile(u, (recorded, 1)), PHI, PHID, info, FORCE)
     _note_rounding(info, solver)
     info["wall_time"] = time.perf_counter() - started
     return trajectory
 
 
-def _tableau_extras(tableau) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The second error estimate and the continuous extension (a, c, d) of ``tableau`` as arrays
-    for :func:`cmbs.integrate.compiled_adaptive.adaptive`, empty where the method has none."""
-    low = tableau.b_error_low if tableau.b_error_low is not None else np.zeros(0)
-    if tableau.dense is None:
-        return low, np.zeros((0, 0)), np.zeros(0), np.zeros((0, 0))
-    return low, tableau.dense.a, tableau.dense.c, tableau.dense.d
+def _loop_counters(solver, resumed: int) -> dict:
+    """The counters a compiled loop adds for matrix R: its re-partitions (``resumed``, the
+    resumptions after its hook handed the run back); the largest κ₁ its recoveries met goes to the
+    solver (for :func:`_note_rounding`).  Nothing for the other formulations."""
+    if not isinstance(solver, MatrixRSolver):
+        return {}
+    solver.note_loop_conditions()
+    return {"repartitions": resumed}
 
 
 def _run_compiled_adaptive(model: Model, solver, chosen: Formulation, plan: tuple, inputs: Inputs, q0: np.ndarray,
@@ -900,28 +871,29 @@ def _run_compiled_adaptive(model: Model, solver, chosen: Formulation, plan: tupl
     from cmbs.integrate import compiled_adaptive
 
     model_part, formulation, _ = plan
-    tableau = explicit_method(options["integrator"])
     u = np.array(inputs(0.0, q0, qd0), dtype=float)
     loop_started = time.perf_counter()
-    (T, Q, QD, QDD, LAM, PHI, PHID, FORCE, recorded, status, t_stop, steps, rejected, evaluations,
-     unsolved, state) = compiled_adaptive.adaptive(
-        model_part, formulation, np.array(q0), np.array(qd0), np.ascontiguousarray(times, dtype=float),
-        options["rtol"], options["atol"], u, model.new_terms().buffer.size, model.m, tableau.c, tableau.a, tableau.b,
-        tableau.b_error, 1.0 / (min(tableau.order, tableau.error_order) + 1), 1.0 / (tableau.order + 1),
-        tableau.first_same_as_last, 10_000_000, *_tableau_extras(tableau))
+    run = compiled_adaptive.adaptive(model_part, formulation, np.array(q0), np.array(qd0), times, options["rtol"],
+                                     options["atol"], u, model.new_terms().buffer.size, model.m,
+                                     explicit_method(options["integrator"]), solver.adjusts_state,
+                                     resume=getattr(solver, "resume", None))
     loop_wall = time.perf_counter() - loop_started
-    message = ""
+    status, t_stop, message = run.status, run.t_stop, run.message
     if status == SINGULAR:
-        message = _singular_message(model, solver, state[:model.n], state[model.n:], t_stop, u)
-    elif status != OK:
-        message = f"{compiled_adaptive.REASONS.get(status, 'failed')} at t={t_stop:.6g}"
-    counters = {"steps": int(steps), "rejected": int(rejected), "evaluations": int(evaluations)}
+        message = _singular_message(model, solver, run.state[:model.n], run.state[model.n:], t_stop, u)
+    elif status in compiled_adaptive.REASONS:
+        message = f"{compiled_adaptive.REASONS[status]} at t={t_stop:.6g}"
+    elif status != OK and not message:
+        message = solver.loop_failure(status, t_stop)     # the formulation's hooks failed
+    counters = {"steps": run.steps, "rejected": run.rejected, "evaluations": run.evaluations,
+                **_loop_counters(solver, run.resumed)}
     info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall},
                  "success" if status == OK else "failed", message, counters)
-    if unsolved:
-        info["outputs_from_integrator"] = int(unsolved)
-    k = recorded
-    trajectory = _trajectory(model, T[:k], Q[:k], QD[:k], QDD[:k], LAM[:k], np.tile(u, (k, 1)), PHI[:k], PHID[:k],
-                             info, FORCE[:k])
+    if run.unsolved:
+        info["outputs_from_integrator"] = run.unsolved
+    k = run.recorded
+    T, Q, QD, QDD, LAM, PHI, PHID, FORCE = (array[:k] for array in run.records)
+    trajectory = _trajectory(model, T, Q, QD, QDD, LAM, np.tile(u, (k, 1)), PHI, PHID, info, FORCE)
+    _note_rounding(info, solver)
     info["wall_time"] = time.perf_counter() - started
     return trajectory

@@ -429,7 +429,8 @@ def _batch_plan(model: Model, settings: RunSettings, variants: list[Variant]) ->
     if not all(variant.state_only for variant in variants) or settings.integrator != "rk4":
         return None
     chosen = make_formulation(settings.formulation, **settings.formulation_options)
-    plan = compiled_run(model, chosen, chosen.bind(model), "rk4", None, settings.project, settings.t_end, settings.dt)
+    plan = compiled_run(model, chosen, chosen.bind(model), "rk4", None, settings.project, settings.t_end, settings.dt,
+                        batched=True)
     return None if plan is None else (*plan, round(settings.t_end / settings.dt))
 
 

@@ -8,6 +8,16 @@ carries ``solve(kernel, terms, t, q̇, q̈, λ) -> status`` (:class:`cmbs.dynami
 chosen by its tuple's class when the caller is compiled (:func:`cmbs.jit.type_dispatch`): the
 integration loops (:mod:`cmbs.integrate.compiled_rk4`, :mod:`cmbs.integrate.compiled_adaptive`)
 are written once for every model kind and formulation, and a run compiles only what it uses.
+
+The class also carries two hooks the loops call for every formulation: ``stage_state(kernel,
+model, q, q̇, t, buffer) -> status`` on each stage state before its field, in place, and
+``after_step(kernel, model, q, q̇, t, buffer) -> status`` on each accepted state, in place.
+:func:`unchanged` is both for a formulation that takes the states as they are; matrix R
+(:class:`cmbs.dynamics.matrix_r_kernels.MatrixRKernel`) recovers its dependent coordinates and
+velocities there, and its after-step hook returns :data:`REPARTITION` when its partition has
+become ill-conditioned: the loop then stops at that accepted state, and Python (the solver's
+``resume``, :meth:`cmbs.dynamics.matrix_r.MatrixRSolver.resume`) chooses a new partition and
+resumes the loop from there with the kernel it returns.  A hook's failure status ends the run.
 """
 
 from __future__ import annotations
@@ -26,6 +36,20 @@ from cmbs.model.model import Model
 
 #: ``solve(kernel, terms, t, qd, qdd, lam) -> status``: the solve of the formulation ``kernel`` describes.
 solve = type_dispatch("solve")
+#: ``stage_state(kernel, model, q, qd, t, buffer) -> status``: the formulation's stage state, in place.
+stage_state = type_dispatch("stage_state")
+#: ``after_step(kernel, model, q, qd, t, buffer) -> status``: the formulation's accepted state, in place.
+after_step = type_dispatch("after_step")
+#: The status of an after-step hook that hands the run back to Python, which resumes it (besides
+#: OK, SINGULAR and NON_FINITE).
+REPARTITION = 3
+
+
+@njit_borrowing(cache=True, inline="always")
+def unchanged(kernel, model, q, qd, t, buffer):
+    """The stage and after-step hook of a formulation that takes every state as it is: OK."""
+    return OK
+
 
 
 def formulation_kernel(chosen: Formulation, solver: object, model: Model) -> NamedTuple | None:

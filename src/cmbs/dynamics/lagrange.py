@@ -22,6 +22,7 @@ import numpy as np
 
 from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.dense import all_finite
+from cmbs.dynamics.field import unchanged
 from cmbs.dynamics.kkt import assemble_kkt, band_kkt, certify, full_system, gram_singular, packed_workspace, \
     schur_solve, unpack_workspace
 from cmbs.errors import SingularSystemError
@@ -245,4 +246,5 @@ def _fresh(kernel):
 
 
 LagrangeKernel.solve = staticmethod(_solve)
+LagrangeKernel.stage_state = LagrangeKernel.after_step = staticmethod(unchanged)
 LagrangeKernel.fresh = staticmethod(_fresh)

@@ -108,6 +108,12 @@ class MatrixR:
     def bind(self, model: Model) -> "MatrixRSolver":
         return MatrixRSolver(model, self)
 
+    def compiled(self, solver: "MatrixRSolver", model: Model) -> kernels.MatrixRKernel | None:
+        """The compiled loops' matrix R (:meth:`MatrixRSolver.kernel`), for holonomic models:
+        with a nonholonomic row the stage states are not recovered (:meth:`MatrixRSolver.stage_state`),
+        which the Python loop does."""
+        return None if model.nonholonomic.any() else solver.kernel()
+
 
 @dataclass(frozen=True)
 class Partition:
@@ -202,6 +208,7 @@ class MatrixRSolver:
         self._recover = kernels.recover if kernel is not None else interpreted(kernels.recover)
         self._no_input = np.zeros(model.n_u)
         self._worst = np.zeros(2)
+        self._loop_worst = np.zeros(2)     # [κ₁, t] of the compiled loops' recoveries (:meth:`kernel`)
 
     def _set_partition(self, partition: Partition) -> None:
         """Keep ``partition`` and its index arrays as the kernels take them."""
@@ -257,6 +264,43 @@ class MatrixRSolver:
         :func:`partition_condition`."""
         rows, dependent, _ = self._indices
         return float(kernels.condition_two(np.ascontiguousarray(A, dtype=float), rows, dependent))
+
+    def kernel(self) -> kernels.MatrixRKernel:
+        """The :class:`~cmbs.dynamics.matrix_r_kernels.MatrixRKernel` of the current partition, on
+        this solver's work arrays; the largest κ₁ its recoveries meet is noted by
+        :meth:`note_loop_conditions`."""
+        rows, dependent, independent = self._indices
+        return kernels.MatrixRKernel(self.model.m, rows, dependent, independent, float(self.p.position_tolerance),
+                                     int(self.p.max_iterations), float(self.recovery_limit),
+                                     float(self.partition_limit()), self._no_input, self.work, self._loop_worst)
+
+    def resume(self, q: np.ndarray, t: float) -> kernels.MatrixRKernel:
+        """The kernel a compiled loop goes on with after it handed back the recovered state
+        (q, t) (status REPARTITION, :func:`~cmbs.dynamics.matrix_r_kernels._after_step`): the
+        partition chosen again there (:meth:`update_partition`).  Raises
+        :class:`~cmbs.errors.CmbsError` where the run cannot go on: a user partition at a
+        singular A_d, or no new partition although the loop asked for one."""
+        before = self.repartitions
+        self.update_partition(self.model.jacobian(q, t), t)
+        if self.repartitions == before:    # Python's A disagrees with the loop's: cannot go on
+            raise CmbsError(f"model {self.model.name!r} at t={t:.6g}: the partition's condition calls for a new "
+                            "partition but none was chosen")
+        return self.kernel()
+
+    def note_loop_conditions(self) -> None:
+        """Keep the largest κ₁ the compiled loops' recoveries met (:meth:`note_condition`)."""
+        self.note_condition(float(self._loop_worst[0]), float(self._loop_worst[1]))
+
+    def loop_failure(self, status: int, t: float) -> str:
+        """The message of a compiled loop stopped by a recovery with ``status`` at ``t``
+        (:data:`~cmbs.dynamics.matrix_r_kernels.NOT_CONVERGED` or ``UNRECOVERED``), else ""."""
+        if status == kernels.NOT_CONVERGED:
+            return (f"model {self.model.name!r} at t={t:.6g}: matrix-r position recovery did not converge in "
+                    f"{self.p.max_iterations} iterations")
+        if status == kernels.UNRECOVERED:
+            return (f"model {self.model.name!r} at t={t:.6g}: matrix-r position recovery met non-finite constraints "
+                    "or a singular block A_d")
+        return ""
 
     def velocity_matrix(self, terms: Terms) -> np.ndarray:
         """R (n, n - r) with q̇ = R ż for the current partition."""

@@ -1,7 +1,8 @@
 """The numerical work of matrix R (:mod:`cmbs.dynamics.matrix_r`), once: the kernels that
 :class:`~cmbs.dynamics.matrix_r.MatrixRSolver` calls on the Python loop and the compiled loops
-(:mod:`cmbs.integrate.compiled_matrix_r`, :mod:`cmbs.integrate.compiled_reduced`) call inside
-theirs.  Without numba they run as Python (:mod:`cmbs.jit`).
+(:mod:`cmbs.integrate.compiled_rk4`, :mod:`cmbs.integrate.compiled_adaptive` through
+:class:`MatrixRKernel`, :mod:`cmbs.integrate.compiled_reduced`) call inside theirs.  Without numba
+they run as Python (:mod:`cmbs.jit`).
 
 With the partition's r constraint rows A_r = [A_d A_z] split into their dependent (d) and
 independent (z) columns (A_d regular; García de Jalón & Bayo 1994 ch. 5, thesis §3.5.4)::
@@ -22,12 +23,18 @@ from typing import NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
+from cmbs.dynamics.field import REPARTITION
 from cmbs.dynamics.kkt import lu_in_place, lu_solve, lu_solve_transposed, solve_in_place
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate
 
 #: :func:`recover`'s status codes besides OK and NON_FINITE
 NOT_CONVERGED, VELOCITIES_KEPT = 4, 5
+#: The status of a loop's stage or step whose recovery met non-finite constraints or an exactly
+#: singular A_d (:func:`recover`'s NON_FINITE): it ends the run, as the Python path's
+#: :class:`~cmbs.errors.SingularSystemError` does, where an adaptive loop would retry a
+#: NON_FINITE stage with a smaller step.  (Apart from the adaptive loop's own codes.)
+UNRECOVERED = 7
 #: κ₂ above which a partition's A_d counts as singular (a user partition fails, an automatic one
 #: is chosen again)
 SINGULAR_CONDITION = 1e12
@@ -320,3 +327,77 @@ def factored_velocity_matrix(A, rows, dependent, independent, Ad, pivots, side, 
         return False
     velocity_matrix(A, rows, dependent, independent, Ad, pivots, side, R)
     return True
+
+
+class MatrixRKernel(NamedTuple):
+    """Matrix R as the compiled loops take it (:mod:`cmbs.dynamics.field`): the partition
+    (constraint rows, dependent and independent coordinates), the recovery's tolerance, iteration
+    limit and κ₁ limit (:attr:`~cmbs.dynamics.matrix_r.MatrixRSolver.recovery_limit`), the κ₂
+    above which a step hands the run back for a new partition
+    (:meth:`~cmbs.dynamics.matrix_r.MatrixRSolver.partition_limit`), zero inputs for the
+    recovery's evaluations, the work arrays of :func:`accelerations_work` and ``worst`` = [κ₁, t],
+    the largest κ₁ a recovery met.  Made by :meth:`~cmbs.dynamics.matrix_r.MatrixRSolver.kernel`,
+    again after every new partition."""
+
+    m: int
+    rows: np.ndarray
+    dependent: np.ndarray
+    independent: np.ndarray
+    tolerance: float
+    iterations: int
+    recovery_limit: float
+    partition_limit: float
+    no_input: np.ndarray
+    work: tuple
+    worst: np.ndarray
+
+
+@njit(cache=True)
+def _solve(kernel, terms, t, qd, qdd, lam):
+    """q̈, λ by matrix R at the terms (:func:`factored_accelerations`), at the state as it is (a
+    loop recovers its stage states before, :func:`_stage_state`)."""
+    Q, _, A, gamma, _, M = terms
+    return factored_accelerations(Q, A, gamma, M, kernel.rows, kernel.dependent, kernel.independent, kernel.work,
+                                  qdd, lam)
+
+
+@njit(cache=True)
+def _recovered(kernel, model, q, qd, t, buffer):
+    """:func:`recover` of (q, q̇) in place with the kernel's partition and limits: OK (also where
+    the integrated velocities are kept), NOT_CONVERGED or UNRECOVERED."""
+    work = kernel.work
+    status = recover(model, q, qd, t, kernel.no_input, buffer, q.shape[0], kernel.m, kernel.rows, kernel.dependent,
+                     kernel.independent, kernel.tolerance, kernel.iterations, kernel.recovery_limit, work[0], work[1],
+                     work[2], kernel.worst)
+    if status == VELOCITIES_KEPT:
+        return OK
+    return UNRECOVERED if status == NON_FINITE else status
+
+
+@njit(cache=True)
+def _stage_state(kernel, model, q, qd, t, buffer):
+    """The stage hook: the stage state recovered in place (:meth:`MatrixRSolver.stage_state
+    <cmbs.dynamics.matrix_r.MatrixRSolver.stage_state>`)."""
+    return _recovered(kernel, model, q, qd, t, buffer)
+
+
+@njit(cache=True)
+def _after_step(kernel, model, q, qd, t, buffer):
+    """The after-step hook: the accepted state recovered in place, then REPARTITION when κ₂ of
+    the partition there exceeds the kernel's limit (:func:`exceeds`, on the recovery's factors
+    of A_d), for Python to choose a new partition (:meth:`MatrixRSolver.after_step
+    <cmbs.dynamics.matrix_r.MatrixRSolver.after_step>`)."""
+    status = _recovered(kernel, model, q, qd, t, buffer)
+    if status != OK:
+        return status
+    n, m = q.shape[0], kernel.m
+    A = buffer[n + m:n + m + m * n].reshape((m, n))           # the recovery left the terms at q
+    work = kernel.work
+    if exceeds(A, kernel.rows, kernel.dependent, work[0], work[1], work[2], kernel.partition_limit):
+        return REPARTITION
+    return OK
+
+
+MatrixRKernel.solve = staticmethod(_solve)
+MatrixRKernel.stage_state = staticmethod(_stage_state)
+MatrixRKernel.after_step = staticmethod(_after_step)

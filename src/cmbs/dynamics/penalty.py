@@ -43,6 +43,7 @@ import numpy as np
 from cmbs.dynamics.base import OK, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, add_scaled_gram, all_finite, fill_nan, max_abs, multiply,
                                  multiply_transposed)
+from cmbs.dynamics.field import unchanged
 from cmbs.dynamics.kkt import DENSE, cholesky_in_place, solve_lower, solve_lower_transposed
 from cmbs.errors import SingularSystemError
 from cmbs.jit import njit
@@ -276,4 +277,5 @@ def _fresh(kernel):
 
 
 PenaltyKernel.solve = staticmethod(_kernel_solve)
+PenaltyKernel.stage_state = PenaltyKernel.after_step = staticmethod(unchanged)
 PenaltyKernel.fresh = staticmethod(_fresh)

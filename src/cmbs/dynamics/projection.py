@@ -33,6 +33,7 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
+from cmbs.dynamics.field import unchanged
 from cmbs.dynamics.kkt import band_kkt, bounds_meeting, packed_workspace, schur_solve, solve_in_place, \
     unpack_workspace
 from cmbs.errors import CmbsError, SingularSystemError
@@ -275,4 +276,5 @@ def _fresh(kernel):
 
 
 ProjectionKernel.solve = staticmethod(_solve)
+ProjectionKernel.stage_state = ProjectionKernel.after_step = staticmethod(unchanged)
 ProjectionKernel.fresh = staticmethod(_fresh)

@@ -35,6 +35,7 @@ import numpy as np
 from cmbs.dynamics.base import OK, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.dense import NOT_POSITIVE_DEFINITE, add_scaled_gram, all_finite, fill_nan, multiply, \
     multiply_transposed
+from cmbs.dynamics.field import unchanged
 from cmbs.dynamics.kkt import DENSE, band_kkt, bounds_meeting, cholesky_in_place, packed_workspace, schur_solve, \
     solve_lower, solve_lower_transposed, unpack_workspace
 from cmbs.dynamics.projection import PROJECTION_REGULAR, reference_row_scale
@@ -356,4 +357,5 @@ def _fresh(kernel):
 
 
 UdwadiaKalabaKernel.solve = staticmethod(_kernel_solve)
+UdwadiaKalabaKernel.stage_state = UdwadiaKalabaKernel.after_step = staticmethod(unchanged)
 UdwadiaKalabaKernel.fresh = staticmethod(_fresh)

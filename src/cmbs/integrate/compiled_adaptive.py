@@ -13,6 +13,16 @@ tenth, FSAL, and cubic Hermite output at the requested times; for DOP853 its com
 (:func:`cmbs.integrate.explicit.dense_coefficients`).  At every output the accelerations,
 multipliers, |Φ|, |Φ̇| and -Aᵀλ are evaluated at the interpolated state, as the Python path's
 recording does (where that state is singular, q̈ is the interpolant's slope and λ is left 0).
+
+The formulation's hooks (:mod:`cmbs.dynamics.field`) run as the Python path's ``stage_state``
+and ``after_step`` do: every stage state is the hook's (matrix R: recovered; its q̇ is the
+slope of q), every accepted state passes the after-step hook before its derivative is
+evaluated (then without FSAL, as on the Python path).  Where that hook hands the run back
+(REPARTITION), :func:`adaptive` calls ``resume`` for the kernel to go on with (matrix R: a new
+partition, chosen at the recovered state as the Python path's ``after_step`` chooses it), which
+finishes that step as the Python path does (the derivative at the new state, the continuous
+extension's stages and the outputs with the new kernel), and goes on: the loop's state (time,
+states, stages, step size, controller, counters) is kept between the calls of :func:`_steps`.
 """
 
 from __future__ import annotations
@@ -21,23 +31,32 @@ import math
 
 import numpy as np
 
-from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
-from cmbs.dynamics.field import field
-from cmbs.integrate.compiled_rk4 import record_constraints
-from cmbs.model.compiled import terms_views
-from cmbs.jit import njit
+from typing import Callable, NamedTuple
 
-#: statuses besides OK, SINGULAR and NON_FINITE
-UNDERFLOW, TOO_MANY_STEPS = 5, 6
+from cmbs.dynamics.base import NON_FINITE, OK
+from cmbs.dynamics.field import REPARTITION, after_step, field, stage_state
+from cmbs.errors import CmbsError
+from cmbs.integrate.compiled_rk4 import record_constraints
+from cmbs.integrate.tableaus import Tableau
+from cmbs.jit import njit
+from cmbs.model.compiled import terms_views
 
 
 @njit(cache=True, inline="always")
-def _rhs(model, formulation, y, t, u, buffer, terms, lam, out):
-    """dy/dt = (q̇, q̈) into ``out``; returns the field's status."""
-    n = y.shape[0] // 2
-    status = field(model, formulation, y[:n], y[n:], t, u, buffer, terms, out[n:], lam)
+def _rhs(model, formulation, y, t, u, buffer, terms, lam, state, out):
+    """dy/dt = (q̇, q̈) into ``out`` at the stage state: ``y`` copied into ``state`` and made the
+    formulation's there (its stage hook: matrix R recovers it), whose q̇ is the slope of q.
+    Returns the hook's status where it failed, else the field's."""
+    d = y.shape[0]
+    n = d // 2
+    for i in range(d):
+        state[i] = y[i]
+    status = stage_state(formulation, model, state[:n], state[n:], t, buffer)
+    if status != OK:
+        return status
+    status = field(model, formulation, state[:n], state[n:], t, u, buffer, terms, out[n:], lam)
     for i in range(n):
-        out[i] = y[n + i]
+        out[i] = state[n + i]
     return status
 
 
@@ -129,161 +148,283 @@ def _dense_value(F, y, x, h, value, slope):
         slope[i] = derivative / h
 
 
-@njit(cache=True)
-def adaptive(model, formulation, q0, qd0, t_out, rtol, atol, u, buffer_size, m, c, a, b, b_error, exponent, start_exponent, first_same_as_last, max_steps, b_error_low, dense_a,
-             dense_c, dense_d):
-    """Integrate from t_out[0] to t_out[-1] with the tableau (c, a, b, b_error), the controller's
-    exponent 1/(min(p, p̂) + 1) and the starting step's 1/(p + 1); ``b_error_low`` (empty if
-    none) the second error estimate and (dense_a, dense_c, dense_d) the continuous extension
-    (empty: cubic Hermite) of :class:`~cmbs.integrate.tableaus.Tableau`; returns the
-    outputs (t, q, q̇, q̈, λ, |Φ|, |Φ̇|, -Aᵀλ), the number recorded, the status, the time
-    reached, the counters (steps, rejected, evaluations, outputs from the interpolant) and the
-    state (q, q̇) the status refers to (where a stage failed, for a failed run)."""
+#: statuses besides OK, SINGULAR, NON_FINITE and the formulation's (REPARTITION, matrix R's)
+UNDERFLOW, TOO_MANY_STEPS = 5, 6
+
+
+class AdaptiveRun(NamedTuple):
+    """The end of an adaptive run: the records (t, q, q̇, q̈, λ, |Φ|, |Φ̇|, -Aᵀλ) and how many
+    rows were recorded, the status and the time it refers to, the counters (steps, rejected,
+    evaluations, outputs from the interpolant, resumptions), the state (q, q̇) the status refers
+    to (where a stage failed, for a failed run) and the message of a run that ``resume``
+    stopped ("" else)."""
+
+    records: tuple
+    recorded: int
+    status: int
+    t_stop: float
+    steps: int
+    rejected: int
+    evaluations: int
+    unsolved: int
+    resumed: int
+    state: np.ndarray
+    message: str
+
+
+def adaptive(model: NamedTuple, formulation: NamedTuple, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray,
+             rtol: float, atol: float, u: np.ndarray, buffer_size: int, m: int, tableau: Tableau,
+             adjusts_state: bool, max_steps: int = 10_000_000,
+             resume: Callable[[np.ndarray, float], NamedTuple] | None = None) -> AdaptiveRun:
+    """Integrate from t_out[0] to t_out[-1] by ``tableau`` (the controller's exponent
+    1/(min(p, p̂) + 1), the starting step's 1/(p + 1), DOP853's second error estimate and
+    continuous extension, FSAL unless the formulation ``adjusts_state`` after each step, as the
+    Python loop).  Where the formulation's after-step hook hands the run back (REPARTITION) at
+    an accepted state, ``resume(q, t)`` returns the kernel to go on with, which finishes that
+    step (its derivative at the new state, its outputs) and goes on; or it raises
+    :class:`~cmbs.errors.CmbsError`, which stops the run there with that status."""
     n = q0.shape[0]
     d = 2 * n
     count = t_out.shape[0]
-    T, Qs, QDs, QDDs = np.zeros(count), np.zeros((count, n)), np.zeros((count, n)), np.zeros((count, n))
-    LAMs, PHI, PHID, FORCE = np.zeros((count, m)), np.zeros(count), np.zeros(count), np.zeros((count, n))
+    records = (np.zeros(count), np.zeros((count, n)), np.zeros((count, n)), np.zeros((count, n)),
+               np.zeros((count, m)), np.zeros(count), np.zeros(count), np.zeros((count, n)))
+    method = _method_arrays(tableau)
+    y, y_new, k1 = np.concatenate([q0, qd0]).astype(float), np.zeros(d), np.zeros(d)
+    stages = np.zeros((method[0].size + method[6].size, d))   # the step's stages, then the continuous extension's
+    clock = np.zeros(4)                  # t, next step size, controller's previous error, size of a step handed back
+    clock[0] = t_out[0]
+    counts = np.zeros(5, dtype=np.int64)  # outputs recorded, steps, rejected, evaluations, from the interpolant
+    where = np.zeros(d)
     buffer = np.zeros(buffer_size)
+    exponent, start_exponent = 1.0 / (min(tableau.order, tableau.error_order) + 1), 1.0 / (tableau.order + 1)
+    fsal = bool(tableau.first_same_as_last and not adjusts_state)
+    times = np.ascontiguousarray(t_out, dtype=float)
+    resumed, message = 0, ""
+    while True:
+        status, t_stop = _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, records, buffer, times,
+                                float(rtol), float(atol), u, *method, exponent, start_exponent, fsal, int(max_steps))
+        if status != REPARTITION:
+            break
+        try:
+            formulation = resume(y_new[:n].copy(), t_stop)
+        except CmbsError as error:
+            message = str(error)
+            break
+        resumed += 1
+    state = y_new if status == REPARTITION else where
+    return AdaptiveRun(records, int(counts[0]), int(status), float(t_stop), int(counts[1]), int(counts[2]),
+                       int(counts[3]), int(counts[4]), resumed, state, message)
+
+
+def _method_arrays(tableau: Tableau) -> tuple[np.ndarray, ...]:
+    """The arrays of ``tableau`` the loop takes: c, a, b, b̂ (error weights), the second error
+    estimate, the continuous extension's (a, c, d); empty where the method has none."""
+    low = tableau.b_error_low if tableau.b_error_low is not None else np.zeros(0)
+    dense = tableau.dense
+    extension = (np.zeros((0, 0)), np.zeros(0), np.zeros((0, 0))) if dense is None else (dense.a, dense.c, dense.d)
+    return tuple(np.ascontiguousarray(array, dtype=float) for array in
+                 (tableau.c, tableau.a, tableau.b, tableau.b_error, low, *extension))
+
+
+@njit(cache=True)
+def _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, records, buffer, t_out, rtol, atol, u, c,
+           a, b, b_error, b_error_low, dense_a, dense_c, dense_d, exponent, start_exponent, first_same_as_last,
+           max_steps):
+    """The loop of :func:`adaptive` from the state ``y`` at t = clock[0] with ``counts`` =
+    (outputs recorded, steps, rejected, evaluations, outputs from the interpolant), all updated in
+    place.  With no output recorded yet it evaluates the derivative ``k1`` there, records
+    t_out[0] and chooses the starting step; else it goes on with ``k1``, the step size clock[1]
+    and the controller's error clock[2], first finishing the step of size clock[3] > 0 to the
+    state ``y_new`` (its ``stages`` kept) that the after-step hook handed back.  Returns the
+    status and the time it refers to; REPARTITION where the hook hands back an accepted state
+    (in ``y_new``, its step's size in clock[3]); a failed stage's state in ``where``."""
+    d = y.shape[0]
+    n = d // 2
+    T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE = records
+    m = LAMs.shape[1]
+    count = t_out.shape[0]
     terms = terms_views(model, n, m, buffer)
     lam = np.empty(m)
     s = c.shape[0]
     extra = dense_c.shape[0]
-    stages = np.zeros((s + extra, d))       # the step's stages, then the continuous extension's
     F = np.zeros((3 + dense_d.shape[0], d))
-    low = np.empty(d)
-    value = np.empty(d)
-    slope = np.empty(d)
-    y = np.empty(d)
-    for i in range(n):
-        y[i] = q0[i]
-        y[n + i] = qd0[i]
-    k1 = np.empty(d)
-    steps, rejected, evaluations, unsolved = 0, 0, 0, 0
-    t = t_out[0]
-    status = _rhs(model, formulation, y, t, u, buffer, terms, lam, k1)
-    evaluations += 1
-    if status != OK:
-        return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, 0, status, t, steps, rejected, evaluations, unsolved, y
-    next_out = np.int64(0)   # not a literal 0: numba would compile _record once more for each constant
-    unsolved += _record(model, formulation, t, y, k1, u, buffer, terms, next_out, T, Qs, QDs, QDDs, LAMs, PHI, PHID,
-                        FORCE)
-    next_out += 1
+    low, value, slope, state = np.empty(d), np.empty(d), np.empty(d), np.empty(d)
+    work, k_new, scale = np.empty(d), np.empty(d), np.empty(d)
+    next_out, steps, rejected, evaluations, unsolved = counts[0], counts[1], counts[2], counts[3], counts[4]
+    t, h, factor_old, handed_back = clock[0], clock[1], clock[2], clock[3]
     t_end = t_out[count - 1]
-    # Hairer & Wanner's starting step (Solving ODEs I, §II.4), as the Python loop
-    scale = atol + np.abs(y) * rtol
-    d0, d1 = _rms(y, scale), _rms(k1, scale)
-    h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-    h0 = min(h0, t_end - t)
-    probe = np.empty(d)
-    status = _rhs(model, formulation, y + h0 * k1, t + h0, u, buffer, terms, lam, probe)
-    evaluations += 1
-    d2 = _rms(probe - k1, scale) / h0
-    h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** start_exponent
-    h = min(100.0 * h0, h1, t_end - t)
-    factor_old = 1e-4
-    y_new = np.empty(d)
-    k_new = np.empty(d)
-    work = np.empty(d)
-    while next_out < count:
-        if steps >= max_steps:
-            return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, TOO_MANY_STEPS, t, steps, rejected, \
-                evaluations, unsolved, y
-        h_try = min(h, t_end - t)
-        for i in range(d):
-            stages[0, i] = k1[i]
-        finite = True
-        for i in range(1, s):
-            _combination(y, h_try, a[i], stages, i, work)
-            status = _rhs(model, formulation, work, t + c[i] * h_try, u, buffer, terms, lam, stages[i])
+    t_stop = t
+    status = OK
+    if next_out == 0:
+        status = _rhs(model, formulation, y, t, u, buffer, terms, lam, state, k1)
+        evaluations += 1
+        if status != OK:
+            _copy(state, where)
+        else:
+            unsolved += _record(model, formulation, t, y, k1, u, buffer, terms, next_out, T, Qs, QDs, QDDs, LAMs,
+                                PHI, PHID, FORCE)
+            next_out += 1
+            # Hairer & Wanner's starting step (Solving ODEs I, §II.4), as the Python loop
+            for i in range(d):
+                scale[i] = atol + abs(y[i]) * rtol
+            d0, d1 = _rms(y, scale), _rms(k1, scale)
+            h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+            h0 = min(h0, t_end - t)
+            for i in range(d):
+                work[i] = y[i] + h0 * k1[i]
+            _rhs(model, formulation, work, t + h0, u, buffer, terms, lam, state, k_new)
             evaluations += 1
-            if status == SINGULAR:
-                return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, SINGULAR, t + c[i] * h_try, steps, \
-                    rejected, evaluations, unsolved, work
-            if status != OK:
-                finite = False
+            for i in range(d):
+                work[i] = k_new[i] - k1[i]
+            d2 = _rms(work, scale) / h0
+            h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** start_exponent
+            h = min(100.0 * h0, h1, t_end - t)
+            factor_old = 1e-4
+    while status == OK and next_out < count:
+        if handed_back > 0.0:               # the step the hook handed back, with the kernel resumed
+            h_try = handed_back
+            handed_back = 0.0
+        else:
+            if steps >= max_steps:
+                status, t_stop = TOO_MANY_STEPS, t
                 break
-        if finite:
-            _combination(y, h_try, b, stages, s, y_new)
+            h_try = min(h, t_end - t)
             for i in range(d):
-                if not math.isfinite(y_new[i]):
-                    finite = False
-        if not finite:
-            if h_try > 1e-14 * max(1.0, abs(t)):
-                h = h_try / 10.0
+                stages[0, i] = k1[i]
+            finite = True
+            for i in range(1, s):
+                _combination(y, h_try, a[i], stages, i, work)
+                status = _rhs(model, formulation, work, t + c[i] * h_try, u, buffer, terms, lam, state, stages[i])
+                evaluations += 1
+                if status != OK:
+                    t_stop = t + c[i] * h_try
+                    break
+            if status == NON_FINITE:        # retried with a smaller step below
+                status = OK
+                finite = False
+            elif status != OK:              # a singular stage, or its hook failed: the run ends
+                _copy(state, where)
+                break
+            if finite:
+                _combination(y, h_try, b, stages, s, y_new)
+                for i in range(d):
+                    if not math.isfinite(y_new[i]):
+                        finite = False
+            if not finite:
+                if h_try > 1e-14 * max(1.0, abs(t)):
+                    h = h_try / 10.0
+                    rejected += 1
+                    continue
+                status, t_stop = NON_FINITE, t + h_try
+                _copy(y, where)
+                break
+            for i in range(d):
+                scale[i] = atol + rtol * max(abs(y[i]), abs(y_new[i]))
+            error = _error_norm(h_try, b_error, b_error_low, stages, s, scale, work, low)
+            if error > 1.0:
+                h = h_try * max(0.2, 0.9 * error ** -exponent)
                 rejected += 1
+                if h < 1e-14 * max(1.0, abs(t)):
+                    status, t_stop = UNDERFLOW, t
+                    _copy(y, where)
+                    break
                 continue
-            return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, NON_FINITE, t + h_try, steps, rejected, \
-                evaluations, unsolved, y
-        for i in range(d):
-            scale[i] = atol + rtol * max(abs(y[i]), abs(y_new[i]))
-        if b_error_low.shape[0] == 0:
-            work[:] = 0.0
-            _add_stages(h_try, b_error, stages, s, work)
-            error = _rms(work, scale)
-        else:                                   # DOP853's combined norm
-            work[:] = 0.0
-            low[:] = 0.0
-            _add_stages(1.0, b_error, stages, s, work)
-            _add_stages(1.0, b_error_low, stages, s, low)
-            high_sum, low_sum = 0.0, 0.0
-            for i in range(d):
-                high_sum += (work[i] / scale[i]) ** 2
-                low_sum += (low[i] / scale[i]) ** 2
-            denominator = high_sum + 0.01 * low_sum
-            error = 0.0 if denominator == 0.0 else abs(h_try) * high_sum / math.sqrt(denominator * d)
-        if error > 1.0:
-            h = h_try * max(0.2, 0.9 * error ** -exponent)
-            rejected += 1
-            if h < 1e-14 * max(1.0, abs(t)):
-                return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, UNDERFLOW, t, steps, rejected, \
-                    evaluations, unsolved, y
-            continue
-        error = max(error, 1e-10)
-        growth = 0.9 * error ** (-0.7 * exponent) * factor_old ** (0.4 * exponent)
-        h = h_try * min(5.0, max(0.2, growth))
-        factor_old = error
+            error = max(error, 1e-10)
+            growth = 0.9 * error ** (-0.7 * exponent) * factor_old ** (0.4 * exponent)
+            h = h_try * min(5.0, max(0.2, growth))
+            factor_old = error
+            status = after_step(formulation, model, y_new[:n], y_new[n:], t + h_try, buffer)
+            if status != OK:
+                t_stop = t + h_try
+                if status == REPARTITION:   # Python chooses the new kernel, then the step goes on
+                    handed_back = h_try
+                else:
+                    _copy(y_new, where)
+                break
         t_new = t + h_try
         if first_same_as_last:
             for i in range(d):
                 k_new[i] = stages[s - 1, i]
         else:
-            status = _rhs(model, formulation, y_new, t_new, u, buffer, terms, lam, k_new)
+            status = _rhs(model, formulation, y_new, t_new, u, buffer, terms, lam, state, k_new)
             evaluations += 1
-            if status == SINGULAR:
-                return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, SINGULAR, t_new, steps, rejected, \
-                    evaluations, unsolved, y_new
+            if status == NON_FINITE:        # as the Python loop: the next step meets it
+                status = OK
+            elif status != OK:
+                t_stop = t_new
+                _copy(state, where)
+                break
         steps += 1
         if extra > 0 and next_out < count and t_out[next_out] <= t_new + 1e-12 * max(1.0, abs(t_new)):
             for i in range(extra):              # the continuous extension's stages
                 _combination(y, h_try, dense_a[i], stages, s + i, work)
-                status = _rhs(model, formulation, work, t + dense_c[i] * h_try, u, buffer, terms, lam,
+                status = _rhs(model, formulation, work, t + dense_c[i] * h_try, u, buffer, terms, lam, state,
                               stages[s + i])
                 evaluations += 1
                 if status != OK:
-                    return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, status, t + dense_c[i] * h_try, \
-                        steps, rejected, evaluations, unsolved, work
+                    t_stop = t + dense_c[i] * h_try
+                    _copy(state, where)
+                    break
+            if status != OK:
+                break
             _dense_coefficients(y, y_new, k1, k_new, h_try, dense_d, stages, F)
         while next_out < count and t_out[next_out] <= t_new + 1e-12 * max(1.0, abs(t_new)):
             x = (t_out[next_out] - t) / h_try
             if extra > 0:
                 _dense_value(F, y, x, h_try, value, slope)
-            else:                               # cubic Hermite on [t, t_new]
-                h00, h10 = 2 * x**3 - 3 * x**2 + 1, x**3 - 2 * x**2 + x
-                h01, h11 = -2 * x**3 + 3 * x**2, x**3 - x**2
-                d00, d10 = (6 * x**2 - 6 * x) / h_try, 3 * x**2 - 4 * x + 1
-                d01, d11 = (-6 * x**2 + 6 * x) / h_try, 3 * x**2 - 2 * x
-                for i in range(d):
-                    value[i] = h00 * y[i] + h10 * h_try * k1[i] + h01 * y_new[i] + h11 * h_try * k_new[i]
-                    slope[i] = d00 * y[i] + d10 * k1[i] + d01 * y_new[i] + d11 * k_new[i]
+            else:
+                _hermite(y, k1, y_new, k_new, x, h_try, value, slope)
             unsolved += _record(model, formulation, t_out[next_out], value, slope, u, buffer, terms, next_out, T, Qs,
                                 QDs, QDDs, LAMs, PHI, PHID, FORCE)
             next_out += 1
         t = t_new
-        for i in range(d):
-            y[i] = y_new[i]
-            k1[i] = k_new[i]
-    return T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE, next_out, OK, t, steps, rejected, evaluations, unsolved, y
+        t_stop = t
+        _copy(y_new, y)
+        _copy(k_new, k1)
+    counts[0], counts[1], counts[2], counts[3], counts[4] = next_out, steps, rejected, evaluations, unsolved
+    clock[0], clock[1], clock[2], clock[3] = t, h, factor_old, handed_back
+    return status, t_stop
+
+
+@njit(cache=True)
+def _copy(source, target):
+    """target = source, element by element."""
+    for i in range(source.shape[0]):
+        target[i] = source[i]
+
+
+@njit(cache=True)
+def _error_norm(h, b_error, b_error_low, stages, s, scale, work, low):
+    """The scaled error of a step (:func:`cmbs.integrate.explicit.error_norm`): the RMS of
+    h Σ b̂_i k_i / scale, or DOP853's combined norm when ``b_error_low`` is not empty."""
+    d = scale.shape[0]
+    for i in range(d):
+        work[i] = 0.0
+    if b_error_low.shape[0] == 0:
+        _add_stages(h, b_error, stages, s, work)
+        return _rms(work, scale)
+    for i in range(d):
+        low[i] = 0.0
+    _add_stages(1.0, b_error, stages, s, work)
+    _add_stages(1.0, b_error_low, stages, s, low)
+    high_sum, low_sum = 0.0, 0.0
+    for i in range(d):
+        high_sum += (work[i] / scale[i]) ** 2
+        low_sum += (low[i] / scale[i]) ** 2
+    denominator = high_sum + 0.01 * low_sum
+    return 0.0 if denominator == 0.0 else abs(h) * high_sum / math.sqrt(denominator * d)
+
+
+@njit(cache=True)
+def _hermite(y, k1, y_new, k_new, x, h, value, slope):
+    """Value and derivative at x = (t - t_n)/h of the cubic Hermite interpolant on [t_n, t_n + h]."""
+    h00, h10 = 2 * x**3 - 3 * x**2 + 1, x**3 - 2 * x**2 + x
+    h01, h11 = -2 * x**3 + 3 * x**2, x**3 - x**2
+    d00, d10 = (6 * x**2 - 6 * x) / h, 3 * x**2 - 4 * x + 1
+    d01, d11 = (-6 * x**2 + 6 * x) / h, 3 * x**2 - 2 * x
+    for i in range(y.shape[0]):
+        value[i] = h00 * y[i] + h10 * h * k1[i] + h01 * y_new[i] + h11 * h * k_new[i]
+        slope[i] = d00 * y[i] + d10 * k1[i] + d01 * y_new[i] + d11 * k_new[i]
 
 
 #: reasons of the failure statuses, for messages

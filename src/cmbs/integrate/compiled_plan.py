@@ -8,7 +8,9 @@ Python.  The index-3 integrators (backward Euler, generalized-α:
 :mod:`cmbs.integrate.compiled_index3`) bring their own formulation: they need the model's and the
 inputs' kernels only (a held law with t_end a multiple of dt); so does the trapezoidal rule in matrix
 R's independent coordinates (:mod:`cmbs.integrate.compiled_reduced`), with constant inputs.
-:func:`cmbs.simulate` and :func:`cmbs.sweep` ask here.
+:func:`cmbs.simulate` and :func:`cmbs.sweep` ask here; a batch of runs in one compiled call
+(:func:`cmbs.integrate.compiled_rk4.rk4_batch`) takes only the formulations that never hand a run
+back to Python (matrix R does, to choose a new partition).
 """
 
 from __future__ import annotations
@@ -49,11 +51,15 @@ def inputs_kernel(u: object, model: Model, dt: float) -> NamedTuple | None:
 
 
 def compiled_run(model: Model, chosen: Formulation, solver: object, integrator: str, u: object, project: bool,
-                 t_end: float, dt: float) -> tuple[NamedTuple, NamedTuple | None, NamedTuple] | None:
+                 t_end: float, dt: float, batched: bool = False
+                 ) -> tuple[NamedTuple, NamedTuple | None, NamedTuple] | None:
     """(model, formulation, inputs) kernel tuples when a compiled loop can run the simulation of
     ``model`` under ``chosen`` (bound as ``solver``) with ``integrator``, else None; the
     formulation's is None for an index-3 integrator (:data:`INDEX3`) and the trapezoidal rule,
-    which bring their own."""
+    which bring their own.  ``batched``: for many runs in one compiled call, which no
+    ``solver.resume`` can take up (:func:`cmbs.integrate.compiled_rk4.rk4`)."""
+    if batched and hasattr(solver, "resume"):
+        return None
     if project or (integrator not in ("rk4", "trapezoidal") and integrator not in ADAPTIVE
                    and integrator not in INDEX3):
         return None
