@@ -45,7 +45,7 @@ def assert_same_run(fast_run, python_run):
                                rtol=1e-6, atol=1e-12)
 
 
-@pytest.mark.parametrize("formulation", ["lagrange", "baumgarte", "projection"])
+@pytest.mark.parametrize("formulation", ["lagrange", "baumgarte", "projection", "matrix-r"])
 def test_compiled_computed_torque_equals_the_python_law_on_the_four_bar(four_bar, formulation):
     plant, reference, start = four_bar
     law = ComputedTorque(plant, reference, kp=100.0, kd=20.0)
