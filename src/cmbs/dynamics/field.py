@@ -18,6 +18,9 @@ velocities there, and its after-step hook returns :data:`REPARTITION` when its p
 become ill-conditioned: the loop then stops at that accepted state, and Python (the solver's
 ``resume``, :meth:`cmbs.dynamics.matrix_r.MatrixRSolver.resume`) chooses a new partition and
 resumes the loop from there with the kernel it returns.  A hook's failure status ends the run.
+A state the after-step hook left is one the stage hook leaves as it is (at the same time, with
+the same kernel: matrix R's recovery of a recovered state changes nothing), so a loop need not
+call the stage hook on it again.
 """
 
 from __future__ import annotations

@@ -43,17 +43,19 @@ from cmbs.model.compiled import terms_views
 
 
 @njit(cache=True, inline="always")
-def _rhs(model, formulation, y, t, u, buffer, terms, lam, state, out):
+def _rhs(model, formulation, y, t, u, buffer, terms, lam, state, out, hooked=True):
     """dy/dt = (q̇, q̈) into ``out`` at the stage state: ``y`` copied into ``state`` and made the
-    formulation's there (its stage hook: matrix R recovers it), whose q̇ is the slope of q.
-    Returns the hook's status where it failed, else the field's."""
+    formulation's there (its stage hook: matrix R recovers it; not when ``hooked`` is False, for
+    a state the after-step hook left), whose q̇ is the slope of q.  Returns the hook's status
+    where it failed, else the field's."""
     d = y.shape[0]
     n = d // 2
     for i in range(d):
         state[i] = y[i]
-    status = stage_state(formulation, model, state[:n], state[n:], t, buffer)
-    if status != OK:
-        return status
+    if hooked:
+        status = stage_state(formulation, model, state[:n], state[n:], t, buffer)
+        if status != OK:
+            return status
     status = field(model, formulation, state[:n], state[n:], t, u, buffer, terms, out[n:], lam)
     for i in range(n):
         out[i] = state[n + i]
@@ -281,7 +283,8 @@ def _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, recor
             h = min(100.0 * h0, h1, t_end - t)
             factor_old = 1e-4
     while status == OK and next_out < count:
-        if handed_back > 0.0:               # the step the hook handed back, with the kernel resumed
+        resumed = handed_back > 0.0
+        if resumed:                         # the step the hook handed back, with the kernel resumed
             h_try = handed_back
             handed_back = 0.0
         else:
@@ -345,8 +348,8 @@ def _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, recor
         if first_same_as_last:
             for i in range(d):
                 k_new[i] = stages[s - 1, i]
-        else:
-            status = _rhs(model, formulation, y_new, t_new, u, buffer, terms, lam, state, k_new)
+        else:                               # a handed-back state meets its new kernel's stage hook
+            status = _rhs(model, formulation, y_new, t_new, u, buffer, terms, lam, state, k_new, resumed)
             evaluations += 1
             if status == NON_FINITE:        # as the Python loop: the next step meets it
                 status = OK

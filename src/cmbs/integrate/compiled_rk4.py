@@ -115,9 +115,10 @@ def _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, wo
                     sq[i] = q[i] + a * kq[stage - 1, i]
                     sv[i] = qd[i] + a * kv[stage - 1, i]
                 st = t + a
-            status = stage_state(formulation, model, sq, sv, st, buffer)
-            if status != OK:
-                return recorded, status, st, step
+            if stage > 0 or step == start_step:     # else the state the after-step hook left
+                status = stage_state(formulation, model, sq, sv, st, buffer)
+                if status != OK:
+                    return recorded, status, st, step
             for i in range(n):                  # the stage's q̇, as the hook left it, is its slope of q
                 kq[stage, i] = sv[i]
             apply_inputs(inputs, step, stage, sq, sv, st, u)
