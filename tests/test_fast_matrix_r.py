@@ -246,3 +246,18 @@ def test_compiled_matrix_r_stops_where_the_python_loop_stops_when_a_recovery_fai
     assert "matrix-r position recovery did not converge in 1 iterations" in compiled.info["message"]
     assert python.info["message"].startswith(compiled.info["message"])
     np.testing.assert_array_equal(compiled.t, python.t)
+
+
+def test_compiled_dynamics_takes_matrix_r_as_its_python_solver_does():
+    """One compiled evaluation of matrix R at a state (no recovery), as
+    MatrixRSolver.accelerations: the free four-bar at a state off its start, on the constraints."""
+    model = cmbs.load("four-bar").without_drivers()
+    q = cmbs.assemble(model, model.q0 + 0.05 * np.arange(model.n), fixed=["alpha"])
+    start = np.zeros(model.n)
+    start[model.coordinate_index("alpha")] = 1.5
+    qd = cmbs.velocities(model, q, qd=start, fixed=["alpha"])
+    compiled = CompiledDynamics(model, "matrix-r")
+    qdd, lam = compiled.accelerations(q, qd, 0.3)
+    expected = MatrixR().bind(model).accelerations(model.evaluate(q, qd, 0.3), q, qd, 0.3)
+    np.testing.assert_allclose(qdd, expected.qdd, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(lam, expected.lam, rtol=1e-12, atol=1e-12)

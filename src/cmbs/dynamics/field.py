@@ -17,7 +17,9 @@ model, q, q̇, t, buffer) -> status`` on each stage state before its field, in p
 velocities there, and its after-step hook returns :data:`REPARTITION` when its partition has
 become ill-conditioned: the loop then stops at that accepted state, and Python (the solver's
 ``resume``, :meth:`cmbs.dynamics.matrix_r.MatrixRSolver.resume`) chooses a new partition and
-resumes the loop from there with the kernel it returns.  A hook's failure status ends the run.
+resumes the loop from there with the kernel it returns.  A hook's failure status ends the run
+(the solver's ``loop_failure(status, t)`` gives its message,
+:meth:`cmbs.dynamics.matrix_r.MatrixRSolver.loop_failure`).
 A state the after-step hook left is one the stage hook leaves as it is (at the same time, with
 the same kernel: matrix R's recovery of a recovered state changes nothing), so a loop need not
 call the stage hook on it again.
@@ -136,7 +138,8 @@ class CompiledDynamics:
     formulation
         A name or a :class:`~cmbs.dynamics.Formulation` with a compiled solve (``lagrange`` and
         ``baumgarte``, ``least_squares`` included, ``penalty``, ``projection`` with any inertia,
-        ``udwadia-kalaba`` without a non-ideal term).
+        ``udwadia-kalaba`` without a non-ideal term, ``matrix-r`` on a holonomic model: its solve
+        at the state as given, without recovery, as ``MatrixRSolver.accelerations``).
     """
 
     def __init__(self, model: Model, formulation: str | Formulation = "lagrange"):
@@ -151,7 +154,7 @@ class CompiledDynamics:
             raise CmbsError(f"the compiled field cannot run model {model.name!r} with formulation {chosen.name!r}: "
                             "it takes natural- or joint-coordinate models without Python time functions, with "
                             "a formulation that has a compiled solve (lagrange, baumgarte, penalty, projection, "
-                            "udwadia-kalaba without a nonideal term)")
+                            "udwadia-kalaba without a nonideal term, matrix-r on a holonomic model)")
         # bound once: a call then passes (and numba unboxes) only the state and the outputs
         self._field = functools.partial(_bound_field_at, Bound(kernel, solve_kernel, model.new_terms().buffer))
         self._no_input = np.zeros(model.n_u)
