@@ -122,7 +122,8 @@ def row(formulation: str | None, integrator: str, result: dict[str, object]) -> 
     flag = "SUCCESS OFF BRANCH" if result.get("off_branch") else ""
     high = "yes" if result.get("high_precision") else "no"
     return (f"  {name:<22} {integrator:<18} {result['status']:<8} {number('t_reached', '7.2f')} "
-            f"{number('b0_error', '10.2e')} {high:>5} {number('energy_drift', '9.1e')} {number('wall', '8.3f')}  {flag}")
+            f"{number('b0_error', '10.2e')} {high:>5} {number('energy_drift', '9.1e')} {number('wall', '8.3f')}"
+            f"  {flag}")
 
 
 def main() -> None:

@@ -83,7 +83,7 @@ _BUILDERS = [
     ("andrews", "andrews", "andrews",
      "Andrews' squeezing mechanism (Hairer & Wanner's seven-body benchmark), relative angles, 1 DOF"),
     ("n-four-bar", "n_four_bar", "n_four_bar",
-     "IFToMM A02 N-four-bar (N=2 loops of 1 m, 1 kg bars), 1 DOF, N+1 DOF at its singular positions"),
+     "IFToMM A02 N-four-bar: N loops of 1 m, 1 kg bars, 1 DOF, N+1 DOF at its singular positions"),
 ]
 
 
