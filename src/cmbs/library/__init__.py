@@ -82,6 +82,8 @@ _BUILDERS = [
      "Chaplygin sleigh: rigid body with a knife edge (nonholonomic), 3 DOF, 2 velocity DOF"),
     ("andrews", "andrews", "andrews",
      "Andrews' squeezing mechanism (Hairer & Wanner's seven-body benchmark), relative angles, 1 DOF"),
+    ("n-four-bar", "n_four_bar", "n_four_bar",
+     "IFToMM A02 N-four-bar: N loops of 1 m, 1 kg bars, 1 DOF, N+1 DOF at its singular positions"),
 ]
 
 

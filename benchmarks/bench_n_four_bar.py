@@ -1,0 +1,157 @@
+#!/usr/bin/env python
+"""IFToMM benchmark A02, the N-four-bar (González et al., Multibody Syst. Dyn. 16:179-190, 2006):
+every formulation and integrator of cmbs through its singular positions, against the exact motion.
+
+    python benchmarks/bench_n_four_bar.py                    # N = 2, 20 s, every configuration
+    python benchmarks/bench_n_four_bar.py --N 2 10 40        # the benchmark's three sizes
+    python benchmarks/bench_n_four_bar.py --t-end 3 --json out.json
+
+The model is ``cmbs.load("n-four-bar", N=N)``; the exact motion of B0 is
+``cmbs.library.n_four_bar.exact_b0`` (the 1-DOF reduction on the parallelogram branch, DOP853
+at 1e-12).  Configurations: each formulation (lagrange, baumgarte, penalty, projection,
+udwadia-kalaba, matrix-r, at their default options) with rk4 at h = 1 ms and with rk45 and
+dop853 at the default tolerances (rtol 1e-6, atol 1e-9), and generalized-α at h = 1 ms (which
+brings its own index-3 Lagrange formulation); outputs every 0.05 s, as the benchmark asks.
+Per run: status, the time reached, max |B0 - exact| over the outputs, whether the run meets
+IFToMM high precision (success to the end and B0 within 1e-3 m at every output), the energy
+drift max |E - E0| / max T (``info["energy_drift"]``), the wall time of the run (its numba
+compilation excluded by a short warm-up run first, which is not timed) and the flag
+``SUCCESS OFF BRANCH``: status success with B0 more than 1e-3 m off — a wrong answer that says
+nothing.  Each run is a child process stopped after ``--timeout`` seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import os
+import sys
+import time
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+import cmbs  # noqa: E402
+from cmbs.library.n_four_bar import exact_b0  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from reporting import write_report  # noqa: E402
+
+HIGH_PRECISION = 1e-3     # m, IFToMM A02 "high precision" on B0 at every output
+OUTPUT_INTERVAL = 0.05    # s
+STEP = 1e-3               # s, the fixed-step integrators
+FORMULATIONS = ("lagrange", "baumgarte", "penalty", "projection", "udwadia-kalaba", "matrix-r")
+EXPLICIT = ("rk4", "rk45", "dop853")
+
+
+def configurations() -> list[tuple[str | None, str]]:
+    """(formulation, integrator) pairs: each formulation with each explicit integrator, and
+    generalized-α with its own formulation (None)."""
+    return [(formulation, integrator) for formulation in FORMULATIONS for integrator in EXPLICIT] + \
+        [(None, "generalized-alpha")]
+
+
+def simulate(model: cmbs.Model, formulation: str | None, integrator: str, t_end: float) -> cmbs.Trajectory:
+    """One run with outputs every :data:`OUTPUT_INTERVAL`: fixed-step integrators at :data:`STEP`
+    keeping every 50th step, adaptive ones at their default tolerances."""
+    if integrator in ("rk4", "generalized-alpha"):
+        return cmbs.simulate(model, t_end=t_end, formulation=formulation, integrator=integrator, dt=STEP,
+                             every=int(round(OUTPUT_INTERVAL / STEP)))
+    return cmbs.simulate(model, t_end=t_end, formulation=formulation, integrator=integrator, dt=OUTPUT_INTERVAL)
+
+
+def b0_error(run: cmbs.Trajectory, N: int) -> float:
+    """max over the run's outputs of |B0 - B0_exact| [m] (inf when an output is not finite)."""
+    position, _ = exact_b0(run.t, N)
+    distance = np.hypot(run["B0.x"] - position[:, 0], run["B0.z"] - position[:, 1])
+    return float(distance.max()) if np.all(np.isfinite(distance)) else float("inf")
+
+
+def measure(N: int, formulation: str | None, integrator: str, t_end: float) -> dict[str, object]:
+    """Figures of one timed run (after an untimed 0.05 s warm-up run that compiles its kernels)."""
+    model = cmbs.load("n-four-bar", N=N)
+    simulate(model, formulation, integrator, OUTPUT_INTERVAL)
+    started = time.perf_counter()
+    try:
+        run = simulate(model, formulation, integrator, t_end)
+    except cmbs.CmbsError as error:
+        return {"status": "error", "message": str(error), "wall": time.perf_counter() - started}
+    wall = time.perf_counter() - started
+    status = run.info["status"]
+    error = b0_error(run, N)
+    return {"status": status, "message": run.info.get("message", "") if status != "success" else "",
+            "note": run.info.get("note", ""), "t_reached": float(run.t[-1]), "b0_error": error,
+            "high_precision": bool(status == "success" and run.t[-1] >= t_end - 1e-9 and error <= HIGH_PRECISION),
+            "off_branch": bool(status == "success" and not error <= HIGH_PRECISION),
+            "energy_drift": run.info.get("energy_drift"), "wall": wall,
+            "formulation_used": run.info.get("formulation", formulation)}
+
+
+def _child(connection: multiprocessing.connection.Connection, *arguments: object) -> None:
+    connection.send(measure(*arguments))
+    connection.close()
+
+
+def measure_with_timeout(N: int, formulation: str | None, integrator: str, t_end: float,
+                         timeout: float) -> dict[str, object]:
+    """:func:`measure` in a child process, stopped (status "timeout") after ``timeout`` seconds."""
+    receiver, sender = multiprocessing.Pipe(duplex=False)
+    child = multiprocessing.Process(target=_child, args=(sender, N, formulation, integrator, t_end))
+    child.start()
+    sender.close()
+    if receiver.poll(timeout):
+        try:
+            result = receiver.recv()
+        except EOFError:
+            result = {"status": "crashed", "message": "the child process ended without a result"}
+    else:
+        child.terminate()
+        result = {"status": "timeout", "message": f"stopped after {timeout:g} s", "wall": timeout}
+    child.join()
+    return result
+
+
+def row(formulation: str | None, integrator: str, result: dict[str, object]) -> str:
+    """One line of the table."""
+    def number(key: str, form: str) -> str:
+        value = result.get(key)
+        return "-" if value is None else format(value, form)
+
+    name = result.get("formulation_used") or formulation or "-"
+    flag = "SUCCESS OFF BRANCH" if result.get("off_branch") else ""
+    high = "yes" if result.get("high_precision") else "no"
+    return (f"  {name:<22} {integrator:<18} {result['status']:<8} {number('t_reached', '7.2f')} "
+            f"{number('b0_error', '10.2e')} {high:>5} {number('energy_drift', '9.1e')} {number('wall', '8.3f')}"
+            f"  {flag}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--N", type=int, nargs="+", default=[2], help="numbers of loops to run (benchmark: 2 10 40)")
+    parser.add_argument("--t-end", type=float, default=20.0, help="simulated time [s] (benchmark: 20)")
+    parser.add_argument("--timeout", type=float, default=600.0, help="wall seconds after which a run is stopped")
+    parser.add_argument("--json", help="also write every figure to this JSON file")
+    args = parser.parse_args()
+    report: dict[str, list[dict[str, object]]] = {}
+    for N in args.N:
+        print(f"\nIFToMM A02 N-four-bar, N = {N}, {args.t_end:g} s, outputs every {OUTPUT_INTERVAL:g} s; "
+              f"high precision: |B0 - exact| <= {HIGH_PRECISION:g} m at every output")
+        print(f"  {'formulation':<22} {'integrator':<18} {'status':<8} {'t [s]':>7} {'max|B0 err|':>10} "
+              f"{'HP':>5} {'E drift':>9} {'wall [s]':>8}")
+        report[str(N)] = []
+        for formulation, integrator in configurations():
+            result = measure_with_timeout(N, formulation, integrator, args.t_end, args.timeout)
+            print(row(formulation, integrator, result), flush=True)
+            for key in ("message", "note"):
+                if result.get(key):
+                    print(f"      {key}: {str(result[key]).splitlines()[0][:150]}")
+            report[str(N)].append({"formulation": formulation, "integrator": integrator, **result})
+        runs = report[str(N)]
+        print(f"  N = {N}: {sum(bool(r.get('high_precision')) for r in runs)} of {len(runs)} runs meet high "
+              f"precision; {sum(bool(r.get('off_branch')) for r in runs)} say success off the branch")
+    write_report(args.json, report)
+
+
+if __name__ == "__main__":
+    main()
