@@ -63,8 +63,10 @@ def njit_borrowing(*args, **options) -> Callable:
     of scalars, never an array, not even a view to Python (which would box it without an owner),
     unless it is ``inline="always"`` and called from compiled code only: it is then compiled
     into its caller, with the caller's reference counting.  numba's option is ``_nrt=False``: a
-    private one, kept until the kernels take packed arguments and work arrays allocated once per
-    run (without it the four-bar's compiled RK4 step costs 2.4-2.9 times as much)."""
+    private one, kept until the hot path holds few array variables (without it the four-bar's
+    compiled RK4 loop takes 2.1 times as long: about 160 reference-count calls per stage, one
+    increment and one decrement for each array a compiled call passes, including each array of
+    a kernel tuple, and for each view; benchmarks/README.md has the measurements)."""
     if _numba is not None:
         return _numba.njit(*args, **{**options, "_nrt": False})
     return njit(*args, **options)
