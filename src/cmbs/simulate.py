@@ -461,8 +461,10 @@ def _solve(solver, model: Model, terms, q: np.ndarray, qd: np.ndarray, t: float)
 
 def _force_derivatives(model: Model, inputs: Inputs, q: np.ndarray, qd: np.ndarray, t: float,
                        extra: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """C_t = -∂Q/∂q̇ and K_t = -∂Q/∂q (+ ∂extra/∂q) by forward differences."""
-    n = model.n
+    """C_t = -∂Q/∂q̇ and K_t = -∂Q/∂q (+ ∂extra/∂q̇, ∂extra/∂q), the inputs evaluated at each
+    state, by the forward differences of :func:`cmbs.integrate.implicit.forward_difference_tangents`."""
+    from cmbs.integrate.implicit import python_tangents
+
     terms = model.new_terms()
 
     def residual(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
@@ -470,17 +472,7 @@ def _force_derivatives(model: Model, inputs: Inputs, q: np.ndarray, qd: np.ndarr
         value = -terms.Q.copy()
         return value + extra(terms) if extra is not None else value
 
-    base = residual(q, qd)
-    K, C = np.zeros((n, n)), np.zeros((n, n))
-    for k in range(n):
-        step_q = 1e-7 * max(1.0, abs(q[k]))
-        shifted = q.copy()
-        shifted[k] += step_q
-        K[:, k] = (residual(shifted, qd) - base) / step_q
-        step_v = 1e-7 * max(1.0, abs(qd[k]))
-        shifted = qd.copy()
-        shifted[k] += step_v
-        C[:, k] = (residual(q, shifted) - base) / step_v
+    K, C = python_tangents(residual, q, qd)
     return C, K
 
 
