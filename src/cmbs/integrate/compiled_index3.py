@@ -26,7 +26,7 @@ import numpy as np
 from cmbs.dynamics.base import OK
 from cmbs.dynamics.kkt import solve_in_place
 from cmbs.integrate.compiled_rk4 import apply_inputs, record_constraints
-from cmbs.integrate.implicit import forward_difference_tangents
+from cmbs.integrate.implicit import DIVERGED, forward_difference_tangents
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
 
@@ -88,7 +88,8 @@ def _differenced(problem, point, t, step, which, shifted, out):
 @njit(cache=True)
 def _residual(problem, step, stage, t, state, out):
     """The residual kernel (module docstring): r_dyn, Φ, M, A at the iterate ``state`` and the
-    tangents K_t, C_t (:func:`~cmbs.integrate.implicit.forward_difference_tangents`), into ``out``."""
+    tangents K_t, C_t (:func:`~cmbs.integrate.implicit.forward_difference_tangents`), into ``out``;
+    OK, or DIVERGED where r_dyn is not finite, there or at a shifted state."""
     q, v, a, lam = state
     r, phi, M, A, C, K = out
     n, m = q.shape[0], lam.shape[0]
@@ -97,7 +98,8 @@ def _residual(problem, step, stage, t, state, out):
     M[:, :] = M_now
     A[:, :] = A_now
     phi[:] = phi_now
-    forward_difference_tangents(problem, state, t, step, r, problem.shifted, problem.base, (K, C))
+    if not forward_difference_tangents(problem, state, t, step, r, problem.shifted, problem.base, (K, C)):
+        return DIVERGED
     return OK
 
 

@@ -32,7 +32,7 @@ from cmbs.dynamics.base import OK
 from cmbs.dynamics.matrix_r_kernels import (NOT_CONVERGED, dependent_accelerations, exceeds, factor_dependent, recover,
                                             velocity_matrix)
 from cmbs.integrate.compiled_index3 import dense_newton_solve
-from cmbs.integrate.implicit import HANDED_BACK, STOPPED, forward_difference_tangents
+from cmbs.integrate.implicit import DIVERGED, HANDED_BACK, STOPPED, forward_difference_tangents
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
 
@@ -175,7 +175,9 @@ def _reduce(R, X, XR, out):
 
 @njit(cache=True)
 def _residual(problem, step, stage, t, state, out):
-    """The residual kernel (module docstring): f, M̄, C̄, K̄ at the iterate ``state`` into ``out``."""
+    """The residual kernel (module docstring): f, M̄, C̄, K̄ at the iterate ``state`` into ``out``;
+    OK, STOPPED by the expansion (:func:`_expand`), or DIVERGED where Q at a shifted state of
+    the tangents is not finite."""
     z, zd, zdd, _ = state
     f, _, M_bar, _, C_bar, K_bar = out
     status = _expand(problem, t, z, zd, zdd)
@@ -200,7 +202,8 @@ def _residual(problem, step, stage, t, state, out):
             total += R[i, b] * force[i]
         f[b] = total
     _reduce(R, mass, XR, M_bar)
-    forward_difference_tangents(problem, problem.last, t, np.int64(0), base, shifted, column, (K, C))
+    if not forward_difference_tangents(problem, problem.last, t, np.int64(0), base, shifted, column, (K, C)):
+        return DIVERGED
     _reduce(R, K, XR, K_bar)
     _reduce(R, C, XR, C_bar)
     return OK

@@ -122,13 +122,18 @@ def forward_difference_tangents(problem, point, t, step, base, shifted, column, 
 
         ∂f/∂x_k ≈ (f(x + δ_k e_k) - f(x)) / δ_k,   δ_k = 1e-7 max(1, |x_k|),   x = q, then x = v
 
-    (``shifted``, ``column``: scratch vectors of the sizes of x and f).  The one tangent routine:
+    (``shifted``, ``column``: scratch vectors of the sizes of x and f).  Returns False, before
+    any difference with it, at a value of f that is not finite (an iterate of a diverging run),
+    else True.  The one tangent routine:
     of the compiled problems (:mod:`cmbs.integrate.compiled_index3`, whose f is r_dyn with the
     inputs applied at the shifted state, and :mod:`cmbs.integrate.compiled_reduced`, whose f is
     -Q with the inputs held) and, run as Python (:func:`cmbs.jit.interpreted`), of the problems
     with Python callables (:func:`cmbs.simulate._force_derivatives`).  Compiled into its caller
     (``inline``): as a function of its own it added 2-3 s to a first compilation of the
     residual kernels (:func:`cmbs.jit.njit`)."""
+    for i in range(base.shape[0]):
+        if not math.isfinite(base[i]):
+            return False
     for which in range(2):
         x, tangent = point[which], tangents[which]
         for k in range(x.shape[0]):
@@ -138,7 +143,10 @@ def forward_difference_tangents(problem, point, t, step, base, shifted, column, 
             shifted[k] += increment
             differenced(problem, point, t, step, which, shifted, column)
             for i in range(column.shape[0]):
+                if not math.isfinite(column[i]):
+                    return False
                 tangent[i, k] = (column[i] - base[i]) / increment
+    return True
 
 
 class PythonFunction(NamedTuple):
@@ -154,21 +162,29 @@ class PythonFunction(NamedTuple):
         out[:] = problem.function(shifted, v) if which == 0 else problem.function(q, shifted)
 
 
+class NonFiniteResidual(ArithmeticError):
+    """A Python residual (or its tangents) is not finite at an iterate: the run ends as a compiled
+    one does there, with :data:`DIVERGED` (:class:`CallbackProblem`).  Raised before any
+    arithmetic on the values, of which numpy would warn (inf - inf)."""
+
+
 def python_tangents(function: Callable[[np.ndarray, np.ndarray], np.ndarray], q: np.ndarray,
                     v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(∂f/∂q, ∂f/∂v) of a Python function f(q, v) by :func:`forward_difference_tangents`, run as
-    Python."""
+    Python; :class:`NonFiniteResidual` when f is not finite at (q, v) or a shifted state."""
     base = function(q, v)
     K, C = np.zeros((base.size, q.size)), np.zeros((base.size, v.size))
-    interpreted(forward_difference_tangents)(PythonFunction(function), (q, v), 0.0, 0, base, np.empty(q.size),
-                                             np.empty(base.size), (K, C))
+    if not interpreted(forward_difference_tangents)(PythonFunction(function), (q, v), 0.0, 0, base,
+                                                    np.empty(q.size), np.empty(base.size), (K, C)):
+        raise NonFiniteResidual("the tangents' forward differences met a non-finite residual")
     return K, C
 
 
 class CallbackProblem(NamedTuple):
     """A problem given as Python functions: the loop then runs interpreted.  ``function`` is the
-    residual (:data:`Residual`); an exception of the types ``stop_on`` raised by it or by
-    ``check`` ends the run with its text as the message (kept in ``stopped[0]``).  Optional:
+    residual (:data:`Residual`); a :class:`NonFiniteResidual` raised by it ends the run as
+    :data:`DIVERGED`, an exception of the types ``stop_on`` raised by it or by ``check`` with
+    its text as the message (kept in ``stopped[0]``).  Optional:
     ``progress(t)`` and ``check(t) -> bool`` (True hands the run back) at each output instant,
     ``adjust(t, (q, v, a, λ, x))`` after each step, ``keep(row, t, (q, v, a, λ))`` at each output
     kept."""
@@ -189,6 +205,8 @@ def _callback_residual(problem: CallbackProblem, step: int, stage: int, t: float
     """The Python residual at the iterate ``state``, copied into ``out``."""
     try:
         values = problem.function(t, *state)
+    except NonFiniteResidual:
+        return DIVERGED
     except problem.stop_on as error:
         problem.stopped[0] = str(error)
         return STOPPED
