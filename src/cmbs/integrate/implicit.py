@@ -149,14 +149,14 @@ def forward_difference_tangents(problem, point, t, step, base, shifted, column, 
     return True
 
 
-class PythonFunction(NamedTuple):
+class CallbackFunction(NamedTuple):
     """A function f(q, v) given as a Python callable, as :func:`forward_difference_tangents` takes
     it run as Python (:func:`python_tangents`)."""
 
     function: Callable[[np.ndarray, np.ndarray], np.ndarray]
 
     @staticmethod
-    def differenced(problem: "PythonFunction", point: tuple, t: float, step: int, which: int, shifted: np.ndarray,
+    def differenced(problem: "CallbackFunction", point: tuple, t: float, step: int, which: int, shifted: np.ndarray,
                     out: np.ndarray) -> None:
         q, v = point
         out[:] = problem.function(shifted, v) if which == 0 else problem.function(q, shifted)
@@ -174,7 +174,7 @@ def python_tangents(function: Callable[[np.ndarray, np.ndarray], np.ndarray], q:
     Python; :class:`NonFiniteResidual` when f is not finite at (q, v) or a shifted state."""
     base = function(q, v)
     K, C = np.zeros((base.size, q.size)), np.zeros((base.size, v.size))
-    if not interpreted(forward_difference_tangents)(PythonFunction(function), (q, v), 0.0, 0, base,
+    if not interpreted(forward_difference_tangents)(CallbackFunction(function), (q, v), 0.0, 0, base,
                                                     np.empty(q.size), np.empty(base.size), (K, C)):
         raise NonFiniteResidual("the tangents' forward differences met a non-finite residual")
     return K, C
