@@ -10,6 +10,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import warnings
 
 import numpy as np
 import pytest
@@ -173,6 +174,38 @@ def test_failures_end_the_run_with_the_python_paths_message(tmp_path, integrator
             assert run.info["message"].startswith(message), run.info["message"]
             assert run.t[-1] == pytest.approx(last, abs=1e-12) and np.all(np.isfinite(run.q))
         np.testing.assert_allclose(runs[0].q, runs[1].q, rtol=0, atol=1e-11)
+
+
+def pendulum_forced_to_infinity() -> cmbs.Model:
+    """A unit point mass on a unit rod about the origin, from Python functions, whose force becomes
+    infinite at t = 0.5."""
+    from cmbs.model.equations import from_callables
+
+    return from_callables("forced-to-infinity", coordinate_names=["x", "z"], mass_matrix=lambda q: np.eye(2),
+                          forces=lambda q, qd, t, u: np.array([0.0, -9.81 if t < 0.5 else np.inf]),
+                          constraints=lambda q, t: np.array([q[0] ** 2 + q[1] ** 2 - 1.0]),
+                          jacobian=lambda q, t: np.array([[2.0 * q[0], 2.0 * q[1]]]),
+                          gamma=lambda q, qd, t: np.array([-2.0 * (qd[0] ** 2 + qd[1] ** 2)]),
+                          q0=[math.sin(0.3), -math.cos(0.3)])
+
+
+@pytest.mark.parametrize("integrator", ["backward-euler", "generalized-alpha"])
+def test_a_diverging_run_on_python_calls_fails_with_the_message_and_no_numpy_warning(tmp_path, integrator):
+    """Forces that become infinite at t = 0.5 (a model file's time function 1/(t - 0.5) run on
+    Python calls, and a model of Python functions): the run ends failed at the last output
+    before 0.5 with Newton's divergence message, as the compiled run does, and numpy warns of
+    nothing (the tangents' forward differences took inf - inf: 'invalid value encountered in
+    subtract')."""
+    path = tmp_path / "singular.toml"
+    path.write_text(SINGULAR_FORCE)
+    for model in (cmbs.load(path), pendulum_forced_to_infinity()):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            run = simulate(model, t_end=1.0, integrator=integrator, dt=0.01, compiled=False)
+        assert [str(warning.message) for warning in caught] == [], model.name
+        assert run.info["status"] == "failed", model.name
+        assert run.info["message"].startswith("Newton iteration diverged at t=0.5"), run.info["message"]
+        assert run.t[-1] == pytest.approx(0.49, abs=1e-12) and np.all(np.isfinite(run.q))
 
 
 ALLOCATIONS = textwrap.dedent("""

@@ -450,27 +450,31 @@ def _solve(solver, model: Model, terms, q: np.ndarray, qd: np.ndarray, t: float)
 
 def _force_derivatives(model: Model, inputs: Inputs, q: np.ndarray, qd: np.ndarray, t: float,
                        extra: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """C_t = -∂Q/∂q̇ and K_t = -∂Q/∂q (+ ∂extra/∂q) by forward differences."""
-    n = model.n
+    """C_t = -∂Q/∂q̇ and K_t = -∂Q/∂q (+ ∂extra/∂q̇, ∂extra/∂q), the inputs evaluated at each
+    state, by the forward differences of :func:`cmbs.integrate.implicit.forward_difference_tangents`;
+    :class:`~cmbs.integrate.implicit.NonFiniteResidual` where they meet a non-finite value."""
+    from cmbs.integrate.implicit import python_tangents
+
     terms = model.new_terms()
 
     def residual(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
         model.evaluate(qq, vv, t, inputs(t, qq, vv), out=terms)
+        if extra is not None:
+            _require_finite_dynamics(terms)
         value = -terms.Q.copy()
         return value + extra(terms) if extra is not None else value
 
-    base = residual(q, qd)
-    K, C = np.zeros((n, n)), np.zeros((n, n))
-    for k in range(n):
-        step_q = 1e-7 * max(1.0, abs(q[k]))
-        shifted = q.copy()
-        shifted[k] += step_q
-        K[:, k] = (residual(shifted, qd) - base) / step_q
-        step_v = 1e-7 * max(1.0, abs(qd[k]))
-        shifted = qd.copy()
-        shifted[k] += step_v
-        C[:, k] = (residual(q, shifted) - base) / step_v
+    K, C = python_tangents(residual, q, qd)
     return C, K
+
+
+def _require_finite_dynamics(terms) -> None:
+    """:class:`~cmbs.integrate.implicit.NonFiniteResidual` unless Q, M and A are finite: checked
+    before r_dyn = M a + Aᵀλ - Q is formed, where numpy would warn of inf - inf or inf·0."""
+    from cmbs.integrate.implicit import NonFiniteResidual
+
+    if not (np.isfinite(terms.Q).all() and np.isfinite(terms.M).all() and np.isfinite(terms.A).all()):
+        raise NonFiniteResidual("non-finite forces, mass matrix or constraint Jacobian")
 
 
 def _consistent_start(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -493,6 +497,7 @@ def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, g
 
     def residual(t, q, v, a, lam):
         model.evaluate(q, v, t, inputs(t, q, v), out=terms)
+        _require_finite_dynamics(terms)
         r = terms.M @ a + terms.A.T @ lam - terms.Q
         M, A, phi = terms.M.copy(), terms.A.copy(), terms.phi.copy()
         C, K = _force_derivatives(model, inputs, q, v, t, extra=lambda tt: tt.M @ a + tt.A.T @ lam)

@@ -1,5 +1,8 @@
-"""The computed-torque law (:class:`~cmbs.control.computed_torque.ComputedTorque`) as the compiled
-loops evaluate it at their stages: :class:`ComputedTorqueKernel` and its inputs kernel.
+"""The computed-torque law (:class:`~cmbs.control.computed_torque.ComputedTorque`), once:
+:func:`computed_torque_inputs` takes the model's terms at the state and the law's data
+(:class:`TorqueLaw`) and gives the inputs.  The Python law evaluates its model in Python (any
+model, user equations included) and calls it; the compiled loops evaluate the model's kernel and
+call it at their stages, through :class:`ComputedTorqueKernel` and its inputs kernel.
 
 The loops take their inputs as a kernel tuple whose class carries ``apply(inputs, step, stage,
 q, q̇, t, u)`` (:mod:`cmbs.integrate.compiled_rk4`): constant inputs do nothing there; this law
@@ -19,28 +22,49 @@ from cmbs.model.compiled import evaluate, model_kernel, terms_views
 from cmbs.model.drivers import evaluate_piecewise
 
 
-class ComputedTorqueKernel(NamedTuple):
-    """A computed-torque law for the compiled loops: its model's kernel, terms buffer and number
-    of constraints and zero inputs; the reference's coordinates, the partition's constraint rows
-    and dependent coordinates, the gains; the reference spline's breaks and coefficients (one
+class TorqueLaw(NamedTuple):
+    """The data of a computed-torque law: the reference's coordinates, the partition's constraint
+    rows and dependent coordinates, the gains; the reference spline's breaks and coefficients (one
     row per coordinate in the flattened layout of :func:`~cmbs.model.drivers.evaluate_piecewise`);
-    the inverse actuator gains; its work arrays; ``held`` for a zero-order hold of period h."""
+    the inverse actuator gains; its work arrays (A_d's LU factors, q̈ and a side vector, pivots)."""
 
-    model: NamedTuple
-    buffer: np.ndarray
-    m: int
-    no_input: np.ndarray
     columns: np.ndarray
     rows: np.ndarray
+    dependent: np.ndarray
     kp: np.ndarray
     kd: np.ndarray
     breaks: np.ndarray
     coefficients: np.ndarray
     gains: np.ndarray
-    dependent: np.ndarray
     K: np.ndarray
     rhs: np.ndarray
     pivots: np.ndarray
+
+
+def torque_law(n: int, spline: object, columns: np.ndarray, partition: object, kp: np.ndarray, kd: np.ndarray,
+               inverse_gains: np.ndarray) -> TorqueLaw:
+    """The :class:`TorqueLaw` of a model with ``n`` coordinates tracking ``columns`` along
+    ``spline`` (a scipy cubic spline, one column per tracked coordinate) with the partition
+    ``partition`` (rows, dependent) of matrix R, gains ``kp``, ``kd`` and inverse actuator gains
+    ``inverse_gains``."""
+    coefficients = np.transpose(spline.c, (2, 1, 0)).reshape(columns.size, -1)  # [j, 4i + r] = c[r, i, j]
+    r = partition.rows.size
+    return TorqueLaw(np.ascontiguousarray(columns, dtype=np.int64), np.ascontiguousarray(partition.rows, dtype=np.int64),
+                     np.ascontiguousarray(partition.dependent, dtype=np.int64), np.array(kp, dtype=float),
+                     np.array(kd, dtype=float), np.ascontiguousarray(spline.x, dtype=float),
+                     np.ascontiguousarray(coefficients, dtype=float), np.ascontiguousarray(inverse_gains, dtype=float),
+                     np.empty((r, r)), np.empty(n + r), np.empty(r, dtype=np.int64))
+
+
+class ComputedTorqueKernel(NamedTuple):
+    """A computed-torque law for the compiled loops: its model's kernel, terms buffer, number of
+    constraints and zero inputs, the law's data, and ``held`` for a zero-order hold of period h."""
+
+    model: NamedTuple
+    buffer: np.ndarray
+    m: int
+    no_input: np.ndarray
+    law: TorqueLaw
     held: bool
 
 
@@ -51,16 +75,7 @@ def computed_torque_kernel(law: object, held: bool) -> ComputedTorqueKernel | No
     if kernel is None:
         return None
     model = law.model
-    spline = law.reference._spline
-    coefficients = np.transpose(spline.c, (2, 1, 0)).reshape(law.columns.size, -1)  # [j, 4i + r] = c[r, i, j]
-    r = law.solver.partition.rows.size
-    return ComputedTorqueKernel(kernel, model.new_terms().buffer, model.m, np.zeros(model.n_u),
-                                law.columns.astype(np.int64), law.solver.partition.rows.astype(np.int64),
-                                np.array(law.kp, dtype=float), np.array(law.kd, dtype=float),
-                                np.ascontiguousarray(spline.x, dtype=float), np.ascontiguousarray(coefficients, dtype=float),
-                                np.ascontiguousarray(law.inverse_gains, dtype=float),
-                                law.solver.partition.dependent.astype(np.int64), np.empty((r, r)),
-                                np.empty(model.n + r), np.empty(r, dtype=np.int64), bool(held))
+    return ComputedTorqueKernel(kernel, model.new_terms().buffer, model.m, np.zeros(model.n_u), law.data, bool(held))
 
 
 @njit_borrowing(cache=True, inline="always")
@@ -78,11 +93,23 @@ ComputedTorqueKernel.apply = staticmethod(_apply)
 
 @njit_borrowing(cache=True)
 def _computed_torque(law, q, qd, t, u):
-    """The inputs of :class:`~cmbs.control.ComputedTorque` at (q, q̇, t) into ``u``; NaN when its
-    linear system is singular (the Python law raises there).
+    """The inputs at (q, q̇, t) into ``u`` (:func:`computed_torque_inputs`) from the terms of the
+    model's kernel at zero inputs; NaN where A_d is singular (the Python law raises there).  A
+    function of its own: compiled into the loops, it made the first compilation of the compiled
+    RK4 loop with this law 1-2 s longer."""
+    evaluate(law.model, q, qd, t, law.no_input, law.buffer)
+    Q, _, A, gamma, _, M = terms_views(law.model, q.shape[0], law.m, law.buffer)
+    computed_torque_inputs(law.law, Q, A, gamma, M, q, qd, t, u)
 
-    The law (thesis ch. 6) is τ_z = Rᵀ(M(R z̈_c + S) - Q₀), u = G τ_z, with M, Q₀ (Q at u = 0),
-    A, γ of the law's model, G its inverse actuator gains, and::
+
+@njit_borrowing(cache=True)
+def computed_torque_inputs(law, Q, A, gamma, M, q, qd, t, u):
+    """The inputs of :class:`~cmbs.control.ComputedTorque` at (q, q̇, t) into ``u``, from the
+    terms of its model there with zero inputs (Q₀ = ``Q``, A, γ, M); False (and u NaN) when the
+    partition's block A_d is singular, else True.
+
+    The law (thesis ch. 6) is τ_z = Rᵀ(M(R z̈_c + S) - Q₀), u = G τ_z, with G the inverse
+    actuator gains, and::
 
         z̈_c = z̈_ref + K_d (ż_ref - ż) + K_p (z_ref - z)
 
@@ -95,16 +122,14 @@ def _computed_torque(law, q, qd, t, u):
         q̈_z = z̈_c,   q̈_d = A_d⁻¹(γ_r - A_z z̈_c),   f = M q̈ - Q₀,
         τ_z = f_z + R_dᵀ f_d = f_z - A_zᵀ A_d⁻ᵀ f_d
 
-    ``law`` is a :class:`ComputedTorqueKernel`.
+    ``law`` is a :class:`TorqueLaw`.
     """
-    buffer, m, columns, rows, kp, kd = law.buffer, law.m, law.columns, law.rows, law.kp, law.kd
+    columns, rows, kp, kd = law.columns, law.rows, law.kp, law.kd
     breaks, coefficients, gains, dependent, K, rhs, pivots = (law.breaks, law.coefficients, law.gains, law.dependent,
                                                               law.K, law.rhs, law.pivots)
     n = q.shape[0]
     r = rows.shape[0]
     k = columns.shape[0]
-    evaluate(law.model, q, qd, t, law.no_input, buffer)
-    _, _, A, gamma, _, M = terms_views(law.model, n, m, buffer)
     qdd = rhs[:n]
     side = rhs[n:n + r]
     clamped = min(max(t, breaks[0]), breaks[breaks.shape[0] - 1])
@@ -123,13 +148,13 @@ def _computed_torque(law, q, qd, t, u):
             Ad[a, j] = A[row, dependent[j]]
     if not lu_in_place(Ad, pivots):
         u[:] = np.nan
-        return
+        return False
     lu_solve(Ad, pivots, side)
     for j in range(r):
         qdd[dependent[j]] = side[j]
     for j in range(r):                      # f_d into side
         c = dependent[j]
-        total = -buffer[c]
+        total = -Q[c]
         for i in range(n):
             total += M[c, i] * qdd[i]
         side[j] = total
@@ -138,10 +163,11 @@ def _computed_torque(law, q, qd, t, u):
         u[i] = 0.0
     for b in range(k):
         c = columns[b]
-        force = -buffer[c]
+        force = -Q[c]
         for i in range(n):
             force += M[c, i] * qdd[i]
         for a in range(r):
             force -= A[rows[a], c] * side[a]
         for i in range(u.shape[0]):
             u[i] += gains[i, b] * force
+    return True

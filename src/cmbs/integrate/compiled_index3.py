@@ -10,12 +10,11 @@ iterate (q, v, a, λ) of a step its residual kernel gives::
     K_t = ∂r_dyn/∂q,   C_t = ∂r_dyn/∂v   (a and λ held),
 
 the tangents by forward differences with the steps 1e-7 max(1, |x_k|) of each coordinate or
-velocity x_k, the inputs evaluated at each shifted state (a computed-torque law's dependence on
-the state is part of the tangent; a held law keeps the sample it took at the step's first
-iterate).  Its
-records at the outputs are λ (Newton's), u, max|Φ|, max|A v + Φ_t| and f_c = -Aᵀλ.  The Newton
-matrix is solved by Gaussian elimination with partial pivoting
-(:func:`cmbs.dynamics.kkt.solve_in_place`).
+velocity x_k (:func:`cmbs.integrate.implicit.forward_difference_tangents`), the inputs evaluated
+at each shifted state (a computed-torque law's dependence on the state is part of the tangent; a
+held law keeps the sample it took at the step's first iterate).  Its records at the outputs
+are λ (Newton's), u, max|Φ|, max|A v + Φ_t| and f_c = -Aᵀλ.  The Newton matrix is solved by
+Gaussian elimination with partial pivoting (:func:`cmbs.dynamics.kkt.solve_in_place`).
 """
 
 from __future__ import annotations
@@ -27,6 +26,7 @@ import numpy as np
 from cmbs.dynamics.base import OK
 from cmbs.dynamics.kkt import solve_in_place
 from cmbs.integrate.compiled_rk4 import apply_inputs, record_constraints
+from cmbs.integrate.implicit import DIVERGED, forward_difference_tangents
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
 
@@ -72,10 +72,24 @@ def _dynamic_residual(problem, q, v, a, lam, t, step, stage, r):
         r[i] = total
 
 
+@njit(cache=True, inline="always")
+def _differenced(problem, point, t, step, which, shifted, out):
+    """The function whose tangents are taken (:data:`cmbs.integrate.implicit.differenced`): r_dyn
+    at the iterate ``point`` = (q, v, a, λ) with q (``which`` 0) or v (1) replaced by ``shifted``,
+    the inputs applied there (a held law keeps its sample)."""
+    q, v, a, lam = point
+    if which == 0:
+        q = shifted
+    else:
+        v = shifted
+    _dynamic_residual(problem, q, v, a, lam, t, step, np.int64(1), out)
+
+
 @njit(cache=True)
 def _residual(problem, step, stage, t, state, out):
     """The residual kernel (module docstring): r_dyn, Φ, M, A at the iterate ``state`` and the
-    tangents C_t, K_t by forward differences, into ``out``."""
+    tangents K_t, C_t (:func:`~cmbs.integrate.implicit.forward_difference_tangents`), into ``out``;
+    OK, or DIVERGED where r_dyn is not finite, there or at a shifted state."""
     q, v, a, lam = state
     r, phi, M, A, C, K = out
     n, m = q.shape[0], lam.shape[0]
@@ -84,23 +98,8 @@ def _residual(problem, step, stage, t, state, out):
     M[:, :] = M_now
     A[:, :] = A_now
     phi[:] = phi_now
-    shifted, column = problem.shifted, problem.base
-    for k in range(n):
-        for i in range(n):
-            shifted[i] = q[i]
-        increment = 1e-7 * max(1.0, abs(q[k]))
-        shifted[k] += increment
-        _dynamic_residual(problem, shifted, v, a, lam, t, step, 1, column)
-        for i in range(n):
-            K[i, k] = (column[i] - r[i]) / increment
-    for k in range(n):
-        for i in range(n):
-            shifted[i] = v[i]
-        increment = 1e-7 * max(1.0, abs(v[k]))
-        shifted[k] += increment
-        _dynamic_residual(problem, q, shifted, a, lam, t, step, 1, column)
-        for i in range(n):
-            C[i, k] = (column[i] - r[i]) / increment
+    if not forward_difference_tangents(problem, state, t, step, r, problem.shifted, problem.base, (K, C)):
+        return DIVERGED
     return OK
 
 
@@ -137,6 +136,7 @@ def _at_output(problem, t):
 
 
 Index3Problem.residual = staticmethod(_residual)
+Index3Problem.differenced = staticmethod(_differenced)
 Index3Problem.newton_solve = staticmethod(dense_newton_solve)
 Index3Problem.record = staticmethod(_record)
 Index3Problem.after_step = staticmethod(_after_step)

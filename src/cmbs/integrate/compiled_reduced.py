@@ -12,8 +12,9 @@ from A_d q̈_d = γ_r - A_z z̈ (``dependent_accelerations``); then, with R = [-
     f = Rᵀ(M q̈ - Q),   M̄ = Rᵀ M R,   C̄ = Rᵀ C_t R,   K̄ = Rᵀ K_t R
 
 where C_t = -∂Q/∂q̇ and K_t = -∂Q/∂q are forward differences over all n coordinates with the
-steps 1e-7 max(1, |x_k|).  After a step the accepted full state is the expansion at the last
-iterate evaluated, and the integrator's z, ż, z̈ are taken from it.  At each output instant
+steps 1e-7 max(1, |x_k|) and the inputs held (:func:`cmbs.integrate.implicit.forward_difference_tangents`).
+After a step the accepted full state is the expansion at the last iterate evaluated, and the
+integrator's z, ż, z̈ are taken from it.  At each output instant
 the partition's κ₂ is tested as :func:`cmbs.integrate.compiled_matrix_r.rk4` tests it
 (:func:`cmbs.dynamics.matrix_r_kernels.exceeds`); above the limit the run
 is handed back to Python, which chooses the partition again
@@ -31,7 +32,7 @@ from cmbs.dynamics.base import OK
 from cmbs.dynamics.matrix_r_kernels import (NOT_CONVERGED, dependent_accelerations, exceeds, factor_dependent, recover,
                                             velocity_matrix)
 from cmbs.integrate.compiled_index3 import dense_newton_solve
-from cmbs.integrate.implicit import HANDED_BACK, STOPPED
+from cmbs.integrate.implicit import DIVERGED, HANDED_BACK, STOPPED, forward_difference_tangents
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
 
@@ -108,9 +109,10 @@ def reduced_problems(kernel: NamedTuple, model: object, solver: object, u: np.nd
 def reduced_work(n: int, k: int, r: int) -> tuple:
     """The work arrays of a :class:`ReducedProblem` with ``k`` independent coordinates and ``r``
     dependent ones: A_d's LU factors and pivots, a side vector, R, M, M q̈ - Q, -Q, X R (X = M, K_t
-    or C_t), K_t, C_t, a shifted state, zeros (n)."""
+    or C_t), K_t, C_t, a shifted state, zeros (n), -Q at a shifted state."""
     return (np.empty((r, r)), np.empty(r, dtype=np.int64), np.empty(r), np.empty((n, k)), np.empty((n, n)),
-            np.empty(n), np.empty(n), np.empty((n, k)), np.empty((n, n)), np.empty((n, n)), np.empty(n), np.zeros(n))
+            np.empty(n), np.empty(n), np.empty((n, k)), np.empty((n, n)), np.empty((n, n)), np.empty(n), np.zeros(n),
+            np.empty(n))
 
 
 @njit(cache=True)
@@ -173,14 +175,16 @@ def _reduce(R, X, XR, out):
 
 @njit(cache=True)
 def _residual(problem, step, stage, t, state, out):
-    """The residual kernel (module docstring): f, M̄, C̄, K̄ at the iterate ``state`` into ``out``."""
+    """The residual kernel (module docstring): f, M̄, C̄, K̄ at the iterate ``state`` into ``out``;
+    OK, STOPPED by the expansion (:func:`_expand`), or DIVERGED where Q at a shifted state of
+    the tangents is not finite."""
     z, zd, zdd, _ = state
     f, _, M_bar, _, C_bar, K_bar = out
     status = _expand(problem, t, z, zd, zdd)
     if status != OK:
         return status
-    q, qd, qdd = problem.last
-    Ad, pivots, side, R, mass, force, base, XR, K, C, shifted, _ = problem.work
+    q, _, qdd = problem.last
+    Ad, pivots, side, R, mass, force, base, XR, K, C, shifted, _, column = problem.work
     rows, dependent, independent = problem.rows, problem.dependent, problem.independent
     n, m, k = q.shape[0], problem.m, independent.shape[0]
     Q, _, A, _, _, M = terms_views(problem.model, n, m, problem.buffer)
@@ -198,24 +202,26 @@ def _residual(problem, step, stage, t, state, out):
             total += R[i, b] * force[i]
         f[b] = total
     _reduce(R, mass, XR, M_bar)
-    u = problem.u
-    for c in range(n):                      # K_t = -∂Q/∂q, C_t = -∂Q/∂q̇ by forward differences
-        shifted[:] = q
-        increment = 1e-7 * max(1.0, abs(q[c]))
-        shifted[c] += increment
-        evaluate(problem.model, shifted, qd, t, u, problem.buffer)
-        for i in range(n):
-            K[i, c] = (-problem.buffer[i] - base[i]) / increment
-    for c in range(n):
-        shifted[:] = qd
-        increment = 1e-7 * max(1.0, abs(qd[c]))
-        shifted[c] += increment
-        evaluate(problem.model, q, shifted, t, u, problem.buffer)
-        for i in range(n):
-            C[i, c] = (-problem.buffer[i] - base[i]) / increment
+    if not forward_difference_tangents(problem, problem.last, t, np.int64(0), base, shifted, column, (K, C)):
+        return DIVERGED
     _reduce(R, K, XR, K_bar)
     _reduce(R, C, XR, C_bar)
     return OK
+
+
+@njit(cache=True, inline="always")
+def _differenced(problem, point, t, step, which, shifted, out):
+    """The function whose tangents are taken (:data:`cmbs.integrate.implicit.differenced`): -Q at
+    the expansion ``point`` = (q, q̇, q̈) with q (``which`` 0) or q̇ (1) replaced by ``shifted``,
+    the inputs held."""
+    q, qd = point[0], point[1]
+    if which == 0:
+        q = shifted
+    else:
+        qd = shifted
+    evaluate(problem.model, q, qd, t, problem.u, problem.buffer)
+    for i in range(out.shape[0]):
+        out[i] = -problem.buffer[i]
 
 
 @njit(cache=True)
@@ -264,6 +270,7 @@ def _at_output(problem, t):
 
 
 ReducedProblem.residual = staticmethod(_residual)
+ReducedProblem.differenced = staticmethod(_differenced)
 ReducedProblem.newton_solve = staticmethod(dense_newton_solve)
 ReducedProblem.record = staticmethod(_record)
 ReducedProblem.after_step = staticmethod(_after_step)

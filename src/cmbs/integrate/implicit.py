@@ -22,9 +22,9 @@ of q_{n+1} and v_{n+1} with respect to a_{n+1} divided by h² and h)::
     [ M + h g' C_t + h² b' K_t    Aᵀ ] [Δa]     [ r_dyn ]
     [ h² b' A                      0 ] [Δλ] = - [ Φ     ]
 
-C_t = -∂Q/∂v and K_t = -∂Q/∂q are supplied by the caller (finite differences or zero).  The
-constraint row is divided by h² b' to keep the matrix well scaled as h → 0.  This module knows
-nothing about mechanics: the caller gives the residual and the matrices as a problem, a kernel
+C_t = -∂Q/∂v and K_t = -∂Q/∂q are supplied by the caller (the forward differences of
+:func:`forward_difference_tangents`, or zero).  The constraint row is divided by h² b' to keep
+the matrix well scaled as h → 0.  This module knows nothing about mechanics: the caller gives the residual and the matrices as a problem, a kernel
 tuple whose class carries them (:data:`residual_terms` and the other dispatches below).  The loop
 (:func:`newton_steps`) is written once: compiled for a problem with compiled kernels
 (:class:`cmbs.integrate.compiled_index3.Index3Problem`, and the trapezoidal rule's
@@ -108,12 +108,83 @@ after_step = type_dispatch("after_step")
 #: ``at_output(problem, t) -> status``: after the outputs of an instant of ``t_out`` are stored
 #: (a progress bar; a check that may stop the run or hand it back).
 at_output = type_dispatch("at_output")
+#: ``differenced(problem, point, t, step, which, shifted, out)``: the function f whose tangents
+#: :func:`forward_difference_tangents` takes, into ``out``, at the iterate ``point`` = (q, v, ...) of
+#: step ``step`` at t with q (``which`` 0) or v (``which`` 1) replaced by ``shifted``.
+differenced = type_dispatch("differenced")
+
+
+@njit(cache=True, inline="always")
+def forward_difference_tangents(problem, point, t, step, base, shifted, column, tangents):
+    """The tangents (∂f/∂q, ∂f/∂v) into ``tangents`` of the problem's function f (:data:`differenced`)
+    at the iterate ``point`` = (q, v, ...), where f is ``base``, by forward differences, column by
+    column::
+
+        ∂f/∂x_k ≈ (f(x + δ_k e_k) - f(x)) / δ_k,   δ_k = 1e-7 max(1, |x_k|),   x = q, then x = v
+
+    (``shifted``, ``column``: scratch vectors of the sizes of x and f).  Returns False, before
+    any difference with it, at a value of f that is not finite (an iterate of a diverging run),
+    else True.  The one tangent routine:
+    of the compiled problems (:mod:`cmbs.integrate.compiled_index3`, whose f is r_dyn with the
+    inputs applied at the shifted state, and :mod:`cmbs.integrate.compiled_reduced`, whose f is
+    -Q with the inputs held) and, run as Python (:func:`cmbs.jit.interpreted`), of the problems
+    with Python callables (:func:`cmbs.simulate._force_derivatives`).  Compiled into its caller
+    (``inline``): as a function of its own it added 2-3 s to a first compilation of the
+    residual kernels (:func:`cmbs.jit.njit`)."""
+    for i in range(base.shape[0]):
+        if not math.isfinite(base[i]):
+            return False
+    for which in range(2):
+        x, tangent = point[which], tangents[which]
+        for k in range(x.shape[0]):
+            for i in range(x.shape[0]):
+                shifted[i] = x[i]
+            increment = 1e-7 * max(1.0, abs(x[k]))
+            shifted[k] += increment
+            differenced(problem, point, t, step, which, shifted, column)
+            for i in range(column.shape[0]):
+                if not math.isfinite(column[i]):
+                    return False
+                tangent[i, k] = (column[i] - base[i]) / increment
+    return True
+
+
+class CallbackFunction(NamedTuple):
+    """A function f(q, v) given as a Python callable, as :func:`forward_difference_tangents` takes
+    it run as Python (:func:`python_tangents`)."""
+
+    function: Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+    @staticmethod
+    def differenced(problem: "CallbackFunction", point: tuple, t: float, step: int, which: int, shifted: np.ndarray,
+                    out: np.ndarray) -> None:
+        q, v = point
+        out[:] = problem.function(shifted, v) if which == 0 else problem.function(q, shifted)
+
+
+class NonFiniteResidual(ArithmeticError):
+    """A Python residual (or its tangents) is not finite at an iterate: the run ends as a compiled
+    one does there, with :data:`DIVERGED` (:class:`CallbackProblem`).  Raised before any
+    arithmetic on the values, of which numpy would warn (inf - inf)."""
+
+
+def python_tangents(function: Callable[[np.ndarray, np.ndarray], np.ndarray], q: np.ndarray,
+                    v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(∂f/∂q, ∂f/∂v) of a Python function f(q, v) by :func:`forward_difference_tangents`, run as
+    Python; :class:`NonFiniteResidual` when f is not finite at (q, v) or a shifted state."""
+    base = function(q, v)
+    K, C = np.zeros((base.size, q.size)), np.zeros((base.size, v.size))
+    if not interpreted(forward_difference_tangents)(CallbackFunction(function), (q, v), 0.0, 0, base,
+                                                    np.empty(q.size), np.empty(base.size), (K, C)):
+        raise NonFiniteResidual("the tangents' forward differences met a non-finite residual")
+    return K, C
 
 
 class CallbackProblem(NamedTuple):
     """A problem given as Python functions: the loop then runs interpreted.  ``function`` is the
-    residual (:data:`Residual`); an exception of the types ``stop_on`` raised by it or by
-    ``check`` ends the run with its text as the message (kept in ``stopped[0]``).  Optional:
+    residual (:data:`Residual`); a :class:`NonFiniteResidual` raised by it ends the run as
+    :data:`DIVERGED`, an exception of the types ``stop_on`` raised by it or by ``check`` with
+    its text as the message (kept in ``stopped[0]``).  Optional:
     ``progress(t)`` and ``check(t) -> bool`` (True hands the run back) at each output instant,
     ``adjust(t, (q, v, a, λ, x))`` after each step, ``keep(row, t, (q, v, a, λ))`` at each output
     kept."""
@@ -134,6 +205,8 @@ def _callback_residual(problem: CallbackProblem, step: int, stage: int, t: float
     """The Python residual at the iterate ``state``, copied into ``out``."""
     try:
         values = problem.function(t, *state)
+    except NonFiniteResidual:
+        return DIVERGED
     except problem.stop_on as error:
         problem.stopped[0] = str(error)
         return STOPPED
