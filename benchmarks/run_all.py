@@ -42,6 +42,8 @@ def commands(out: Path, quick: bool) -> dict[str, list[str]]:
         "servo": ["bench_servo.py", *fast, "--json", str(out / "servo.json")],
         "gait": ["bench_gait.py", *(["--repeat", "2"] if quick else [])],
         "memory": ["bench_memory.py", *fast, "--json", str(out / "memory.json")],
+        "n-four-bar": ["bench_n_four_bar.py", *(["--t-end", "5"] if quick else []), "--json",
+                       str(out / "n-four-bar.json")],
     }
 
 

@@ -15,7 +15,7 @@ where C_t = -∂Q/∂q̇ and K_t = -∂Q/∂q are forward differences over all n
 steps 1e-7 max(1, |x_k|) and the inputs held (:func:`cmbs.integrate.implicit.forward_difference_tangents`).
 After a step the accepted full state is the expansion at the last iterate evaluated, and the
 integrator's z, ż, z̈ are taken from it.  At each output instant
-the partition's κ₂ is tested as :func:`cmbs.integrate.compiled_matrix_r.rk4` tests it
+the partition's κ₂ is tested as matrix R's after-step hook in the explicit loops tests it
 (:func:`cmbs.dynamics.matrix_r_kernels.exceeds`); above the limit the run
 is handed back to Python, which chooses the partition again
 (:meth:`cmbs.dynamics.matrix_r.MatrixRSolver.update_partition`) and resumes.
