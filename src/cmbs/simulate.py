@@ -580,7 +580,7 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
                                                       NEWTON_ITERATIONS, every, out, out.copy(), counts,
                                                       kernel is not None)
         if kernel is not None:
-            solver.note_condition(problem.worst[0], problem.worst[1])
+            solver.note_loop_conditions()
         if status == OK:
             break
         reached = next_out - 1                      # the state is that of grid[reached]

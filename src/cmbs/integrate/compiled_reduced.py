@@ -29,8 +29,8 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import OK
-from cmbs.dynamics.matrix_r_kernels import (NOT_CONVERGED, dependent_accelerations, exceeds, factor_dependent, recover,
-                                            velocity_matrix)
+from cmbs.dynamics.matrix_r_kernels import (NOT_CONVERGED, MatrixRKernel, dependent_accelerations, exceeds,
+                                            factor_dependent, recover, velocity_matrix)
 from cmbs.integrate.compiled_index3 import dense_newton_solve
 from cmbs.integrate.implicit import DIVERGED, HANDED_BACK, STOPPED, forward_difference_tangents
 from cmbs.jit import njit
@@ -43,29 +43,22 @@ RECOVERY_NOT_CONVERGED, RECOVERY_FAILED, NON_FINITE_TERMS = 1, 2, 3
 
 
 class ReducedProblem(NamedTuple):
-    """The trapezoidal rule's problem for one partition (rows, dependent, independent): the model's
-    kernel, its constant inputs u (and zeros), terms buffer and number of constraints; the
-    recovery's tolerance and iterations; the κ₂ above which the run is handed back; the accepted
-    full state ``full`` and the last expansion ``last`` (each q, q̇, q̈), shared by the problems
-    of a run; its work arrays; ``worst`` (largest κ₁ met by a recovery, its time); ``failure``
-    (why the problem stopped the run: code, value, time); ``records`` (q, q̇, q̈ of the kept
-    outputs) and the model's name for the messages."""
+    """The trapezoidal rule's problem for one partition: the model's kernel, its constant inputs
+    u and terms buffer; matrix R's kernel of the partition (:class:`MatrixRKernel`: constraint
+    rows, dependent and independent coordinates, the recovery's tolerance and iterations, the κ₂
+    above which the run is handed back, zero inputs and ``worst``, the largest κ₁ a recovery
+    met); the accepted full state ``full`` and the last expansion ``last`` (each q, q̇, q̈),
+    shared by the problems of a run; its work arrays; ``failure`` (why the problem stopped the
+    run: code, value, time); ``records`` (q, q̇, q̈ of the kept outputs) and the model's name for
+    the messages."""
 
     model: NamedTuple
     u: np.ndarray
-    u_zero: np.ndarray
     buffer: np.ndarray
-    m: int
-    rows: np.ndarray
-    dependent: np.ndarray
-    independent: np.ndarray
-    tolerance: float
-    iterations: int
-    limit: float
+    partition: MatrixRKernel
     full: tuple
     last: tuple
     work: tuple
-    worst: np.ndarray
     failure: np.ndarray
     records: tuple
     name: str
@@ -75,7 +68,7 @@ class ReducedProblem(NamedTuple):
         code, value, t = self.failure
         if code == RECOVERY_NOT_CONVERGED:
             return (f"model {self.name!r} at t={t:.6g}: matrix-r position recovery did not converge in "
-                    f"{self.iterations} iterations (residual {value:.3g})")
+                    f"{self.partition.iterations} iterations (residual {value:.3g})")
         if code == RECOVERY_FAILED:
             return (f"model {self.name!r} at t={t:.6g}: matrix-r position recovery met non-finite constraints or "
                     "a singular block A_d")
@@ -85,23 +78,19 @@ class ReducedProblem(NamedTuple):
 def reduced_problems(kernel: NamedTuple, model: object, solver: object, u: np.ndarray, full: tuple, last: tuple,
                      outputs: int) -> Callable[[], ReducedProblem]:
     """The maker of the :class:`ReducedProblem` of ``model`` (``kernel``) with inputs ``u`` for
-    the current partition of ``solver`` (a :class:`~cmbs.dynamics.matrix_r.MatrixRSolver`), all
-    sharing the full states ``full`` and ``last``, the terms buffer, ``worst``, ``failure`` and
-    the records of ``outputs`` outputs."""
-    n, m = model.n, model.m
-    buffer, worst, failure = model.new_terms().buffer.copy(), np.zeros(2), np.zeros(3)
+    the current partition of ``solver`` (a :class:`~cmbs.dynamics.matrix_r.MatrixRSolver`: its
+    :meth:`~cmbs.dynamics.matrix_r.MatrixRSolver.kernel`, whose ``worst`` is the solver's), all
+    sharing the full states ``full`` and ``last``, the terms buffer, ``failure`` and the records
+    of ``outputs`` outputs."""
+    n = model.n
+    buffer, failure = model.new_terms().buffer.copy(), np.zeros(3)
     records = (np.zeros((outputs, n)), np.zeros((outputs, n)), np.zeros((outputs, n)))
-    parameters = solver.p
 
     def make() -> ReducedProblem:
-        part = solver.partition
-        rows, dependent, independent = (np.ascontiguousarray(part.rows, dtype=np.int64),
-                                        np.ascontiguousarray(part.dependent, dtype=np.int64),
-                                        np.ascontiguousarray(part.independent, dtype=np.int64))
-        return ReducedProblem(kernel, u, np.zeros(u.size), buffer, m, rows, dependent, independent,
-                              float(parameters.position_tolerance), int(parameters.max_iterations),
-                              float(solver.partition_limit()), full, last,
-                              reduced_work(n, independent.size, rows.size), worst, failure, records, model.name)
+        partition = solver.kernel()
+        return ReducedProblem(kernel, u, buffer, partition, full, last,
+                              reduced_work(n, partition.independent.size, partition.rows.size), failure, records,
+                              model.name)
 
     return make
 
@@ -123,8 +112,9 @@ def _expand(problem, t, z, zd, zdd):
     q, qd, qdd = problem.last
     full_q, full_qd, full_qdd = problem.full
     Ad, pivots, side = problem.work[0], problem.work[1], problem.work[2]
-    rows, dependent, independent = problem.rows, problem.dependent, problem.independent
-    n, m, r = q.shape[0], problem.m, rows.shape[0]
+    partition = problem.partition
+    rows, dependent, independent = partition.rows, partition.dependent, partition.independent
+    n, m, r = q.shape[0], partition.m, rows.shape[0]
     q[:] = full_q
     qd[:] = full_qd
     qdd[:] = full_qdd
@@ -132,8 +122,8 @@ def _expand(problem, t, z, zd, zdd):
         q[independent[b]] = z[b]
         qd[independent[b]] = zd[b]
         qdd[independent[b]] = zdd[b]
-    status = recover(problem.model, q, qd, t, problem.u_zero, problem.buffer, n, m, rows, dependent, independent,
-                     problem.tolerance, problem.iterations, np.inf, Ad, pivots, side, problem.worst)
+    status = recover(problem.model, q, qd, t, partition.no_input, problem.buffer, n, m, rows, dependent, independent,
+                     partition.tolerance, partition.iterations, np.inf, Ad, pivots, side, partition.worst)
     if status != OK:
         largest = 0.0
         for a in range(r):
@@ -185,8 +175,9 @@ def _residual(problem, step, stage, t, state, out):
         return status
     q, _, qdd = problem.last
     Ad, pivots, side, R, mass, force, base, XR, K, C, shifted, _, column = problem.work
-    rows, dependent, independent = problem.rows, problem.dependent, problem.independent
-    n, m, k = q.shape[0], problem.m, independent.shape[0]
+    partition = problem.partition
+    rows, dependent, independent = partition.rows, partition.dependent, partition.independent
+    n, m, k = q.shape[0], partition.m, independent.shape[0]
     Q, _, A, _, _, M = terms_views(problem.model, n, m, problem.buffer)
     velocity_matrix(A, rows, dependent, independent, Ad, pivots, side, R)     # A_d's factors: _expand's
     for i in range(n):
@@ -246,8 +237,9 @@ def _after_step(problem, t, state):
         full_q[i] = last_q[i]
         full_qd[i] = last_qd[i]
         full_qdd[i] = last_qdd[i]
-    for b in range(problem.independent.shape[0]):
-        c = problem.independent[b]
+    independent = problem.partition.independent
+    for b in range(independent.shape[0]):
+        c = independent[b]
         z[b] = full_q[c]
         zd[b] = full_qd[c]
         zdd[b] = full_qdd[c]
@@ -260,11 +252,12 @@ def _at_output(problem, t):
     singular there), else OK."""
     full_q = problem.full[0]
     Ad, pivots, side, zeros = problem.work[0], problem.work[1], problem.work[2], problem.work[11]
-    n, m, rows, dependent = full_q.shape[0], problem.m, problem.rows, problem.dependent
-    evaluate(problem.model, full_q, zeros, t, problem.u_zero, problem.buffer)
+    partition = problem.partition
+    n, m, rows, dependent = full_q.shape[0], partition.m, partition.rows, partition.dependent
+    evaluate(problem.model, full_q, zeros, t, partition.no_input, problem.buffer)
     A = terms_views(problem.model, n, m, problem.buffer)[2]
     if not factor_dependent(A, rows, dependent, Ad, pivots) or exceeds(A, rows, dependent, Ad, pivots, side,
-                                                                        problem.limit):
+                                                                        partition.partition_limit):
         return HANDED_BACK
     return OK
 
