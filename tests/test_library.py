@@ -24,6 +24,8 @@ from cmbs.library import names
     ("two-link-arm", {}, 6, 2),
     ("two-link-arm-joint", {"tool": (0.8, 0.1)}, 2, 2),
     ("chaplygin-sleigh", {}, 3, 3),
+    ("n-four-bar", {}, 6, 1),
+    ("n-four-bar", {"N": 40}, 82, 1),
 ])
 def test_library_models_assemble_with_their_dof(name, parameters, n, dof):
     model = cmbs.load(name, **parameters)
