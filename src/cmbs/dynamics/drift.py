@@ -144,19 +144,20 @@ def project_drift(kernel, model, q, qd, t, buffer):
     return project_velocities(A, phi_t, kernel.threshold, qd)
 
 
-@njit_borrowing(cache=True)
+# The three hooks only forward: compiled into their caller (cmbs.jit.njit's note on compile time).
+@njit_borrowing(cache=True, inline="always")
 def _solve(kernel, terms, t, qd, qdd, lam):
     """The wrapped formulation's solve."""
     return solve(kernel.inner, terms, t, qd, qdd, lam)
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def _stage_state(kernel, model, q, qd, t, buffer):
     """The wrapped formulation's stage hook."""
     return stage_state(kernel.inner, model, q, qd, t, buffer)
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def _after_step(kernel, model, q, qd, t, buffer):
     """The wrapped formulation's after-step hook, then the projection (as the Python loop's
     ``after_step``)."""
