@@ -14,15 +14,17 @@ import cmbs
 from cmbs.cli import main
 from cmbs.simulate import project_state, simulate
 
-CASES = [("four-bar", "projection"), ("four-bar", "lagrange"), ("slider-crank-joint", "lagrange")]
+CASES = [(name, formulation, integrator) for integrator in ("rk4", "rk45")
+         for name, formulation in (("four-bar", "projection"), ("four-bar", "lagrange"),
+                                   ("slider-crank-joint", "lagrange"))]
+CASES += [("four-bar", "lagrange", "rk23"), ("four-bar", "lagrange", "dop853")]
 
 
 def _model(name: str) -> cmbs.Model:
     return cmbs.load(name).without_drivers() if name == "four-bar" else cmbs.load(name)
 
 
-@pytest.mark.parametrize("integrator", ["rk4", "rk45"])
-@pytest.mark.parametrize("name, formulation", CASES)
+@pytest.mark.parametrize("name, formulation, integrator", CASES)
 def test_compiled_projection_takes_the_python_loops_steps(name, formulation, integrator):
     """The four-bar (natural coordinates) and the slider-crank (joint coordinates), two closed
     chains, up to 0.4 s (the slider-crank's singular position is at 0.46 s)."""
