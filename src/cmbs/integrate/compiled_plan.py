@@ -5,10 +5,11 @@ A run is compiled when its model, formulation and inputs each have a compiled ke
 :func:`inputs_kernel`) and its integrator has a compiled loop for them: rk4 (t_end a multiple of
 dt) with any inputs kernel, rk45/rk23/dop853 with constant inputs; with drift projection the
 formulation's kernel is wrapped in :class:`~cmbs.dynamics.drift.DriftProjection` (not for matrix
-R, whose recovery would have to run again on each projected state, nor for a batch).  The index-3 integrators (backward Euler, generalized-α:
-:mod:`cmbs.integrate.compiled_index3`) bring their own formulation: they need the model's and the
-inputs' kernels only (a held law with t_end a multiple of dt); so does the trapezoidal rule in matrix
-R's independent coordinates (:mod:`cmbs.integrate.compiled_reduced`), with constant inputs.
+R, whose recovery would have to run again on each projected state, nor for a batch).  The
+index-3 integrators (backward Euler, generalized-α: :mod:`cmbs.integrate.compiled_index3`)
+bring their own formulation: they need the model's and the inputs' kernels only (a held law
+with t_end a multiple of dt); so does the trapezoidal rule in matrix R's independent
+coordinates (:mod:`cmbs.integrate.compiled_reduced`), with constant inputs.
 :func:`cmbs.simulate` and :func:`cmbs.sweep` ask here; a batch of runs in one compiled call
 (:func:`cmbs.integrate.compiled_rk4.rk4_batch`) takes only the formulations that never hand a run
 back to Python (matrix R does, to choose a new partition).
