@@ -78,8 +78,9 @@ def interpreted(kernel: Callable) -> Callable:
     return getattr(kernel, "py_func", kernel)
 
 
-def type_dispatch(attribute: str) -> Callable:
-    """A function ``f(data, *args)`` that calls ``type(data).<attribute>(data, *args)``.
+def type_dispatch(attribute: str, default: Callable | None = None) -> Callable:
+    """A function ``f(data, *args)`` that calls ``type(data).<attribute>(data, *args)``, or
+    ``default(data, *args)`` for a class without that attribute (when ``default`` is given).
 
     ``data`` is a :class:`typing.NamedTuple` whose class carries the kernel as a static attribute
     (a model's terms kernel, a formulation's solve, an input law).  Compiled, the choice is made
@@ -93,7 +94,7 @@ def type_dispatch(attribute: str) -> Callable:
     kernel with problem hooks, the compiled trapezoidal rule: the kernels stay calls.)"""
 
     def dispatch(data, *args):
-        return getattr(type(data), attribute)(data, *args)
+        return getattr(type(data), attribute, default)(data, *args)
 
     dispatch.__name__ = dispatch.__qualname__ = f"dispatch_{attribute}"
     if _numba is not None:
@@ -101,7 +102,7 @@ def type_dispatch(attribute: str) -> Callable:
 
         @overload(dispatch, inline="always", strict=False)
         def _resolved(data, *args):
-            return _forwarding(getattr(data.instance_class, attribute), 1 + len(args))
+            return _forwarding(getattr(data.instance_class, attribute, default), 1 + len(args))
     return dispatch
 
 

@@ -25,7 +25,7 @@ import numpy as np
 from cmbs.blas import small_matrix_loop
 from cmbs.dynamics import Formulation, formulation as make_formulation
 from cmbs.dynamics.matrix_r import MatrixRSolver, rounding_note
-from cmbs.dynamics.projection import pseudo_inverse
+from cmbs.dynamics.drift import CORRECTED, correct_positions, project_velocities
 from cmbs.errors import CmbsError, SingularSystemError, did_you_mean
 from cmbs.integrate.explicit import Integration, integrate as integrate_explicit
 from cmbs.integrate.grid import whole_steps
@@ -104,26 +104,26 @@ def check_start(model: Model, q: np.ndarray, qd: np.ndarray) -> None:
 
 def project_state(model: Model, q: np.ndarray, qd: np.ndarray, t: float, *, tolerance: float = 1e-10,
                   max_iterations: int = 10, threshold: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
-    """Coordinate and velocity projection onto Φ = 0, A q̇ = -Φ_t (Aghili 2005, eq. 45-47).
+    """Coordinate and velocity projection onto Φ = 0, A q̇ = -Φ_t (Aghili 2005, eq. 45-47), as new
+    arrays: the steps of :mod:`cmbs.dynamics.drift` (which the compiled loops take) on the terms
+    the model evaluates here, at q̇ = 0.
 
     The coordinates are projected with the holonomic rows only (a nonholonomic row has no
-    position-level constraint), the velocities with all rows."""
+    position-level constraint), the velocities with all rows.  Non-finite terms leave the state
+    as it is (the next evaluation of the run fails there)."""
+    q, qd = np.array(q, dtype=float), np.array(qd, dtype=float)
     if model.m == 0:
         return q, qd
-    q = q.copy()
     terms = model.new_terms()
     zeros = np.zeros(model.n)
-    rows = np.flatnonzero(model.holonomic)
+    rows = np.flatnonzero(model.holonomic).astype(np.int64)
     for _ in range(max_iterations if rows.size else 0):
         model.evaluate(q, zeros, t, out=terms)
-        phi = terms.phi[rows]
-        if np.max(np.abs(phi)) < tolerance:
+        if correct_positions(terms.A, terms.phi, rows, float(tolerance), float(threshold), q) != CORRECTED:
             break
-        pinv, _ = pseudo_inverse(terms.A[rows], threshold)
-        q -= pinv @ phi
     model.evaluate(q, zeros, t, out=terms)
-    pinv, P = pseudo_inverse(terms.A, threshold)
-    return q, P @ qd - pinv @ terms.phi_t
+    project_velocities(terms.A, terms.phi_t, float(threshold), qd)
+    return q, qd
 
 
 class _Progress:
@@ -288,13 +288,15 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     steps = whole_steps(t_end, dt)
     from cmbs.integrate.compiled_plan import compiled_run
 
-    plan = compiled_run(model, chosen, solver, integrator, u, project, t_end, dt)
+    plan = compiled_run(model, chosen, solver, integrator, u, project, t_end, dt,
+                        projection_tolerance=projection_tolerance)
     if compiled and plan is None:
         raise CmbsError(f"the compiled loop cannot run this simulation of model {model.name!r}: it needs a model, "
                         f"formulation and inputs without Python callables (formulations {COMPILED_FORMULATIONS}; "
                         "constant inputs or a ComputedTorque law, alone or in a ZeroOrderHold with period dt), "
                         "integrator rk4 with t_end a multiple of dt, backward-euler or generalized-alpha or, with "
-                        "constant inputs, rk45, rk23, dop853 or trapezoidal, and no --project")
+                        "constant inputs, rk45, rk23, dop853 or trapezoidal (--project: rk4, rk45, rk23 or dop853, not "
+                        "with matrix-r)")
     run_options = {"integrator": integrator, "dt": dt, "every": every, "rtol": rtol, "atol": atol, "project": project}
     if plan is not None and compiled is not False and integrator in INDEX3:
         trajectory = _run_compiled_index3(model, plan, inputs, q_start, qd_start, grid, INDEX3[integrator],
@@ -397,8 +399,8 @@ def _python_loop_note(model: Model, chosen: Formulation, solver: object, u: obje
         reason = "numba is not installed, the kernels run as Python"
     elif model_kernel(model) is None:
         reason = f"model {model.name!r} has Python-callable terms or time functions"
-    elif project:
-        reason = "drift projection (project=True) runs in Python"
+    elif project and hasattr(solver, "resume"):
+        reason = "drift projection (project=True) with matrix R runs in Python"
     elif callable(u):
         reason = "the inputs are a Python callable (only a plain ComputedTorque law is compiled)"
     elif formulation_kernel(chosen, solver, model) is None:
@@ -880,7 +882,8 @@ def _run_compiled_adaptive(model: Model, solver, chosen: Formulation, plan: tupl
     loop_started = time.perf_counter()
     run = compiled_adaptive.adaptive(model_part, formulation, np.array(q0), np.array(qd0), times, options["rtol"],
                                      options["atol"], u, model.new_terms().buffer.size, model.m,
-                                     explicit_method(options["integrator"]), solver.adjusts_state,
+                                     explicit_method(options["integrator"]),
+                                     solver.adjusts_state or options["project"],
                                      resume=getattr(solver, "resume", None))
     loop_wall = time.perf_counter() - loop_started
     status, t_stop, message = run.status, run.t_stop, run.message

@@ -22,7 +22,10 @@ resumes the loop from there with the kernel it returns.  A hook's failure status
 :meth:`cmbs.dynamics.matrix_r.MatrixRSolver.loop_failure`).
 A state the after-step hook left is one the stage hook leaves as it is (at the same time, with
 the same kernel: matrix R's recovery of a recovered state changes nothing), so a loop need not
-call the stage hook on it again.
+call the stage hook on it again.  An optional third hook, ``output_state`` (same arguments),
+runs on each output state an adaptive loop interpolates before it is recorded: drift projection
+(:class:`cmbs.dynamics.drift.DriftProjection`, which wraps a formulation's kernel) projects
+the accepted and the output states there.
 """
 
 from __future__ import annotations
@@ -55,6 +58,11 @@ def unchanged(kernel, model, q, qd, t, buffer):
     """The stage and after-step hook of a formulation that takes every state as it is: OK."""
     return OK
 
+
+#: ``output_state(kernel, model, q, qd, t, buffer) -> status``: an output state of an adaptive
+#: loop (interpolated between accepted states) as the formulation records it, in place; the
+#: state as it is (:func:`unchanged`) for a class without the hook.
+output_state = type_dispatch("output_state", unchanged)
 
 
 def formulation_kernel(chosen: Formulation, solver: object, model: Model) -> NamedTuple | None:

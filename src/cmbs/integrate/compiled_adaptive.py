@@ -17,7 +17,9 @@ recording does (where that state is singular, q̈ is the interpolant's slope and
 The formulation's hooks (:mod:`cmbs.dynamics.field`) run as the Python path's ``stage_state``
 and ``after_step`` do: every stage state is the hook's (matrix R: recovered; its q̇ is the
 slope of q), every accepted state passes the after-step hook before its derivative is
-evaluated (then without FSAL, as on the Python path).  Where that hook hands the run back
+evaluated (then without FSAL, as on the Python path), and every output state passes the output
+hook before it is recorded (drift projection, :class:`cmbs.dynamics.drift.DriftProjection`, as
+the Python path projects its interpolated outputs).  Where that hook hands the run back
 (REPARTITION), :func:`adaptive` calls ``resume`` for the kernel to go on with (matrix R: a new
 partition, chosen at the recovered state as the Python path's ``after_step`` chooses it), which
 finishes that step as the Python path does (the derivative at the new state, the continuous
@@ -34,7 +36,7 @@ import numpy as np
 from typing import Callable, NamedTuple
 
 from cmbs.dynamics.base import NON_FINITE, OK
-from cmbs.dynamics.field import REPARTITION, after_step, field, stage_state
+from cmbs.dynamics.field import REPARTITION, after_step, field, output_state, stage_state
 from cmbs.errors import CmbsError
 from cmbs.integrate.compiled_rk4 import record_constraints
 from cmbs.integrate.tableaus import Tableau
@@ -72,13 +74,17 @@ def _rms(values, scale):
 
 @njit(cache=True, inline="always")
 def _record(model, formulation, t, y, slope, u, buffer, terms, k, T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE):
-    """Row ``k`` of the outputs at (t, y); returns 1 when the state was singular (q̈ from the
-    interpolant's slope, λ = 0), else 0."""
+    """Row ``k`` of the outputs at (t, y), made the formulation's output state first (its output
+    hook: drift projection projects it; ``y`` is left as it is); returns 1 when the state was
+    singular (q̈ from the interpolant's slope, λ = 0), else 0."""
     n = y.shape[0] // 2
     m = LAMs.shape[1]
     lam = np.zeros(m)
     qdd = np.empty(n)
-    status = field(model, formulation, y[:n], y[n:], t, u, buffer, terms, qdd, lam)
+    y = y.copy()
+    status = output_state(formulation, model, y[:n], y[n:], t, buffer)
+    if status == OK:
+        status = field(model, formulation, y[:n], y[n:], t, u, buffer, terms, qdd, lam)
     unsolved = 0
     if status != OK:                         # the terms at the state are in the buffer all the same
         for i in range(n):

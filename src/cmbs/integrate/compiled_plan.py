@@ -3,11 +3,13 @@
 A run is compiled when its model, formulation and inputs each have a compiled kernel
 (:func:`cmbs.model.compiled.model_kernel`, :func:`cmbs.dynamics.field.formulation_kernel`,
 :func:`inputs_kernel`) and its integrator has a compiled loop for them: rk4 (t_end a multiple of
-dt) with any inputs kernel, rk45/rk23/dop853 with constant inputs; drift projection runs in
-Python.  The index-3 integrators (backward Euler, generalized-α:
-:mod:`cmbs.integrate.compiled_index3`) bring their own formulation: they need the model's and the
-inputs' kernels only (a held law with t_end a multiple of dt); so does the trapezoidal rule in matrix
-R's independent coordinates (:mod:`cmbs.integrate.compiled_reduced`), with constant inputs.
+dt) with any inputs kernel, rk45/rk23/dop853 with constant inputs; with drift projection the
+formulation's kernel is wrapped in :class:`~cmbs.dynamics.drift.DriftProjection` (not for matrix
+R, whose recovery would have to run again on each projected state, nor for a batch).  The
+index-3 integrators (backward Euler, generalized-α: :mod:`cmbs.integrate.compiled_index3`)
+bring their own formulation: they need the model's and the inputs' kernels only (a held law
+with t_end a multiple of dt); so does the trapezoidal rule in matrix R's independent
+coordinates (:mod:`cmbs.integrate.compiled_reduced`), with constant inputs.
 :func:`cmbs.simulate` and :func:`cmbs.sweep` ask here; a batch of runs in one compiled call
 (:func:`cmbs.integrate.compiled_rk4.rk4_batch`) takes only the formulations that never hand a run
 back to Python (matrix R does, to choose a new partition).
@@ -18,6 +20,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from cmbs.dynamics.base import Formulation
+from cmbs.dynamics.drift import drift_projection
 from cmbs.dynamics.field import formulation_kernel
 from cmbs.integrate.compiled_rk4 import ConstantInputs
 from cmbs.integrate.grid import whole_steps
@@ -51,17 +54,19 @@ def inputs_kernel(u: object, model: Model, dt: float) -> NamedTuple | None:
 
 
 def compiled_run(model: Model, chosen: Formulation, solver: object, integrator: str, u: object, project: bool,
-                 t_end: float, dt: float, batched: bool = False
+                 t_end: float, dt: float, batched: bool = False, projection_tolerance: float = 1e-10
                  ) -> tuple[NamedTuple, NamedTuple | None, NamedTuple] | None:
     """(model, formulation, inputs) kernel tuples when a compiled loop can run the simulation of
     ``model`` under ``chosen`` (bound as ``solver``) with ``integrator``, else None; the
     formulation's is None for an index-3 integrator (:data:`INDEX3`) and the trapezoidal rule,
     which bring their own.  ``batched``: for many runs in one compiled call, which no
-    ``solver.resume`` can take up (:func:`cmbs.integrate.compiled_rk4.rk4`)."""
+    ``solver.resume`` can take up (:func:`cmbs.integrate.compiled_rk4.rk4`).  ``project``: drift
+projection to ``projection_tolerance`` after each step (explicit integrators only)."""
     if batched and hasattr(solver, "resume"):
         return None
-    if project or (integrator not in ("rk4", "trapezoidal") and integrator not in ADAPTIVE
-                   and integrator not in INDEX3):
+    if project and (batched or hasattr(solver, "resume") or integrator != "rk4" and integrator not in ADAPTIVE):
+        return None
+    if integrator not in ("rk4", "trapezoidal") and integrator not in ADAPTIVE and integrator not in INDEX3:
         return None
     model_part = model_kernel(model)
     if model_part is None:
@@ -77,4 +82,6 @@ def compiled_run(model: Model, chosen: Formulation, solver: object, integrator: 
     if integrator == "rk4" and not exact:
         return None
     formulation = formulation_kernel(chosen, solver, model)
-    return None if formulation is None else (model_part, formulation, inputs)
+    if formulation is None:
+        return None
+    return model_part, drift_projection(formulation, model, projection_tolerance) if project else formulation, inputs

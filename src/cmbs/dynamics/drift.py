@@ -1,0 +1,173 @@
+"""Drift projection: coordinate and velocity projection onto Φ = 0, A q̇ + Φ_t = 0 (Aghili 2005,
+§VI, eq. 45-47), written once for the Python loop and the compiled ones.
+
+After each accepted step (and, in an adaptive run, at each output state) the coordinates are
+moved by minimum-norm Newton steps on the holonomic rows h (a nonholonomic row has no
+position-level constraint), until max |Φ_h| < tolerance or ``iterations`` steps:
+
+    q ← q - A_h⁺ Φ_h(q)
+
+then the velocities are projected with all rows at the new q:
+
+    q̇ ← (I - A⁺A) q̇ - A⁺ Φ_t
+
+A⁺ by SVD, singular values below ``threshold``·σ_max discarded (as
+:func:`cmbs.dynamics.projection.pseudo_inverse`).  :func:`correct_positions` and
+:func:`project_velocities` are the two steps on terms already evaluated;
+:func:`cmbs.simulate.project_state` calls them on terms the model evaluates in Python, and
+:class:`DriftProjection` is the kernel tuple the compiled loops take: it wraps a formulation's
+kernel (:mod:`cmbs.dynamics.field`), forwards its solve and stage hook and projects in its
+after-step and output hooks.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from cmbs.dynamics.base import NON_FINITE, OK
+from cmbs.dynamics.field import after_step, solve, stage_state
+from cmbs.jit import njit, njit_borrowing
+from cmbs.model.compiled import evaluate, terms_views
+from cmbs.model.model import Model
+
+#: :func:`correct_positions` moved the coordinates (besides OK: within the tolerance, nothing done).
+CORRECTED = 3
+
+
+@njit(cache=True)
+def _subtract_pseudo_inverse(A, b, threshold, x, row_space):
+    """x ← x - A⁺ b - ``row_space`` · A⁺A x, with A⁺A = V Vᵀ and A⁺ = V Σ⁻¹ Uᵀ from the SVD of A
+    (singular values below ``threshold``·σ_max discarded); ``row_space`` is 0.0 or 1.0."""
+    U, sigma, Vt = np.linalg.svd(A, full_matrices=False)
+    cutoff = threshold * max(sigma[0], 1e-300)
+    n = x.shape[0]
+    weights = np.zeros(sigma.shape[0])
+    for k in range(sigma.shape[0]):
+        if sigma[k] > cutoff:
+            along = 0.0                     # (Uᵀ b)_k / σ_k + row_space (Vᵀ x)_k
+            for a in range(b.shape[0]):
+                along += U[a, k] * b[a]
+            along /= sigma[k]
+            for j in range(n):
+                along += row_space * Vt[k, j] * x[j]
+            weights[k] = along
+    for j in range(n):
+        total = 0.0
+        for k in range(sigma.shape[0]):
+            total += Vt[k, j] * weights[k]
+        x[j] -= total
+
+
+@njit(cache=True)
+def correct_positions(A, phi, rows, tolerance, threshold, q):
+    """One Newton step q ← q - A_h⁺ Φ_h on the holonomic ``rows`` h of the terms A, Φ at q, in
+    place.  Returns OK (nothing done) when max |Φ_h| < ``tolerance``, NON_FINITE for a
+    non-finite Φ_h or A_h, else CORRECTED."""
+    r, n = rows.shape[0], q.shape[0]
+    A_h, phi_h = np.empty((r, n)), np.empty(r)
+    largest = 0.0
+    for a in range(r):
+        phi_h[a] = phi[rows[a]]
+        if not np.isfinite(phi_h[a]):
+            return NON_FINITE
+        largest = max(largest, abs(phi_h[a]))
+        for j in range(n):
+            A_h[a, j] = A[rows[a], j]
+            if not np.isfinite(A_h[a, j]):
+                return NON_FINITE
+    if largest < tolerance:
+        return OK
+    _subtract_pseudo_inverse(A_h, phi_h, threshold, q, 0.0)
+    return CORRECTED
+
+
+@njit(cache=True)
+def project_velocities(A, phi_t, threshold, qd):
+    """q̇ ← (I - A⁺A) q̇ - A⁺ Φ_t with every row of the terms A, Φ_t, in place; OK, or
+    NON_FINITE (q̇ unchanged) for non-finite terms or velocities."""
+    m, n = A.shape
+    for j in range(n):
+        if not np.isfinite(qd[j]):
+            return NON_FINITE
+    for a in range(m):
+        if not np.isfinite(phi_t[a]):
+            return NON_FINITE
+        for j in range(n):
+            if not np.isfinite(A[a, j]):
+                return NON_FINITE
+    if m > 0:
+        _subtract_pseudo_inverse(A, phi_t, threshold, qd, 1.0)
+    return OK
+
+
+class DriftProjection(NamedTuple):
+    """A formulation's kernel (``inner``) with drift projection after each accepted step and at
+    each output state of an adaptive loop: the holonomic ``rows``, the ``tolerance`` on max |Φ_h|,
+    at most ``iterations`` Newton steps, the SVD ``threshold``, the number of constraints ``m``
+    (the terms' layout), zero velocities (the terms are evaluated at q̇ = 0, as
+    :func:`cmbs.simulate.project_state` evaluates them) and zero inputs."""
+
+    inner: NamedTuple
+    rows: np.ndarray
+    tolerance: float
+    iterations: int
+    threshold: float
+    m: int
+    zeros: np.ndarray
+    u: np.ndarray
+
+
+def drift_projection(inner: NamedTuple, model: Model, tolerance: float, iterations: int = 10,
+                     threshold: float = 1e-9) -> DriftProjection:
+    """The kernel of ``inner`` (a formulation's kernel for ``model``) with drift projection to
+    ``tolerance``, the arguments of :func:`cmbs.simulate.project_state`."""
+    return DriftProjection(inner, np.flatnonzero(model.holonomic).astype(np.int64), float(tolerance),
+                           int(iterations), float(threshold), int(model.m), np.zeros(model.n), np.zeros(model.n_u))
+
+
+@njit(cache=True)
+def project_drift(kernel, model, q, qd, t, buffer):
+    """The projection of (q, q̇) at t in place, the terms evaluated by the ``model`` kernel into
+    ``buffer``; OK or NON_FINITE."""
+    n = q.shape[0]
+    _, phi, A, _, phi_t, _ = terms_views(model, n, kernel.m, buffer)
+    for _ in range(kernel.iterations if kernel.rows.shape[0] > 0 else 0):
+        evaluate(model, q, kernel.zeros, t, kernel.u, buffer)
+        status = correct_positions(A, phi, kernel.rows, kernel.tolerance, kernel.threshold, q)
+        if status == NON_FINITE:
+            return NON_FINITE
+        if status == OK:
+            break
+    evaluate(model, q, kernel.zeros, t, kernel.u, buffer)
+    return project_velocities(A, phi_t, kernel.threshold, qd)
+
+
+# The three hooks only forward: compiled into their caller (cmbs.jit.njit's note on compile time).
+@njit_borrowing(cache=True, inline="always")
+def _solve(kernel, terms, t, qd, qdd, lam):
+    """The wrapped formulation's solve."""
+    return solve(kernel.inner, terms, t, qd, qdd, lam)
+
+
+@njit_borrowing(cache=True, inline="always")
+def _stage_state(kernel, model, q, qd, t, buffer):
+    """The wrapped formulation's stage hook."""
+    return stage_state(kernel.inner, model, q, qd, t, buffer)
+
+
+@njit_borrowing(cache=True, inline="always")
+def _after_step(kernel, model, q, qd, t, buffer):
+    """The wrapped formulation's after-step hook, then the projection (as the Python loop's
+    ``after_step``)."""
+    status = after_step(kernel.inner, model, q, qd, t, buffer)
+    if status != OK:
+        return status
+    return project_drift(kernel, model, q, qd, t, buffer)
+
+
+DriftProjection.solve = staticmethod(_solve)
+DriftProjection.stage_state = staticmethod(_stage_state)
+DriftProjection.after_step = staticmethod(_after_step)
+DriftProjection.output_state = staticmethod(project_drift)
