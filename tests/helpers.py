@@ -147,3 +147,17 @@ def library_four_bar_variant(name: str, *, coupler_mass: float = 5.0, coupler_co
     if actuator:
         b.add_actuator("torque", coordinate="alpha")
     return b.build()
+
+
+def arm_on_slider_motion():
+    """The arm on a slider and a smooth motion of it for tracking tests: 1 s at 5 ms, θ2 and θ3
+    oscillating about their initial values (θ2 + 0.2 sin 2t, θ3 - 0.1 sin 3t), the slider held;
+    velocities and accelerations left zero (a Reference fits its own spline)."""
+    import cmbs
+
+    arm = cmbs.load("arm-on-slider")
+    t = np.linspace(0.0, 1.0, 201)
+    q = np.tile(arm.q0, (t.size, 1))
+    q[:, 1] += 0.2 * np.sin(2 * t)
+    q[:, 2] -= 0.1 * np.sin(3 * t)
+    return arm, cmbs.Trajectory(t, q, np.zeros_like(q), np.zeros_like(q), arm.coordinate_names)

@@ -8,7 +8,7 @@ import pytest
 import cmbs
 from cmbs.control import PD, ComputedTorque, Reference, ZeroOrderHold
 from cmbs.errors import CmbsError
-from helpers import library_four_bar_variant
+from helpers import arm_on_slider_motion, library_four_bar_variant
 
 
 @pytest.fixture(scope="module")
@@ -236,12 +236,7 @@ def test_computed_torque_gives_the_designed_accelerations_off_the_reference(four
 def test_computed_torque_gives_the_designed_accelerations_of_two_coordinates():
     """The arm on a slider tracking two coordinates named out of the model's order, per-coordinate
     gains, off the reference in both."""
-    arm = cmbs.load("arm-on-slider")
-    t = np.linspace(0.0, 1.0, 201)
-    q = np.tile(arm.q0, (t.size, 1))
-    q[:, 1] += 0.2 * np.sin(2 * t)
-    q[:, 2] -= 0.1 * np.sin(3 * t)
-    motion = cmbs.Trajectory(t, q, np.zeros_like(q), np.zeros_like(q), arm.coordinate_names)
+    arm, motion = arm_on_slider_motion()
     reference = Reference(motion, ("theta3", "theta2"))
     designed_accelerations_hold(arm, reference, [400.0, 100.0], [40.0, 20.0], ("theta3", "theta2"),
                                 np.array([0.02, -0.03]), np.array([0.1, -0.2]), 0.4)

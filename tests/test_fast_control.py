@@ -10,7 +10,7 @@ from cmbs.control.compiled_torque import computed_torque_kernel
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.motion import prescribe, read_motion
 from cmbs.simulate import simulate
-from helpers import library_four_bar_variant
+from helpers import arm_on_slider_motion, library_four_bar_variant
 
 H = 1e-3
 
@@ -79,12 +79,7 @@ def test_compiled_computed_torque_on_a_joint_model():
 def test_compiled_computed_torque_with_two_coordinates_in_any_order():
     """Two tracked coordinates (spline columns, gains per coordinate) on the arm on a slider; the
     law does not depend on the order in which the reference names them."""
-    arm = cmbs.load("arm-on-slider")
-    t = np.linspace(0.0, 1.0, 201)
-    q = np.tile(arm.q0, (t.size, 1))
-    q[:, 1] += 0.2 * np.sin(2 * t)
-    q[:, 2] -= 0.1 * np.sin(3 * t)
-    motion = cmbs.Trajectory(t, q, np.zeros_like(q), np.zeros_like(q), arm.coordinate_names)
+    arm, motion = arm_on_slider_motion()
     start = arm.q0.copy()
     start[1] += 0.05
     start = cmbs.assemble(arm, start, fixed=["theta2", "theta3"])
