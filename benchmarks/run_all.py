@@ -44,6 +44,8 @@ def commands(out: Path, quick: bool) -> dict[str, list[str]]:
         "memory": ["bench_memory.py", *fast, "--json", str(out / "memory.json")],
         "n-four-bar": ["bench_n_four_bar.py", *(["--t-end", "5"] if quick else []), "--json",
                        str(out / "n-four-bar.json")],
+        "n-four-bar-tools": ["bench_n_four_bar_tools.py", *(["--N", "2", "10", "--t-end", "5"] if quick else []),
+                             "--json", str(out / "n-four-bar-tools.json")],
     }
 
 
