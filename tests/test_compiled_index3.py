@@ -1,7 +1,7 @@
 """Backward Euler and generalized-α compiled (cmbs.integrate.compiled_index3 on the Newton loop of
 cmbs.integrate.implicit): against the closed-form small oscillation of the pendulum, to the
 schemes' orders; against the same loop run interpreted on a Python residual (the path of runs
-with Python callables: the residual routine and the tangents run as Python, numpy's solve);
+with Python callables: the same residual routine, the tangent routine run as Python, numpy's solve);
 and the failures, which end the run with the messages of the Python path."""
 
 import json
@@ -53,9 +53,9 @@ def test_compiled_schemes_follow_the_small_oscillation_to_their_order(integrator
 
 
 def test_one_residual_routine_compiled_and_run_as_python():
-    """r_dyn = M a + Aᵀλ - Q (cmbs.integrate.implicit.dynamic_residual): compiled, as the compiled
-    problems call it, and run as Python, as the runs on Python calls do, it gives the same bits,
-    and numpy's formula to rounding."""
+    """r_dyn = M a + Aᵀλ - Q (cmbs.integrate.implicit.dynamic_residual), which the compiled problems
+    and the runs on Python calls share: compiled and run as Python (without numba) it gives the
+    same bits, and numpy's formula to rounding."""
     from cmbs.integrate.implicit import dynamic_residual
 
     rng = np.random.default_rng(4)

@@ -492,20 +492,18 @@ def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, g
     with the model and inputs as Python calls: :func:`cmbs.integrate.implicit.integrate_index3`,
     the loop of :func:`_run_compiled_index3` interpreted."""
     from cmbs.integrate.implicit import dynamic_residual, python_tangents
-    from cmbs.jit import interpreted
 
     a0, lam0 = _consistent_start(model, inputs, q0, qd0)
     terms = model.new_terms()
-    residual_rows = interpreted(dynamic_residual)
 
     def residual(t, q, v, a, lam):
         def dynamic(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
-            """r_dyn = M a + Aᵀλ - Q at (qq, vv) with the inputs applied there, as the compiled
-            problem's (:func:`~cmbs.integrate.implicit.dynamic_residual`)."""
+            """r_dyn = M a + Aᵀλ - Q at (qq, vv) with the inputs applied there, by the compiled
+            problem's routine (:func:`~cmbs.integrate.implicit.dynamic_residual`)."""
             model.evaluate(qq, vv, t, inputs(t, qq, vv), out=terms)
             _require_finite_dynamics(terms)
             r = np.empty(model.n)
-            residual_rows(terms.M, terms.A, terms.Q, a, lam, r)
+            dynamic_residual(terms.M, terms.A, terms.Q, a, lam, r)
             return r
 
         r = dynamic(q, v)

@@ -157,9 +157,10 @@ def dynamic_residual(M, A, Q, a, lam, r):
         r_dyn = M a + Aᵀλ - Q
 
     summed row by row from -Q_i.  The one residual routine: of the compiled problems
-    (:mod:`cmbs.integrate.compiled_index3`, on the terms of the model's kernel) and, run as Python
-    (:func:`cmbs.jit.interpreted`), of the problems with Python callables
-    (:func:`cmbs.simulate._run_index3`)."""
+    (:mod:`cmbs.integrate.compiled_index3`, on the terms of the model's kernel) and, called from
+    Python, of the problems with Python callables (:func:`cmbs.simulate._run_index3`), for which
+    it is compiled too where numba is (a call costs 0.35 µs; run as Python, its 2n(n + m)
+    operations on numpy scalars made a run of the human model, n = 38, 12× slower)."""
     n, m = a.shape[0], lam.shape[0]
     for i in range(n):
         total = -Q[i]
