@@ -373,7 +373,8 @@ def newton_steps(problem, t_out, first, keep_every, coefficients, step, toleranc
     stepped to, time of the failed step or reached, last scaled correction).
 
     Its helpers are inner functions, compiled into it (numba's closures) and plain Python when it
-    runs interpreted: a run on a Python residual compiles nothing.
+    runs interpreted: a run on a Python residual compiles none of the loop (only, once, the small
+    :func:`dynamic_residual` of the index-3 residual of :mod:`cmbs.simulate`).
     """
     b0, b1, g0, g1, alpha_m, alpha_f, b_eff, g_eff = coefficients
     q, v, a, lam, x = state
