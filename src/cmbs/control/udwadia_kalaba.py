@@ -369,7 +369,7 @@ class UdwadiaKalabaTracking:
         if not threshold >= 0:
             raise CmbsError(f"Udwadia-Kalaba control: threshold must be >= 0, got {threshold}")
         self.tolerance = tolerance
-        self.threshold = threshold
+        self.threshold = float(threshold)      # the compiled solve's argument type
         chosen = model.actuator_names if actuators is None else tuple(actuators)
         unknown = [name for name in chosen if name not in model.actuator_names]
         if unknown:
