@@ -154,3 +154,18 @@ def test_the_first_compilation_is_announced_once():
     assert lines == []
     assert twice(1) == 2 and twice(1.5) == 3.0          # two compilations
     assert len(lines) == 1 and "compiling the kernels" in lines[0]
+
+
+@pytest.mark.parametrize("options, loop", [
+    (["--integrator", "rk4", "--t-end", "0.3", "--dt", "0.1"], "compiled"),
+    (["--integrator", "rk4", "--t-end", "0.35", "--dt", "0.1"], "Python loop (t_end is not a multiple of dt)"),
+    (["--integrator", "rk4", "--t-end", "0.3", "--formulation", "matrix-r", "--project"],
+     "Python loop (drift projection)"),
+    (["--integrator", "rk45", "--t-end", "0.3", "--formulation", "matrix-r", "--project"], "Python loop"),
+], ids=["compiled", "rk4-odd-end", "rk4-matrix-r-projection", "rk45-matrix-r-projection"])
+def test_the_summary_says_whether_the_run_was_compiled(options, loop, capsys):
+    """The summary line ends with the loop the run took, and the reason that run's note gives
+    for the Python loop in a few words (the note itself has all of it)."""
+    assert main(["simulate", "four-bar", *options]) == 0
+    summary = next(line for line in capsys.readouterr().out.splitlines() if line.startswith("four-bar:"))
+    assert summary.endswith(f" s), {loop}"), summary

@@ -1,7 +1,7 @@
 """Backward Euler and generalized-α compiled (cmbs.integrate.compiled_index3 on the Newton loop of
 cmbs.integrate.implicit): against the closed-form small oscillation of the pendulum, to the
 schemes' orders; against the same loop run interpreted on a Python residual (the path of runs
-with Python callables, with numpy's solve and the tangents of cmbs.simulate._force_derivatives);
+with Python callables: the same residual routine, the tangent routine run as Python, numpy's solve);
 and the failures, which end the run with the messages of the Python path."""
 
 import json
@@ -50,6 +50,25 @@ def test_compiled_schemes_follow_the_small_oscillation_to_their_order(integrator
     errors = [angle_error(run) for run in runs]
     assert errors[0] < largest
     assert math.log2(errors[0] / errors[1]) == pytest.approx(order, abs=0.15)
+
+
+def test_one_residual_routine_compiled_and_run_as_python():
+    """r_dyn = M a + Aᵀλ - Q (cmbs.integrate.implicit.dynamic_residual), which the compiled problems
+    and the runs on Python calls share: compiled and run as Python (without numba) it gives the
+    same bits, and numpy's formula to rounding."""
+    from cmbs.integrate.implicit import dynamic_residual
+
+    rng = np.random.default_rng(4)
+    n, m = 5, 3
+    M, A, Q, a, lam = (rng.normal(size=shape) for shape in ((n, n), (m, n), n, n, m))
+    compiled, python = np.empty(n), np.empty(n)
+    dynamic_residual(M, A, Q, a, lam, compiled)
+    jit.interpreted(dynamic_residual)(M, A, Q, a, lam, python)
+    np.testing.assert_array_equal(compiled, python)
+    expected = M @ a + A.T @ lam - Q
+    np.testing.assert_allclose(compiled, expected, rtol=0, atol=1e-14 * (np.abs(M).max() * np.abs(a).sum()
+                                                                         + np.abs(A).max() * np.abs(lam).sum()
+                                                                         + np.abs(Q).max()))
 
 
 @pytest.mark.parametrize("integrator, name", [("backward-euler", "four-bar"), ("generalized-alpha", "four-bar"),

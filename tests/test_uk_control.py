@@ -238,6 +238,71 @@ def test_force_obeys_gauss_principle(case):
             assert gauss(alternative) - best == pytest.approx(delta @ M @ delta, rel=1e-6, abs=1e-12 * scale**2)
 
 
+def symmetric_root_solution(M: np.ndarray, Q: np.ndarray, A_s: np.ndarray,
+                            b_s: np.ndarray) -> np.ndarray:
+    """q̈* of Nicoara eq. (11) with the symmetric square root of a definite M and numpy's
+    pseudo-inverse, the rows of B = A_s M^{-1/2} scaled to unit norm by D:
+    q̈* = a + M^{-1/2} (D B)⁺ D (b_s - A_s a), a = M⁻¹Q."""
+    values, vectors = np.linalg.eigh(M)
+    inverse_root = (vectors / np.sqrt(values)) @ vectors.T
+    a = np.linalg.solve(M, Q)
+    B = A_s @ inverse_root
+    D = 1.0 / np.linalg.norm(B, axis=1)
+    return a + inverse_root @ np.linalg.pinv(D[:, None] * B) @ (D * (b_s - A_s @ a))
+
+
+def stretched_joint_arm_task():
+    """The joint arm at full stretch (θ2 = 0): the tip's Jacobian has rank 1 and the circle's
+    demand is inconsistent, so Gauss's solution is the least-squares one of the pseudo-inverse."""
+    model = joint_arm((0.3, 0.0))
+    return model, TrackingTask(point_output(model, "lower.end"), CIRCLE), np.array([0.3, 0.0]), np.array([0.4, -0.2])
+
+
+def redundant_joint_arm_task():
+    """The joint arm told to move θ1 and 2θ1 along φ(t) and 2φ(t): two dependent, consistent rows."""
+    model = joint_arm()
+    twice = FunctionOutput(lambda q: np.array([q[0], 2.0 * q[0]]), ("theta1", "twice theta1"),
+                           jacobian=lambda q: np.array([[1.0, 0.0], [2.0, 0.0]]))
+    desired = lambda t: (np.array([1.0, 2.0]) * math.sin(t), np.array([1.0, 2.0]) * math.cos(t),
+                         -np.array([1.0, 2.0]) * math.sin(t))
+    return model, TrackingTask(twice, desired), np.array([0.2, 0.9]), np.array([-0.5, 0.3])
+
+
+def natural_arm_task():
+    """The natural arm (semi-definite M, four plant constraints) drawing the circle."""
+    model = natural_arm()
+    return (model, TrackingTask(point_output(model, "P2"), CIRCLE)) + natural_state(np.array([0.4, 1.1]),
+                                                                                       np.array([0.7, -0.3]))
+
+
+@pytest.mark.parametrize("make", [natural_arm_task, stretched_joint_arm_task, redundant_joint_arm_task],
+                         ids=["natural-arm", "stretched-joint-arm", "redundant-task"])
+def test_force_is_the_symmetric_root_formula(make):
+    """q̈* and Q_c = M q̈* - Q against Nicoara eq. (11), (19) computed with the symmetric square
+    root and numpy's pseudo-inverse, also where [A; Ψ_q] loses rank (the KKT solve of
+    test_force_obeys_gauss_principle is singular there).  The natural arm's M is semi-definite:
+    the formula takes M + s AᵀA, Q + s Aᵀγ (s = trace M / n), which has the same q̈* on A q̈ = γ."""
+    model, task, q, qd = make()
+    kp, kd = np.array([100.0, 64.0]), np.array([20.0, 10.0])
+    t = 0.7
+    step = UdwadiaKalabaTracking(model, task, kp=kp, kd=kd, tolerance=None).step(t, q, qd)
+    terms = model.evaluate(q, qd, t)
+    J = task.output.jacobian(q)
+    y_d, yd_d, ydd_d = task.desired(t)
+    b_task = ydd_d + kd * (yd_d - J @ qd) + kp * (y_d - task.output.value(q)) - task.output.bias(q, qd)
+    A_s, b_s = np.vstack([terms.A, J]), np.concatenate([terms.gamma, b_task])
+    M, Q = terms.M, terms.Q
+    if model.m:
+        s = np.trace(M) / model.n
+        M, Q = M + s * terms.A.T @ terms.A, Q + s * terms.A.T @ terms.gamma
+    else:
+        assert np.linalg.matrix_rank(A_s) < A_s.shape[0]      # dependent task rows
+    qdd = symmetric_root_solution(M, Q, A_s, b_s)
+    force = terms.M @ qdd - terms.Q
+    np.testing.assert_allclose(step.qdd, qdd, rtol=0, atol=1e-10 * np.abs(qdd).max())
+    np.testing.assert_allclose(step.constraint_force, force, rtol=0, atol=1e-10 * np.abs(force).max())
+
+
 def test_inputs_realise_the_force_without_plant_constraints():
     """Open chain (m = 0): G u = Q_c exactly, where G u is measured as Q(u) - Q(0)."""
     model = joint_arm()

@@ -158,6 +158,21 @@ def timing(info: dict) -> str:
     return f"run {run_seconds(info):.3g} s, compile {info.get('compile_time', 0.0):.3g} s"
 
 
+#: How :func:`cmbs.simulate.simulate` begins the note saying why a run took the Python loop.
+_PYTHON_LOOP_NOTE = "Python loop: "
+
+
+def _loop_statement(info: dict) -> str:
+    """``compiled``, or ``Python loop`` with the reason the run's note gives, in a few words (up to
+    its first parenthesis), e.g. ``Python loop (t_end is not a multiple of dt)``."""
+    if info.get("compiled"):
+        return "compiled"
+    for note in info.get("note", "").split("; "):
+        if note.startswith(_PYTHON_LOOP_NOTE):
+            return f"Python loop ({note[len(_PYTHON_LOOP_NOTE):].split(' (')[0]})"
+    return "Python loop"
+
+
 def _models(args: argparse.Namespace) -> int:
     from cmbs.library import entry, names
 
@@ -240,7 +255,7 @@ def _simulate(args: argparse.Namespace) -> int:
     info = run.info
     error = run["constraint_error"]
     print(f"{model.name}: {info['formulation']} + {info['integrator']}, {info['status']} {_reached(run)} "
-          f"({info['steps']} steps, {timing(info)})")
+          f"({info['steps']} steps, {timing(info)}), {_loop_statement(info)}")
     if run.t.size:
         print(f"  max constraint error {error.max(initial=0.0):.3g}, max velocity constraint error "
               f"{run['velocity_constraint_error'].max(initial=0.0):.3g}, {energy_statement(model, run)}")

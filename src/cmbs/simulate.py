@@ -450,10 +450,10 @@ def _solve(solver, model: Model, terms, q: np.ndarray, qd: np.ndarray, t: float)
                                   f"({error}); try formulation 'projection' or 'udwadia-kalaba'") from None
 
 
-def _force_derivatives(model: Model, inputs: Inputs, q: np.ndarray, qd: np.ndarray, t: float,
-                       extra: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """C_t = -∂Q/∂q̇ and K_t = -∂Q/∂q (+ ∂extra/∂q̇, ∂extra/∂q), the inputs evaluated at each
-    state, by the forward differences of :func:`cmbs.integrate.implicit.forward_difference_tangents`;
+def _force_derivatives(model: Model, inputs: Inputs, q: np.ndarray, qd: np.ndarray,
+                       t: float) -> tuple[np.ndarray, np.ndarray]:
+    """C_t = -∂Q/∂q̇ and K_t = -∂Q/∂q, the inputs evaluated at each state, by the forward
+    differences of :func:`cmbs.integrate.implicit.forward_difference_tangents`;
     :class:`~cmbs.integrate.implicit.NonFiniteResidual` where they meet a non-finite value."""
     from cmbs.integrate.implicit import python_tangents
 
@@ -461,10 +461,7 @@ def _force_derivatives(model: Model, inputs: Inputs, q: np.ndarray, qd: np.ndarr
 
     def residual(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
         model.evaluate(qq, vv, t, inputs(t, qq, vv), out=terms)
-        if extra is not None:
-            _require_finite_dynamics(terms)
-        value = -terms.Q.copy()
-        return value + extra(terms) if extra is not None else value
+        return -terms.Q.copy()
 
     K, C = python_tangents(residual, q, qd)
     return C, K
@@ -494,15 +491,24 @@ def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, g
     """Backward Euler / generalized-α on M a + Aᵀλ = Q, Φ(q) = 0 (consistent start from Lagrange)
     with the model and inputs as Python calls: :func:`cmbs.integrate.implicit.integrate_index3`,
     the loop of :func:`_run_compiled_index3` interpreted."""
+    from cmbs.integrate.implicit import dynamic_residual, python_tangents
+
     a0, lam0 = _consistent_start(model, inputs, q0, qd0)
     terms = model.new_terms()
 
     def residual(t, q, v, a, lam):
-        model.evaluate(q, v, t, inputs(t, q, v), out=terms)
-        _require_finite_dynamics(terms)
-        r = terms.M @ a + terms.A.T @ lam - terms.Q
+        def dynamic(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
+            """r_dyn = M a + Aᵀλ - Q at (qq, vv) with the inputs applied there, by the compiled
+            problem's routine (:func:`~cmbs.integrate.implicit.dynamic_residual`)."""
+            model.evaluate(qq, vv, t, inputs(t, qq, vv), out=terms)
+            _require_finite_dynamics(terms)
+            r = np.empty(model.n)
+            dynamic_residual(terms.M, terms.A, terms.Q, a, lam, r)
+            return r
+
+        r = dynamic(q, v)
         M, A, phi = terms.M.copy(), terms.A.copy(), terms.phi.copy()
-        C, K = _force_derivatives(model, inputs, q, v, t, extra=lambda tt: tt.M @ a + tt.A.T @ lam)
+        K, C = python_tangents(dynamic, q, v)
         return r, phi, M, A, C, K
 
     return integrate_index3(residual, q0, qd0, a0, lam0, grid, scheme=scheme, step=dt,

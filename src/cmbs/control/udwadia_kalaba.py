@@ -44,13 +44,16 @@ task is not realisable with these actuators, e.g. more task outputs than actuato
 passive joint that the force of least constraint would need).
 
 Numerics.  Any factor M = L Lᵀ can stand for M^{1/2} (Gauss's measure is the same), so the
-Cholesky factor is used, as in :mod:`cmbs.dynamics.udwadia_kalaba`.  When the model has
+Cholesky factor is used, and q̈* is computed by the Udwadia-Kalaba formulation's own solve,
+:func:`cmbs.dynamics.udwadia_kalaba.udwadia_kalaba_solve`, on that factor with the stacked rows
+A_s, b_s as its constraints (the controller adds the actuation and ρ above).  When the model has
 constraints, M is replaced by M̂ = M + s ÃᵀÃ and Q by Q̂ = Q + s Ãᵀγ̃ (Ã, γ̃ the plant's rows
 scaled to unit norm, s = trace(M(q0))/n; Udwadia & Phohomsiri 2006): on A q̈ = γ this adds the
 constant s|γ̃|² to Gauss's function and changes neither q̈* nor Q_c nor δq̈, and it makes M̂
-definite for natural coordinates with massless angle coordinates.  Pseudo-inverses discard
-singular values below ``threshold``·σ_max (rows normalised first), so a task row that becomes
-dependent (an arm at full stretch) is dropped instead of blowing up.
+definite for natural coordinates with massless angle coordinates.  The pseudo-inverses of B̃
+(A_s L⁻ᵀ with unit rows) and of its plant rows discard singular values ≤ ``threshold``, that
+of N L⁻¹ G those below ``threshold``·σ_max, so a task row that becomes dependent (an arm at
+full stretch) is dropped instead of blowing up.
 """
 
 from __future__ import annotations
@@ -63,6 +66,7 @@ import numpy as np
 
 from cmbs.control.base import actuator_map, gain_vector
 from cmbs.dynamics.projection import pseudo_inverse
+from cmbs.dynamics.udwadia_kalaba import udwadia_kalaba_solve
 from cmbs.errors import CmbsError
 from cmbs.lazy import on_first_use
 from cmbs.model import joints
@@ -72,6 +76,8 @@ from cmbs.model.natural import NaturalEquations, point_map
 linalg = on_first_use("scipy.linalg")
 
 Desired = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
+#: The non-ideal vector c of :func:`udwadia_kalaba_solve`: none (the task force is ideal).
+NO_NONIDEAL = np.zeros(0)
 
 
 # ------------------------------------------------------------------ outputs y = Ψ(q)
@@ -346,7 +352,8 @@ class UdwadiaKalabaTracking:
         Largest unrealisable fraction ρ accepted; above it a :class:`CmbsError` is raised.
         None: never raise, apply the least-squares inputs (see ``step(...).residual``).
     threshold
-        Relative singular-value cut-off of the pseudo-inverses (rows normalised first).
+        Singular-value cut-off of the pseudo-inverses (of A_s M^{-1/2} with unit rows; relative to
+        the largest for the actuators' N M^{-1/2} G).
     """
 
     def __init__(self, model: Model, task: TrackingTask, *, kp: float | Sequence[float],
@@ -362,7 +369,7 @@ class UdwadiaKalabaTracking:
         if not threshold >= 0:
             raise CmbsError(f"Udwadia-Kalaba control: threshold must be >= 0, got {threshold}")
         self.tolerance = tolerance
-        self.threshold = threshold
+        self.threshold = float(threshold)      # the compiled solve's argument type
         chosen = model.actuator_names if actuators is None else tuple(actuators)
         unknown = [name for name in chosen if name not in model.actuator_names]
         if unknown:
@@ -380,6 +387,8 @@ class UdwadiaKalabaTracking:
             raise CmbsError(f"task desired(t) must return three ({k},) arrays for outputs {', '.join(task.names)}, "
                             f"got shapes {y_d.shape}, {yd_d.shape}, {ydd_d.shape}")
         self.mass_scale = float(np.trace(model.mass_matrix(model.q0))) / model.n
+        n, rows = model.n, model.m + k
+        self.solve_work = (np.zeros((rows, n)), np.zeros((3, n)), np.zeros((2, rows)), np.zeros(rows), np.zeros(n))
         self.terms = model.new_terms()
         self.no_input = np.zeros(model.n_u)
 
@@ -398,37 +407,17 @@ class UdwadiaKalabaTracking:
         b_task = ydd_d + self.kd * (yd_d - J @ qd) + self.kp * error - output.bias(q, qd)
         A_s = np.vstack([A, J])
         b_s = np.concatenate([gamma, b_task])
-
-        m = A.shape[0]
-        M_hat, Q_hat = M, Q
-        if m:
-            scale = _unit_row_scale(A)
-            A_unit = A * scale[:, None]
-            M_hat = M + self.mass_scale * (A_unit.T @ A_unit)
-            Q_hat = Q + self.mass_scale * (A_unit.T @ (gamma * scale))
+        M_hat, Q_hat = self._augmented(M, Q, A, gamma)
         try:
             L = np.linalg.cholesky(M_hat)
         except np.linalg.LinAlgError:
             raise CmbsError(f"Udwadia-Kalaba control at t={t:.6g}: the mass matrix of model {self.model.name!r} "
                             "is not positive definite on its constraint manifold") from None
-        a = linalg.cho_solve((L, True), Q_hat, check_finite=False)
         B = linalg.solve_triangular(L, A_s.T, lower=True, check_finite=False).T  # A_s L⁻ᵀ
         row_scale = _unit_row_scale(B)
-        B_unit = B * row_scale[:, None]
-        B_unit_pinv, _ = pseudo_inverse(B_unit, self.threshold)
-        _, N = pseudo_inverse(B_unit[:m], self.threshold)  # projector onto null(A L⁻ᵀ)
-        scaled_force = B_unit_pinv @ (row_scale * (b_s - A_s @ a))
-        qdd = a + linalg.solve_triangular(L, scaled_force, lower=True, trans="T", check_finite=False)
+        qdd = self._gauss_accelerations(M_hat, Q_hat, A_s, b_s, L, row_scale)
         force = M @ qdd - Q
-
-        H = N @ linalg.solve_triangular(L, self.gains, lower=True, check_finite=False)  # N L⁻¹ G
-        H_pinv, _ = pseudo_inverse(H, self.threshold)
-        target = N @ linalg.solve_triangular(L, force, lower=True, check_finite=False)
-        u_selected = H_pinv @ target
-        residual = float(np.linalg.norm(H @ u_selected - target))
-        demanded = N @ B_unit_pinv
-        size = np.linalg.norm(demanded, 2) if demanded.size else 0.0
-        unrealisable = float(np.linalg.norm(demanded - H @ (H_pinv @ demanded), 2) / size) if size > 0 else 0.0
+        u_selected, residual, unrealisable = self._inputs(L, B * row_scale[:, None], A.shape[0], force)
         if self.tolerance is not None and unrealisable > self.tolerance:
             used = ", ".join(self.model.actuator_names[i] for i in self.selected)
             raise CmbsError(f"Udwadia-Kalaba control at t={t:.6g}: the task {', '.join(self.task.names)} needs "
@@ -440,3 +429,41 @@ class UdwadiaKalabaTracking:
         u[self.selected] = u_selected
         return UdwadiaKalabaStep(qdd=qdd, constraint_force=force, actuator_force=self.gains @ u_selected, u=u,
                                  error=error, residual=residual, unrealisable=unrealisable)
+
+    def _augmented(self, M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """M̂ = M + s ÃᵀÃ and Q̂ = Q + s Ãᵀγ̃, Ã and γ̃ the plant's rows scaled to unit norm
+        (module docstring; M and Q themselves without plant constraints)."""
+        scale = _unit_row_scale(A)
+        A_unit = A * scale[:, None]
+        return M + self.mass_scale * (A_unit.T @ A_unit), Q + self.mass_scale * (A_unit.T @ (gamma * scale))
+
+    def _gauss_accelerations(self, M_hat: np.ndarray, Q_hat: np.ndarray, A_s: np.ndarray, b_s: np.ndarray,
+                             L: np.ndarray, row_scale: np.ndarray) -> np.ndarray:
+        """q̈* = a + L⁻ᵀ (A_s L⁻ᵀ)⁺ (b_s - A_s a), a = M̂⁻¹Q̂ (module docstring), by the Udwadia-Kalaba
+        formulation's solve (:func:`~cmbs.dynamics.udwadia_kalaba.udwadia_kalaba_solve`) on the factor
+        L of M̂ with the rows of A_s L⁻ᵀ scaled by ``row_scale``; NaN where a term is not finite (the
+        plant's integrator then reports the state)."""
+        qdd = np.empty(M_hat.shape[0])
+        work_matrix, vectors_n, vectors_m, lam, force = self.solve_work
+        udwadia_kalaba_solve(M_hat, Q_hat, A_s, b_s, NO_NONIDEAL, 0.0, True, self.threshold, row_scale, 1.0, L,
+                             work_matrix, vectors_n, vectors_m, qdd, lam, force)
+        return qdd
+
+    def _inputs(self, L: np.ndarray, B_unit: np.ndarray, m: int, force: np.ndarray
+                ) -> tuple[np.ndarray, float, float]:
+        """The selected inputs u = (N L⁻¹ G)⁺ N L⁻¹ Q_c, the residual ‖N L⁻¹(G u - Q_c)‖ and the
+        unrealisable fraction ρ (module docstring), from the factor L of M̂ and B̃ = A_s L⁻ᵀ with
+        unit rows (its first ``m`` rows the plant's)."""
+        unit = np.ones(B_unit.shape[0])
+        B_unit_pinv, _ = pseudo_inverse(B_unit, self.threshold, unit)
+        _, N = pseudo_inverse(B_unit[:m], self.threshold, unit[:m])  # projector onto null(A L⁻ᵀ)
+        H = N @ linalg.solve_triangular(L, self.gains, lower=True, check_finite=False)  # N L⁻¹ G
+        H_pinv, _ = pseudo_inverse(H, self.threshold)
+        target = N @ linalg.solve_triangular(L, force, lower=True, check_finite=False)
+        u_selected = H_pinv @ target
+        residual = float(np.linalg.norm(H @ u_selected - target))
+        demanded = N @ B_unit_pinv
+        size = np.linalg.norm(demanded, 2) if demanded.size else 0.0
+        unrealisable = float(np.linalg.norm(demanded - H @ (H_pinv @ demanded), 2) / size) if size > 0 else 0.0
+        return u_selected, residual, unrealisable

@@ -26,7 +26,7 @@ import numpy as np
 from cmbs.dynamics.base import OK
 from cmbs.dynamics.kkt import solve_in_place
 from cmbs.integrate.compiled_rk4 import apply_inputs, record_constraints
-from cmbs.integrate.implicit import DIVERGED, forward_difference_tangents
+from cmbs.integrate.implicit import DIVERGED, dynamic_residual, forward_difference_tangents
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
 
@@ -57,19 +57,14 @@ def index3_problem(model_kernel: NamedTuple, inputs: NamedTuple, u0: np.ndarray,
 
 @njit(cache=True)
 def _dynamic_residual(problem, q, v, a, lam, t, step, stage, r):
-    """r = M a + Aᵀλ - Q at (q, v, t) with the inputs applied there (``step``, ``stage`` as
-    :func:`~cmbs.integrate.compiled_rk4.apply_inputs` takes them); the terms stay in the buffer."""
+    """r = M a + Aᵀλ - Q (:func:`~cmbs.integrate.implicit.dynamic_residual`) at (q, v, t) with the
+    inputs applied there (``step``, ``stage`` as :func:`~cmbs.integrate.compiled_rk4.apply_inputs`
+    takes them); the terms stay in the buffer."""
     n, m = q.shape[0], lam.shape[0]
     apply_inputs(problem.inputs, step, stage, q, v, t, problem.u)
     evaluate(problem.model, q, v, t, problem.u, problem.buffer)
     Q, _, A, _, _, M = terms_views(problem.model, n, m, problem.buffer)
-    for i in range(n):
-        total = -Q[i]
-        for j in range(n):
-            total += M[i, j] * a[j]
-        for b in range(m):
-            total += A[b, i] * lam[b]
-        r[i] = total
+    dynamic_residual(M, A, Q, a, lam, r)
 
 
 @njit(cache=True, inline="always")
