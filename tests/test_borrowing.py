@@ -64,6 +64,8 @@ SCRIPT = textwrap.dedent("""
                                                              project=True)
         yield "batched sweep", lambda: cmbs.sweep(four_bar, [cmbs.Variant(), cmbs.Variant()], t_end=0.05,
                                                   dt=1e-3)
+        yield "batched adaptive sweep", lambda: cmbs.sweep(four_bar, [cmbs.Variant(), cmbs.Variant()], t_end=0.05,
+                                                           dt=1e-3, integrator="rk45")
         compiled = CompiledDynamics(slider, "projection")      # its SVD at the singular position
         yield "CompiledDynamics", lambda: compiled.accelerations(singular, np.zeros(slider.n), 0.0)
 
@@ -102,7 +104,8 @@ def test_compiled_paths_free_every_array_they_allocate_and_fixed_step_loops_allo
     # the statistics are on: the paths that create arrays in compiled code did allocate (the SVD,
     # the adaptive loop's records, the sweep's per-variant workspace)
     for name in ("rk4 projection through the singular position (SVD)", "rk4 lagrange, least squares (lstsq)",
-                 "dop853", "rk4 drift projection", "rk45 drift projection", "matrix R", "batched sweep", "CompiledDynamics"):
+                 "dop853", "rk4 drift projection", "rk45 drift projection", "matrix R", "batched sweep",
+                 "batched adaptive sweep", "CompiledDynamics"):
         assert allocations[name][0] > 0, (name, allocations)
     # the RK4 loop's work arrays are allocated once per run, none per step (the joint model's
     # runs allocate per record outside the loop: its energy kernel's work array)

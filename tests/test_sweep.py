@@ -1,5 +1,7 @@
 """cmbs.sweep: batched, process-pool and Dask runs give the numbers of single simulations."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -108,6 +110,38 @@ def test_failed_variants_are_marked_and_the_file_round_trips(tmp_path):
     np.testing.assert_array_equal(loaded.q, result.q)
     assert list(loaded.status) == list(result.status) and loaded.variants[0]["label"] == "at rest"
     assert loaded.info["mode"] == "batched" and loaded.names == result.names
+
+
+def _failure_time(message):
+    """The time a failed run's message names (``... at t=0.834 ...``)."""
+    return float(re.search(r"at t=([-+0-9.e]+)", message).group(1))
+
+
+@pytest.mark.parametrize("integrator", ["rk45", "rk23", "dop853"])
+def test_batched_adaptive_sweep_equals_each_variants_simulate(integrator):
+    """rk45, rk23 and dop853 sweeps run batched (the adaptive loop of cmbs.simulate for each
+    variant, in parallel): each variant's outputs, status and energy drift are those of its own
+    cmbs.simulate run (the process path), to the last bit.  Lagrange refusing σ_min/σ_max < 0.01
+    stops the slider-crank released at twice its speed before its singular position (t ≈ 0.24 s):
+    that variant fails at the time simulate names, with the outputs of the steps before only;
+    the others run to the end."""
+    model = cmbs.load("slider-crank", gravity=9.81)
+    variants = [Variant(label="at rest", qd0=np.zeros(model.n)), Variant(label="turning"),
+                Variant(label="faster", qd0=2.0 * model.qd0)]
+    options = dict(t_end=0.5, dt=1e-3, every=10, integrator=integrator, rtol=1e-8, atol=1e-10,
+                   formulation_options={"singular_tolerance": 0.01})
+    batched = sweep(model, variants, **options)
+    single = sweep(model, variants, batched=False, workers=1, **options)
+    assert batched.info["mode"] == "batched" and single.info["mode"] == "processes"
+    assert list(batched.status) == list(single.status) == ["success", "success", "failed"]
+    np.testing.assert_array_equal(batched.recorded, single.recorded)
+    assert batched.recorded[1] == batched.t.size and 0 < batched.recorded[2] < batched.t.size
+    for name in ("q", "qd", "energy", "constraint_error", "energy_drift"):
+        np.testing.assert_array_equal(getattr(batched, name), getattr(single, name), err_msg=name)
+    assert "singular" in batched.message[2]
+    stop = _failure_time(batched.message[2])
+    assert stop == _failure_time(single.message[2]) and 0.2 < stop < 0.3
+    assert batched.t[batched.recorded[2] - 1] <= stop and np.isnan(batched.q[2, batched.recorded[2]:]).all()
 
 
 def test_sweep_refuses_bad_variants(four_bar):

@@ -5,12 +5,15 @@ with a leading variant dimension, on one common time grid).  It chooses how to r
 
 ``batched``
     Variants that differ only in the initial state and constant inputs, on a run the compiled
-    loop takes (:mod:`cmbs.integrate.compiled_plan` with rk4), run as one compiled call parallel
-    over the variants (numba threads): natural-coordinate models under lagrange, baumgarte
-    (without ``least_squares``) or projection in blocks of eight variants that share each stage's
+    loops take (:mod:`cmbs.integrate.compiled_plan`: rk4, rk45, rk23 or dop853, no drift
+    projection, no matrix R), run as one compiled call parallel over the variants (numba
+    threads).  rk4: natural-coordinate models under lagrange, baumgarte (without
+    ``least_squares``) or projection in blocks of eight variants that share each stage's
     bookkeeping (:func:`cmbs.integrate.compiled_lanes.rk4_lanes`), other runs one variant at a time
     (:func:`cmbs.integrate.compiled_rk4.rk4_batch`); both give the numbers of
-    :func:`cmbs.integrate.compiled_rk4.rk4` bit for bit.
+    :func:`cmbs.integrate.compiled_rk4.rk4` bit for bit.  rk45, rk23, dop853: one variant at a
+    time in the adaptive loop :func:`cmbs.simulate` runs
+    (:func:`cmbs.integrate.compiled_batch.adaptive_batch`), with its outputs at every dt.
 ``processes``
     Anything else (library-model parameters, mass faults, other formulations and integrators)
     runs :func:`cmbs.simulate` once per variant, in a local pool of worker processes
@@ -35,7 +38,7 @@ import time
 from dataclasses import dataclass, field
 from itertools import product
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -250,7 +253,8 @@ def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, form
     plan = _batch_plan(nominal, settings, variants) if batched is not False else None
     if batched and plan is None:
         raise CmbsError("sweep: the batched path needs state-only variants (q0, qd0, u) and a run the compiled "
-                        "loop takes (rk4; lagrange, baumgarte, penalty, projection or udwadia-kalaba; no project)")
+                        "loops take (rk4, rk45, rk23 or dop853 with t_end a multiple of dt; lagrange, baumgarte, "
+                        "penalty, projection or udwadia-kalaba; no project)")
     from tqdm import tqdm   # here: importing it takes about 25 ms, a launch's budget
 
     with tqdm(total=len(variants), desc=f"sweep {nominal.name}", unit="variant", disable=not progress,
@@ -307,7 +311,6 @@ def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> 
     from cmbs.simulate import energy_drift, simulate
 
     built = _build(model, variant)
-    times = settings.output_times()
     n = built.n
     u = None if variant.u is None else np.asarray(variant.u, dtype=float)
     try:
@@ -319,11 +322,7 @@ def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> 
         status, message, compile_time = run.info["status"], run.info.get("message", ""), run.info["compile_time"]
     except CmbsError as error:
         return _failed_output(n, str(error))
-    index = np.searchsorted(run.t, times - 1e-9 * settings.dt)
-    valid = index < run.t.size
-    valid[valid] = np.abs(run.t[index[valid]] - times[valid]) <= 1e-9 * max(1.0, settings.t_end)
-    count = int(np.argmin(valid)) if not valid.all() else times.size
-    picked = index[:count]
+    picked = _output_rows(run.t, settings)
     q, qd = run.q[picked], run.qd[picked]
     kinetic, energy, sources = built.energy_parts(q, qd)[0], run["energy"][picked], built.work_sources
     if variant.masses:          # the heavier or lighter mechanism's own energy, conserved as the nominal one's
@@ -335,6 +334,17 @@ def run_variant(model: str | Model, settings: RunSettings, variant: Variant) -> 
     return {"q": q, "qd": qd, "energy": energy, "phi": run["constraint_error"][picked], "status": status,
             "message": message, "drift": energy_drift(sources, kinetic, energy, run["u"][picked]),
             "compile_time": compile_time}
+
+
+def _output_rows(t: np.ndarray, settings: RunSettings) -> np.ndarray:
+    """The rows of the increasing times ``t`` (a run's outputs) at the sweep's output times, as
+    many as ``t`` holds from the first on (to 1e-9 relative)."""
+    times = settings.output_times()
+    index = np.searchsorted(t, times - 1e-9 * settings.dt)
+    valid = index < t.size
+    valid[valid] = np.abs(t[index[valid]] - times[valid]) <= 1e-9 * max(1.0, settings.t_end)
+    count = int(np.argmin(valid)) if not valid.all() else times.size
+    return index[:count]
 
 
 def _failed_output(n: int, message: str) -> dict:
@@ -420,18 +430,24 @@ def _await_with_workers(client, futures: list, bar: tqdm, worker_timeout: float)
 
 # ---------------------------------------------------------------------------------- batched path
 def _batch_plan(model: Model, settings: RunSettings, variants: list[Variant]) -> tuple | None:
-    """(model, formulation and inputs kernels, steps) of the batched path, or None: state-only
-    variants and a run the compiled RK4 loop takes with constant inputs
-    (:func:`cmbs.integrate.compiled_plan.compiled_run`)."""
+    """(model, formulation and inputs kernels, steps, whether the formulation adjusts the state)
+    of the batched path, or None: state-only variants and a run a compiled loop takes with
+    constant inputs (:func:`cmbs.integrate.compiled_plan.compiled_run`: rk4, or rk45, rk23,
+    dop853), t_end a multiple of dt (so that the adaptive loop's outputs, every dt as
+    :func:`run_variant` asks :func:`cmbs.simulate` for them, hold the sweep's)."""
     from cmbs.dynamics import formulation as make_formulation
-    from cmbs.integrate.compiled_plan import compiled_run
+    from cmbs.integrate.compiled_plan import ADAPTIVE, compiled_run
+    from cmbs.integrate.grid import whole_steps
 
-    if not all(variant.state_only for variant in variants) or settings.integrator != "rk4":
+    steps = whole_steps(settings.t_end, settings.dt)
+    if not all(variant.state_only for variant in variants) or settings.integrator not in ("rk4", *ADAPTIVE) or \
+            steps is None:
         return None
     chosen = make_formulation(settings.formulation, **settings.formulation_options)
-    plan = compiled_run(model, chosen, chosen.bind(model), "rk4", None, settings.project, settings.t_end, settings.dt,
-                        batched=True)
-    return None if plan is None else (*plan, round(settings.t_end / settings.dt))
+    solver = chosen.bind(model)
+    plan = compiled_run(model, chosen, solver, settings.integrator, None, settings.project, settings.t_end,
+                        settings.dt, batched=True)
+    return None if plan is None else (*plan, steps, solver.adjusts_state)
 
 
 def _threads() -> int:
@@ -446,37 +462,30 @@ PROGRESS_BLOCKS = 50
 
 def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], plan: tuple,
                  bar: tqdm) -> list[dict]:
-    from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
-    from cmbs.integrate.compiled_lanes import lane_setup, rk4_lanes
-    from cmbs.integrate.compiled_rk4 import rk4_batch
+    from cmbs.dynamics.base import OK
     from cmbs.simulate import energy_drift
 
-    model_part, formulation, inputs, steps = plan
     count = len(variants)
     Q0 = np.array([model.q0 if v.q0 is None else v.q0 for v in variants], dtype=float).reshape(count, model.n)
     QD0 = np.array([model.qd0 if v.qd0 is None else v.qd0 for v in variants], dtype=float).reshape(count, model.n)
     U0 = np.array([np.zeros(model.n_u) if v.u is None else v.u for v in variants], dtype=float).reshape(count,
                                                                                                        model.n_u)
-    records = steps // settings.every + 1
+    records = settings.output_times().size
     Qs, QDs = np.full((count, records, model.n), np.nan), np.full((count, records, model.n), np.nan)
-    PHIs = np.full((count, records), np.nan)
+    PHIs, stops = np.full((count, records), np.nan), np.zeros(count)
     statuses, recorded = np.zeros(count, dtype=np.int64), np.zeros(count, dtype=np.int64)
     block = count if bar.disable else max(-(-count // PROGRESS_BLOCKS), 4 * _threads())
-    lanes = lane_setup(model_part, formulation, model.m, model.n)
-    run = rk4_batch if lanes is None else functools.partial(rk4_lanes, lanes=lanes)
-    buffer_size = model.new_terms().buffer.size
+    run = _block_runner(model, settings, plan)
     for a in range(0, count, block):        # each variant is independent: blocks change nothing
         b = min(a + block, count)
-        run(model_part, formulation, inputs, Q0[a:b], QD0[a:b], U0[a:b], settings.dt, steps, settings.every,
-            buffer_size, model.m, Qs[a:b], QDs[a:b], PHIs[a:b], statuses[a:b], recorded[a:b])
+        run(Q0[a:b], QD0[a:b], U0[a:b], Qs[a:b], QDs[a:b], PHIs[a:b], statuses[a:b], stops[a:b], recorded[a:b])
         bar.update(b - a)
-    reasons = {SINGULAR: "singular system (rank of A)", NON_FINITE: "the motion diverged"}
     sources = model.work_sources
     outputs = []
     for v in range(count):
         k = int(recorded[v])
         failed = statuses[v] != OK or k < records
-        message = f"{reasons.get(int(statuses[v]), 'failed')} at t={k * settings.every * settings.dt:.6g}"
+        message = f"{_failure_reason(int(statuses[v]))} at t={stops[v]:.6g}"
         kinetic, potential = model.energy_parts(Qs[v, :k], QDs[v, :k])
         energy = kinetic + potential
         outputs.append({"q": Qs[v, :k], "qd": QDs[v, :k], "energy": energy,
@@ -484,6 +493,47 @@ def _run_batched(model: Model, settings: RunSettings, variants: list[Variant], p
                         "message": message if failed else "",
                         "drift": energy_drift(sources, kinetic, energy, np.tile(U0[v], (k, 1)))})
     return outputs
+
+
+def _block_runner(model: Model, settings: RunSettings, plan: tuple) -> Callable[..., None]:
+    """``run(Q0, QD0, U0, Qs, QDs, PHIs, statuses, stops, recorded)``: the batched path's
+    compiled call for a block of variants (rows of the initial states and inputs), writing their
+    kept outputs, statuses, the times these refer to and the outputs each reached."""
+    model_part, formulation, inputs, steps, adjusts_state = plan
+    buffer_size, m = model.new_terms().buffer.size, model.m
+    if settings.integrator == "rk4":
+        from cmbs.integrate.compiled_lanes import lane_setup, rk4_lanes
+        from cmbs.integrate.compiled_rk4 import rk4_batch
+
+        lanes = lane_setup(model_part, formulation, m, model.n)
+        loop = rk4_batch if lanes is None else functools.partial(rk4_lanes, lanes=lanes)
+
+        def run(Q0, QD0, U0, Qs, QDs, PHIs, statuses, stops, recorded):
+            loop(model_part, formulation, inputs, Q0, QD0, U0, settings.dt, steps, settings.every, buffer_size, m, Qs,
+                 QDs, PHIs, statuses, recorded)
+            stops[:] = recorded * settings.every * settings.dt    # a failed run: the first output it missed
+        return run
+    from cmbs.integrate.compiled_adaptive import MAX_STEPS, loop_method
+    from cmbs.integrate.compiled_batch import adaptive_batch
+    from cmbs.integrate.tableaus import tableau
+    from cmbs.simulate import output_times
+
+    t_out = output_times(settings.t_end, settings.dt)       # every dt, as run_variant's simulate records
+    kept = _output_rows(t_out, settings).astype(np.int64)
+    method = loop_method(tableau(settings.integrator), adjusts_state)
+
+    def run(Q0, QD0, U0, Qs, QDs, PHIs, statuses, stops, recorded):
+        adaptive_batch(model_part, formulation, Q0, QD0, U0, t_out, kept, float(settings.rtol), float(settings.atol),
+                       method, MAX_STEPS, buffer_size, m, Qs, QDs, PHIs, statuses, stops, recorded)
+    return run
+
+
+def _failure_reason(status: int) -> str:
+    """What a batched run's failure ``status`` means."""
+    from cmbs.dynamics.base import NON_FINITE, SINGULAR
+    from cmbs.integrate.compiled_adaptive import REASONS
+
+    return {**REASONS, SINGULAR: "singular system (rank of A)", NON_FINITE: "the motion diverged"}.get(status, "failed")
 
 
 # ---------------------------------------------------------------------------------- assembly

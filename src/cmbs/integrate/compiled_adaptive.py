@@ -40,7 +40,7 @@ from cmbs.dynamics.field import REPARTITION, after_step, field, output_state, st
 from cmbs.errors import CmbsError
 from cmbs.integrate.compiled_rk4 import record_constraints
 from cmbs.integrate.tableaus import Tableau
-from cmbs.jit import njit
+from cmbs.jit import interpreted, njit
 from cmbs.model.compiled import terms_views
 
 
@@ -158,6 +158,8 @@ def _dense_value(F, y, x, h, value, slope):
 
 #: statuses besides OK, SINGULAR, NON_FINITE and the formulation's (REPARTITION, matrix R's)
 UNDERFLOW, TOO_MANY_STEPS = 5, 6
+#: The steps after which an adaptive run stops with TOO_MANY_STEPS.
+MAX_STEPS = 10_000_000
 
 
 class AdaptiveRun(NamedTuple):
@@ -182,7 +184,7 @@ class AdaptiveRun(NamedTuple):
 
 def adaptive(model: NamedTuple, formulation: NamedTuple, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray,
              rtol: float, atol: float, u: np.ndarray, buffer_size: int, m: int, tableau: Tableau,
-             adjusts_state: bool, max_steps: int = 10_000_000,
+             adjusts_state: bool, max_steps: int = MAX_STEPS,
              resume: Callable[[np.ndarray, float], NamedTuple] | None = None) -> AdaptiveRun:
     """Integrate from t_out[0] to t_out[-1] by ``tableau`` (the controller's exponent
     1/(min(p, p̂) + 1), the starting step's 1/(p + 1), DOP853's second error estimate and
@@ -192,25 +194,14 @@ def adaptive(model: NamedTuple, formulation: NamedTuple, q0: np.ndarray, qd0: np
     step (its derivative at the new state, its outputs) and goes on; or it raises
     :class:`~cmbs.errors.CmbsError`, which stops the run there with that status."""
     n = q0.shape[0]
-    d = 2 * n
-    count = t_out.shape[0]
-    records = (np.zeros(count), np.zeros((count, n)), np.zeros((count, n)), np.zeros((count, n)),
-               np.zeros((count, m)), np.zeros(count), np.zeros(count), np.zeros((count, n)))
-    method = _method_arrays(tableau)
-    y, y_new, k1 = np.concatenate([q0, qd0]).astype(float), np.zeros(d), np.zeros(d)
-    stages = np.zeros((method[0].size + method[6].size, d))   # the step's stages, then the continuous extension's
-    clock = np.zeros(4)                  # t, next step size, controller's previous error, size of a step handed back
-    clock[0] = t_out[0]
-    counts = np.zeros(5, dtype=np.int64)  # outputs recorded, steps, rejected, evaluations, from the interpolant
-    where = np.zeros(d)
-    buffer = np.zeros(buffer_size)
-    exponent, start_exponent = 1.0 / (min(tableau.order, tableau.error_order) + 1), 1.0 / (tableau.order + 1)
-    fsal = bool(tableau.first_same_as_last and not adjusts_state)
+    method = loop_method(tableau, adjusts_state)
     times = np.ascontiguousarray(t_out, dtype=float)
+    y, y_new, k1, stages, clock, counts, where, buffer, records = interpreted(run_arrays)(
+        np.asarray(q0, dtype=float), np.asarray(qd0, dtype=float), times, m, method[0], method[6], buffer_size)
     resumed, message = 0, ""
     while True:
         status, t_stop = _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, records, buffer, times,
-                                float(rtol), float(atol), u, *method, exponent, start_exponent, fsal, int(max_steps))
+                                float(rtol), float(atol), u, *method, int(max_steps))
         if status != REPARTITION:
             break
         try:
@@ -222,6 +213,36 @@ def adaptive(model: NamedTuple, formulation: NamedTuple, q0: np.ndarray, qd0: np
     state = y_new if status == REPARTITION else where
     return AdaptiveRun(records, int(counts[0]), int(status), float(t_stop), int(counts[1]), int(counts[2]),
                        int(counts[3]), int(counts[4]), resumed, state, message)
+
+
+def loop_method(tableau: Tableau, adjusts_state: bool) -> tuple:
+    """The method as :func:`_steps` takes it: :func:`_method_arrays`, then the controller's
+    exponent 1/(min(p, p̂) + 1), the starting step's 1/(p + 1) and whether to use FSAL (not when
+    the formulation ``adjusts_state`` after each step)."""
+    return (*_method_arrays(tableau), 1.0 / (min(tableau.order, tableau.error_order) + 1), 1.0 / (tableau.order + 1),
+            bool(tableau.first_same_as_last and not adjusts_state))
+
+
+@njit(cache=True)
+def run_arrays(q0, qd0, t_out, m, c, dense_c, buffer_size):
+    """The arrays of an adaptive run from (q0, q̇0) with outputs at ``t_out`` and a method with
+    the nodes ``c`` and the continuous extension's ``dense_c``: the state y = (q, q̇), the step's
+    new state, the derivative at y, the stages (the step's, then the extension's), the clock (t,
+    next step size, the controller's previous error, the size of a step handed back), the counts
+    of :func:`_steps`, the state of a failure, the terms buffer and the records.  Plain numpy:
+    :func:`adaptive` calls it interpreted, :func:`cmbs.integrate.compiled_batch.adaptive_batch`
+    compiled, once per variant."""
+    n = q0.shape[0]
+    d = 2 * n
+    count = t_out.shape[0]
+    records = (np.zeros(count), np.zeros((count, n)), np.zeros((count, n)), np.zeros((count, n)),
+               np.zeros((count, m)), np.zeros(count), np.zeros(count), np.zeros((count, n)))
+    y = np.concatenate((q0, qd0))
+    stages = np.zeros((c.shape[0] + dense_c.shape[0], d))
+    clock = np.zeros(4)
+    clock[0] = t_out[0]
+    counts = np.zeros(5, dtype=np.int64)   # outputs recorded, steps, rejected, evaluations, from the interpolant
+    return y, np.zeros(d), np.zeros(d), stages, clock, counts, np.zeros(d), np.zeros(buffer_size), records
 
 
 def _method_arrays(tableau: Tableau) -> tuple[np.ndarray, ...]:
