@@ -11,7 +11,9 @@ The model is ``cmbs.load("n-four-bar", N=N)``; the exact motion of B0 is
 at 1e-12).  Configurations: each formulation (lagrange, baumgarte, penalty, projection,
 udwadia-kalaba, matrix-r, at their default options) with rk4 at h = 1 ms and with rk45 and
 dop853 at the default tolerances (rtol 1e-6, atol 1e-9), and generalized-α at h = 1 ms (which
-brings its own index-3 Lagrange formulation); outputs every 0.05 s, as the benchmark asks.
+brings its own index-3 Lagrange formulation); then projection and udwadia-kalaba again with rk4
+and dop853 and drift projection after every step to max |Φ| < 1e-12 (``project=True,
+projection_tolerance=1e-12``; "+proj" in the table); outputs every 0.05 s, as the benchmark asks.
 Per run: status, the time reached, max |B0 - exact| over the outputs, whether the run meets
 IFToMM high precision (success to the end and B0 within 1e-3 m at every output), the energy
 drift max |E - E0| / max T (``info["energy_drift"]``), the wall time of the run (its numba
@@ -43,22 +45,30 @@ OUTPUT_INTERVAL = 0.05    # s
 STEP = 1e-3               # s, the fixed-step integrators
 FORMULATIONS = ("lagrange", "baumgarte", "penalty", "projection", "udwadia-kalaba", "matrix-r")
 EXPLICIT = ("rk4", "rk45", "dop853")
+DRIFT_TOLERANCE = 1e-12   # max |Φ| after the drift projection of the "+proj" configurations
+PROJECTED = ("projection", "udwadia-kalaba")
 
 
-def configurations() -> list[tuple[str | None, str]]:
-    """(formulation, integrator) pairs: each formulation with each explicit integrator, and
-    generalized-α with its own formulation (None)."""
-    return [(formulation, integrator) for formulation in FORMULATIONS for integrator in EXPLICIT] + \
-        [(None, "generalized-alpha")]
+def configurations() -> list[tuple[str | None, str, bool]]:
+    """(formulation, integrator, drift projection) triples: each formulation with each explicit
+    integrator, generalized-α with its own formulation (None), and the :data:`PROJECTED`
+    formulations with rk4 and dop853 and drift projection."""
+    return [(formulation, integrator, False) for formulation in FORMULATIONS for integrator in EXPLICIT] + \
+        [(None, "generalized-alpha", False)] + \
+        [(formulation, integrator, True) for formulation in PROJECTED for integrator in ("rk4", "dop853")]
 
 
-def simulate(model: cmbs.Model, formulation: str | None, integrator: str, t_end: float) -> cmbs.Trajectory:
+def simulate(model: cmbs.Model, formulation: str | None, integrator: str, projected: bool,
+             t_end: float) -> cmbs.Trajectory:
     """One run with outputs every :data:`OUTPUT_INTERVAL`: fixed-step integrators at :data:`STEP`
-    keeping every 50th step, adaptive ones at their default tolerances."""
+    keeping every 50th step, adaptive ones at their default tolerances; with ``projected``,
+    coordinate and velocity projection after every step to :data:`DRIFT_TOLERANCE`."""
+    drift = {"project": True, "projection_tolerance": DRIFT_TOLERANCE} if projected else {}
     if integrator in ("rk4", "generalized-alpha"):
         return cmbs.simulate(model, t_end=t_end, formulation=formulation, integrator=integrator, dt=STEP,
-                             every=int(round(OUTPUT_INTERVAL / STEP)))
-    return cmbs.simulate(model, t_end=t_end, formulation=formulation, integrator=integrator, dt=OUTPUT_INTERVAL)
+                             every=int(round(OUTPUT_INTERVAL / STEP)), **drift)
+    return cmbs.simulate(model, t_end=t_end, formulation=formulation, integrator=integrator, dt=OUTPUT_INTERVAL,
+                         **drift)
 
 
 def b0_error(run: cmbs.Trajectory, N: int) -> float:
@@ -68,13 +78,13 @@ def b0_error(run: cmbs.Trajectory, N: int) -> float:
     return float(distance.max()) if np.all(np.isfinite(distance)) else float("inf")
 
 
-def measure(N: int, formulation: str | None, integrator: str, t_end: float) -> dict[str, object]:
+def measure(N: int, formulation: str | None, integrator: str, projected: bool, t_end: float) -> dict[str, object]:
     """Figures of one timed run (after an untimed 0.05 s warm-up run that compiles its kernels)."""
     model = cmbs.load("n-four-bar", N=N)
-    simulate(model, formulation, integrator, OUTPUT_INTERVAL)
+    simulate(model, formulation, integrator, projected, OUTPUT_INTERVAL)
     started = time.perf_counter()
     try:
-        run = simulate(model, formulation, integrator, t_end)
+        run = simulate(model, formulation, integrator, projected, t_end)
     except cmbs.CmbsError as error:
         return {"status": "error", "message": str(error), "wall": time.perf_counter() - started}
     wall = time.perf_counter() - started
@@ -93,11 +103,11 @@ def _child(connection: multiprocessing.connection.Connection, *arguments: object
     connection.close()
 
 
-def measure_with_timeout(N: int, formulation: str | None, integrator: str, t_end: float,
+def measure_with_timeout(N: int, formulation: str | None, integrator: str, projected: bool, t_end: float,
                          timeout: float) -> dict[str, object]:
     """:func:`measure` in a child process, stopped (status "timeout") after ``timeout`` seconds."""
     receiver, sender = multiprocessing.Pipe(duplex=False)
-    child = multiprocessing.Process(target=_child, args=(sender, N, formulation, integrator, t_end))
+    child = multiprocessing.Process(target=_child, args=(sender, N, formulation, integrator, projected, t_end))
     child.start()
     sender.close()
     if receiver.poll(timeout):
@@ -112,8 +122,8 @@ def measure_with_timeout(N: int, formulation: str | None, integrator: str, t_end
     return result
 
 
-def row(formulation: str | None, integrator: str, result: dict[str, object]) -> str:
-    """One line of the table."""
+def row(formulation: str | None, integrator: str, projected: bool, result: dict[str, object]) -> str:
+    """One line of the table ("+proj" after the integrator of a run with drift projection)."""
     def number(key: str, form: str) -> str:
         value = result.get(key)
         return "-" if value is None else format(value, form)
@@ -121,6 +131,7 @@ def row(formulation: str | None, integrator: str, result: dict[str, object]) -> 
     name = result.get("formulation_used") or formulation or "-"
     flag = "SUCCESS OFF BRANCH" if result.get("off_branch") else ""
     high = "yes" if result.get("high_precision") else "no"
+    integrator = integrator + ("+proj" if projected else "")
     return (f"  {name:<22} {integrator:<18} {result['status']:<8} {number('t_reached', '7.2f')} "
             f"{number('b0_error', '10.2e')} {high:>5} {number('energy_drift', '9.1e')} {number('wall', '8.3f')}"
             f"  {flag}")
@@ -140,13 +151,14 @@ def main() -> None:
         print(f"  {'formulation':<22} {'integrator':<18} {'status':<8} {'t [s]':>7} {'max|B0 err|':>10} "
               f"{'HP':>5} {'E drift':>9} {'wall [s]':>8}")
         report[str(N)] = []
-        for formulation, integrator in configurations():
-            result = measure_with_timeout(N, formulation, integrator, args.t_end, args.timeout)
-            print(row(formulation, integrator, result), flush=True)
+        for formulation, integrator, projected in configurations():
+            result = measure_with_timeout(N, formulation, integrator, projected, args.t_end, args.timeout)
+            print(row(formulation, integrator, projected, result), flush=True)
             for key in ("message", "note"):
                 if result.get(key):
                     print(f"      {key}: {str(result[key]).splitlines()[0][:150]}")
-            report[str(N)].append({"formulation": formulation, "integrator": integrator, **result})
+            report[str(N)].append({"formulation": formulation, "integrator": integrator, "project": projected,
+                                   **({"projection_tolerance": DRIFT_TOLERANCE} if projected else {}), **result})
         runs = report[str(N)]
         print(f"  N = {N}: {sum(bool(r.get('high_precision')) for r in runs)} of {len(runs)} runs meet high "
               f"precision; {sum(bool(r.get('off_branch')) for r in runs)} say success off the branch")
