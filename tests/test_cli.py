@@ -99,6 +99,10 @@ def test_console_script(tmp_path):
     (["sweep", "slider-crank", "--vary", "crank_speed=1,2", "--formulation", "lagrangee", "--t-end", "0.1"],
      "--formulation: unknown 'lagrangee' (did you mean 'lagrange'?)"),
     (["sweep", "four-bar", "--undriven", "--mass", "crank=1,-1", "--t-end", "0.1"], "mass factors must be > 0"),
+    (["simulate", "four-bar", "--t-end", "1", "--project", "--projection-tolerance", "0"],
+     "--projection-tolerance must be a finite number > 0, got 0.0"),
+    (["simulate", "four-bar", "--t-end", "1", "--projection-tolerance", "1e-12"],
+     "--projection-tolerance sets the drift projection's tolerance: give --project too"),
 ])
 def test_bad_values_one_line_exit_2(arguments, message, tmp_path, monkeypatch, capsys):
     """Numbers that are not finite or out of range, and yes/no values that are not, are named in one

@@ -105,7 +105,7 @@ def unique_pairs(pairs: Iterable[tuple[str, object]], option: str) -> dict[str, 
 NUMBER_RULES = {
     "t_end": "positive", "dt": "positive", "rtol": "fraction", "atol": "positive", "sample_rate": "positive",
     "kp": "non-negative", "kd": "non-negative", "ki": "non-negative", "kf": "non-negative",
-    "initial_error": "finite", "worker_timeout": "positive",
+    "initial_error": "finite", "worker_timeout": "positive", "projection_tolerance": "positive",
 }
 
 
@@ -143,8 +143,13 @@ def _formulation_options(args: argparse.Namespace) -> dict[str, object]:
 
 
 def _simulation_settings(args: argparse.Namespace) -> dict[str, object]:
-    return {"t_end": args.t_end, "integrator": args.integrator, "dt": args.dt, "rtol": args.rtol, "atol": args.atol,
-            "project": args.project}
+    settings = {"t_end": args.t_end, "integrator": args.integrator, "dt": args.dt, "rtol": args.rtol,
+                "atol": args.atol, "project": args.project}
+    if args.projection_tolerance is not None:
+        if not args.project:
+            raise _UsageError("--projection-tolerance sets the drift projection's tolerance: give --project too")
+        settings["projection_tolerance"] = args.projection_tolerance
+    return settings
 
 
 def run_seconds(info: dict) -> float:
@@ -591,6 +596,9 @@ def build_parser() -> argparse.ArgumentParser:
         command.add_argument("--atol", type=float, default=1e-9, help="absolute tolerance (adaptive)")
         command.add_argument("--project", action="store_true",
                              help="coordinate and velocity projection after each step and at each output instant")
+        command.add_argument("--projection-tolerance", type=float, metavar="TOL",
+                             help="with --project: max |constraint| the positions are projected to (default 1e-10; "
+                                  "1e-12 keeps the n-four-bar on its branch, docs/formulations.md)")
         command.add_argument("--undriven", action="store_true", help="remove the model's driver constraints")
 
     simulate = model_command("simulate", "forward dynamics of a model")
