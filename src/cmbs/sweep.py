@@ -250,7 +250,8 @@ def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, form
     plan = _batch_plan(nominal, settings, variants) if batched is not False else None
     if batched and plan is None:
         raise CmbsError("sweep: the batched path needs state-only variants (q0, qd0, u) and a run the compiled "
-                        "loop takes (rk4; lagrange, baumgarte, penalty, projection or udwadia-kalaba; no project)")
+                        "loop takes (rk4; lagrange, baumgarte, penalty, projection, udwadia-kalaba or matrix-r; no "
+                        "project)")
     from tqdm import tqdm   # here: importing it takes about 25 ms, a launch's budget
 
     with tqdm(total=len(variants), desc=f"sweep {nominal.name}", unit="variant", disable=not progress,
