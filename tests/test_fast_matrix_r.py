@@ -1,6 +1,6 @@
 """Matrix R in the compiled loops (its stage and after-step hooks in the RK4 loop of
-cmbs.integrate.compiled_rk4 and the adaptive loop of cmbs.integrate.compiled_adaptive, which hand
-the run back to Python for a new partition) against the Python loop, another formulation and
+cmbs.integrate.compiled_rk4 and the adaptive loop of cmbs.integrate.compiled_adaptive, the
+after-step hook choosing new partitions in place) against the Python loop, another formulation and
 conservation."""
 
 import numpy as np
@@ -172,9 +172,9 @@ def _assert_same_adaptive_run(compiled, python, same_lam=True):
 
 @pytest.mark.parametrize("integrator", ["rk45", "rk23", "dop853"])
 def test_compiled_adaptive_matrix_r_takes_the_python_loops_steps_through_repartitions(integrator):
-    """The undriven four-bar re-partitions three times in 2 s: each time the compiled loop hands
-    the recovered state back, Python chooses the partition, and the loop finishes the step with
-    it, as the Python loop's after_step does: the same steps, rejections and evaluations."""
+    """The undriven four-bar re-partitions three times in 2 s: each time the compiled loop's
+    after-step hook chooses the partition at the recovered state and recovers it again, as the
+    Python loop's after_step does: the same steps, rejections and evaluations."""
     compiled, python = _adaptive_both(cmbs.load("four-bar").without_drivers(), integrator, 2.0)
     assert compiled.info["repartitions"] == 3
     _assert_same_adaptive_run(compiled, python)

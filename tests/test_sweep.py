@@ -287,7 +287,7 @@ def test_a_task_that_killed_its_workers_is_a_failed_variant():
 
 def test_dask_sweep_names_an_unreachable_scheduler(four_bar):
     with pytest.raises(CmbsError, match="cannot reach the Dask scheduler"):
-        sweep(four_bar, [Variant()], t_end=0.01, formulation="matrix-r", scheduler="tcp://127.0.0.1:9")
+        sweep(four_bar, [Variant()], t_end=0.01, batched=False, scheduler="tcp://127.0.0.1:9")
 
 
 # ---------------------------------------------------------------------------------- command line

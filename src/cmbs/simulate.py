@@ -23,15 +23,16 @@ from typing import Callable, Mapping
 import numpy as np
 
 from cmbs.blas import small_matrix_loop
-from cmbs.dynamics import Formulation, formulation as make_formulation
+from cmbs.dynamics import Formulation, drift, formulation as make_formulation
 from cmbs.dynamics.matrix_r import MatrixRSolver, rounding_note
-from cmbs.dynamics.drift import CORRECTED, correct_positions, project_velocities
+from cmbs.dynamics.matrix_r_kernels import PythonEquations
 from cmbs.errors import CmbsError, SingularSystemError, did_you_mean
 from cmbs.integrate.explicit import Integration, integrate as integrate_explicit
 from cmbs.integrate.grid import whole_steps
 from cmbs.integrate.implicit import BACKWARD_EULER, TRAPEZOIDAL, Scheme, generalized_alpha, integrate_index3
 from cmbs.integrate.tableaus import NAMES as EXPLICIT, tableau as explicit_method
-from cmbs.jit import compile_seconds
+from cmbs.jit import compile_seconds, interpreted
+from cmbs.model.compiled import model_kernel
 from cmbs.model.model import Model
 from cmbs.trajectory import Trajectory
 
@@ -109,20 +110,19 @@ def project_state(model: Model, q: np.ndarray, qd: np.ndarray, t: float, *, tole
     the model evaluates here, at q̇ = 0.
 
     The coordinates are projected with the holonomic rows only (a nonholonomic row has no
-    position-level constraint), the velocities with all rows.  Non-finite terms leave the state
-    as it is (the next evaluation of the run fails there)."""
+    position-level constraint), the velocities with all rows (:func:`cmbs.dynamics.drift.project`,
+    compiled for a model with a compiled kernel, else run as Python on the model's own
+    evaluation).  Non-finite terms leave the state as the last finite step left it (the next
+    evaluation of the run fails there)."""
     q, qd = np.array(q, dtype=float), np.array(qd, dtype=float)
     if model.m == 0:
         return q, qd
     terms = model.new_terms()
-    zeros = np.zeros(model.n)
+    kernel = model_kernel(model)
     rows = np.flatnonzero(model.holonomic).astype(np.int64)
-    for _ in range(max_iterations if rows.size else 0):
-        model.evaluate(q, zeros, t, out=terms)
-        if correct_positions(terms.A, terms.phi, rows, float(tolerance), float(threshold), q) != CORRECTED:
-            break
-    model.evaluate(q, zeros, t, out=terms)
-    project_velocities(terms.A, terms.phi_t, float(threshold), qd)
+    run = drift.project if kernel is not None else interpreted(drift.project)
+    run(kernel if kernel is not None else PythonEquations(model, terms), q, qd, float(t), np.zeros(model.n),
+        np.zeros(model.n_u), terms.buffer, model.m, rows, float(tolerance), int(max_iterations), float(threshold))
     return q, qd
 
 
@@ -348,7 +348,7 @@ def _run_python(model: Model, solver, chosen: Formulation, inputs: Inputs, q_sta
                                      "project": project, "loop_wall_time": loop_wall})
     trajectory.info["wall_time"] = time.perf_counter() - started
     if integrator == "rk4":                 # before the energy note, which the recording may have made
-        _add_note(trajectory.info, _python_loop_note(model, chosen, solver, u, project, compiled), first=True)
+        _add_note(trajectory.info, _python_loop_note(model, chosen, solver, u, compiled), first=True)
     _note_rounding(trajectory.info, solver)
     return trajectory
 
@@ -369,10 +369,12 @@ def _explain_failure(model: Model, trajectory: Trajectory, times: np.ndarray) ->
 
 
 def _note_rounding(info: dict, solver) -> None:
-    """For matrix R: the largest κ₁ = ‖A_r‖₁ ‖A_d⁻¹‖₁ met by its recovery (``max_condition``, at
-    ``max_condition_t``) and, when rounding there may have spoilt the motion, a warning in the note."""
+    """For matrix R: its number of re-partitions (``repartitions``), the largest κ₁ = ‖A_r‖₁ ‖A_d⁻¹‖₁
+    met by its recovery (``max_condition``, at ``max_condition_t``) and, when rounding there may
+    have spoilt the motion, a warning in the note."""
     if not isinstance(solver, MatrixRSolver):
         return
+    info["repartitions"] = solver.repartitions
     info["max_condition"], info["max_condition_t"] = solver.worst_condition, solver.worst_time
     warning = rounding_note(solver.worst_condition, solver.worst_time)
     if warning:
@@ -386,12 +388,10 @@ def _add_note(info: dict, text: str, *, first: bool = False) -> None:
     info["note"] = "; ".join(part for part in parts if part)
 
 
-def _python_loop_note(model: Model, chosen: Formulation, solver: object, u: object, project: bool,
-                      compiled: bool | None) -> str:
+def _python_loop_note(model: Model, chosen: Formulation, solver: object, u: object, compiled: bool | None) -> str:
     """Why an rk4 run took the Python loop (tens of µs per step more than the compiled one)."""
     from cmbs import jit
     from cmbs.dynamics.field import formulation_kernel
-    from cmbs.model.compiled import model_kernel
 
     if compiled is False:
         reason = "compiled=False"
@@ -399,8 +399,6 @@ def _python_loop_note(model: Model, chosen: Formulation, solver: object, u: obje
         reason = "numba is not installed, the kernels run as Python"
     elif model_kernel(model) is None:
         reason = f"model {model.name!r} has Python-callable terms or time functions"
-    elif project and hasattr(solver, "resume"):
-        reason = "drift projection (project=True) with matrix R runs in Python"
     elif callable(u):
         reason = "the inputs are a Python callable (only a plain ComputedTorque law is compiled)"
     elif formulation_kernel(chosen, solver, model) is None:
@@ -551,19 +549,19 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
     """Implicit trapezoidal rule in the independent coordinates z of matrix R (thesis eq. 3.51-3.57):
     Newton on f = Rᵀ(M q̈ - Q) = M̄ z̈ - Q̄ with tangent M̄ + h/2 RᵀC̄R + h²/4 RᵀK̄R.  The dependent
     coordinates follow by position, velocity and acceleration analysis with z held, and the step's
-    full state is the expansion of its last iterate.  At each instant of ``grid`` the partition is
-    chosen again if its dependent block became ill-conditioned (κ₂ grown by ``condition_growth``,
-    or above 1e12: :meth:`MatrixRSolver.update_partition`, which raises for a user's partition);
+    full state is the expansion of its last iterate.  After each step the partition is chosen
+    again if its dependent block became ill-conditioned (κ₂ grown by ``condition_growth``, or above
+    1e12, which stops the run for a user's partition: the problem's after-step hook, as
+    :meth:`MatrixRSolver.update_partition`) and the steps go on in its independent coordinates;
     a step that fails is tried once more with independent coordinates chosen at its start
     (automatic partition).  Of the instants of ``grid`` only ``grid[::every]`` are stored.
 
     The loop is :func:`cmbs.integrate.implicit.newton_steps`, compiled on the problem of
     :mod:`cmbs.integrate.compiled_reduced` when the model's ``kernel`` is given (constant
     inputs), else interpreted on the Python problem of :func:`_python_reduced_problem`; this
-    function drives both alike, handing every re-partition to ``solver``."""
+    function drives both alike."""
     from cmbs.dynamics.base import OK
-    from cmbs.integrate.implicit import (HANDED_BACK, NEWTON_ITERATIONS, counter_dict, failure_message, newton_run,
-                                         newton_state)
+    from cmbs.integrate.implicit import NEWTON_ITERATIONS, counter_dict, failure_message, newton_run, newton_state
 
     terms = model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0))
     full = (q0.copy(), qd0.copy(), solver.accelerations(terms, q0, qd0, 0.0).qdd)
@@ -592,19 +590,7 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
         if status == OK:
             break
         reached = next_out - 1                      # the state is that of grid[reached]
-        if status == HANDED_BACK:
-            before = solver.repartitions
-            try:
-                solver.update_partition(model.jacobian(full[0], grid[reached]), grid[reached])
-            except CmbsError as error:
-                message, stored = str(error), reached // every + 1
-                break
-            if solver.repartitions == before:        # Python's A and the loop's disagree: cannot go on
-                message = (f"model {model.name!r} at t={grid[reached]:.6g}: the partition's condition calls for a "
-                           "new partition but none was chosen")
-                stored = reached // every + 1
-                break
-        elif solver.user is None and retried != reached:    # once more with independent coordinates chosen here
+        if solver.user is None and retried != reached:    # once more with independent coordinates chosen here
             retried = reached
             solver.repartition(model.jacobian(full[0], grid[reached]))
         else:
@@ -641,9 +627,9 @@ def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, l
     the inputs have Python callables): a :class:`~cmbs.integrate.implicit.CallbackProblem` whose
     residual expands an iterate into ``last`` (as
     :class:`~cmbs.integrate.compiled_reduced.ReducedProblem`'s kernel does), whose steps accept
-    ``last`` into ``full``, whose check asks for a new partition as
-    :meth:`MatrixRSolver.update_partition` would, and which records ``full`` into ``y``, ``dy``.
-    Returns the maker of the problem for the current partition."""
+    ``last`` into ``full`` and update the partition there (:meth:`MatrixRSolver.update_partition`),
+    and which records ``full`` into ``y``, ``dy``.  Returns the maker of the problem for a run or
+    its retry."""
     from cmbs.integrate.implicit import CallbackProblem
 
     terms = model.new_terms()
@@ -665,21 +651,19 @@ def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, l
                 R.T @ C @ R, R.T @ K @ R)
 
     def adjust(t: float, state: tuple) -> None:
-        independent = solver.partition.independent
         for target, value in zip(full, last):
             target[:] = value
+        solver.update_partition(model.jacobian(full[0], t), t)
+        independent = solver.partition.independent
         z, zd, zdd, _, x = state
         z[:], zd[:], zdd[:], x[:] = full[0][independent], full[1][independent], full[2][independent], \
             full[2][independent]
-
-    def check(t: float) -> bool:
-        return solver.exceeds_limit(model.jacobian(full[0], t))
 
     def keep(row: int, t: float, state: tuple) -> None:
         y[row] = np.concatenate([full[0], full[1]])
         dy[row] = np.concatenate([full[1], full[2]])
 
-    return lambda: CallbackProblem(residual, bar, (CmbsError,), [""], adjust, check, keep)
+    return lambda: CallbackProblem(residual, bar, (CmbsError,), [""], adjust, keep)
 
 
 def _record(model: Model, solver, inputs: Inputs, result: Integration, chosen: Formulation | None,
@@ -845,18 +829,20 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs
     model_part, formulation, law = plan
     u0 = np.array(inputs(0.0, q0, qd0), dtype=float) if isinstance(law, ConstantInputs) else np.zeros(model.n_u)
     loop_started = time.perf_counter()
-    (T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, done, q_fail, qd_fail, u_fail, message,
-     resumed) = rk4(model_part, formulation, law, np.array(q0), np.array(qd0), dt, steps, options["every"], u0,
-                    model.new_terms().buffer.size, model.m, getattr(solver, "resume", None))
+    (T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, done, q_fail, qd_fail, u_fail) = rk4(
+        model_part, formulation, law, np.array(q0), np.array(qd0), dt, steps, options["every"], u0,
+        model.new_terms().buffer.size, model.m)
     loop_wall = time.perf_counter() - loop_started
+    message = ""
     if status == SINGULAR:
         message = _singular_message(model, solver, q_fail, qd_fail, t_fail, u_fail)
     elif status == NON_FINITE:
         message = (f"non-finite state or accelerations at t={t_fail:.6g}: the motion diverged; try a smaller "
                    "step, drift projection (project=True) or another formulation")
-    elif status != OK and not message:
+    elif status != OK:
         message = solver.loop_failure(status, t_fail)     # the formulation's hooks failed
-    counters = {"steps": done, "evaluations": 4 * done, **_loop_counters(solver, resumed)}
+    _note_loop_conditions(solver)
+    counters = {"steps": done, "evaluations": 4 * done}
     info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall}, "success" if status ==
                  OK else "failed", message, counters)
     k = recorded
@@ -867,14 +853,11 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs
     return trajectory
 
 
-def _loop_counters(solver, resumed: int) -> dict:
-    """The counters a compiled loop adds for matrix R: its re-partitions (``resumed``, the
-    resumptions after its hook handed the run back); the largest κ₁ its recoveries met goes to the
-    solver (for :func:`_note_rounding`).  Nothing for the other formulations."""
-    if not isinstance(solver, MatrixRSolver):
-        return {}
-    solver.note_loop_conditions()
-    return {"repartitions": resumed}
+def _note_loop_conditions(solver) -> None:
+    """For matrix R: the largest κ₁ a compiled loop's recoveries met, to the solver (for
+    :func:`_note_rounding`)."""
+    if isinstance(solver, MatrixRSolver):
+        solver.note_loop_conditions()
 
 
 def _run_compiled_adaptive(model: Model, solver, chosen: Formulation, plan: tuple, inputs: Inputs, q0: np.ndarray,
@@ -889,18 +872,17 @@ def _run_compiled_adaptive(model: Model, solver, chosen: Formulation, plan: tupl
     run = compiled_adaptive.adaptive(model_part, formulation, np.array(q0), np.array(qd0), times, options["rtol"],
                                      options["atol"], u, model.new_terms().buffer.size, model.m,
                                      explicit_method(options["integrator"]),
-                                     solver.adjusts_state or options["project"],
-                                     resume=getattr(solver, "resume", None))
+                                     solver.adjusts_state or options["project"])
     loop_wall = time.perf_counter() - loop_started
-    status, t_stop, message = run.status, run.t_stop, run.message
+    status, t_stop, message = run.status, run.t_stop, ""
     if status == SINGULAR:
         message = _singular_message(model, solver, run.state[:model.n], run.state[model.n:], t_stop, u)
     elif status in compiled_adaptive.REASONS:
         message = f"{compiled_adaptive.REASONS[status]} at t={t_stop:.6g}"
-    elif status != OK and not message:
+    elif status != OK:
         message = solver.loop_failure(status, t_stop)     # the formulation's hooks failed
-    counters = {"steps": run.steps, "rejected": run.rejected, "evaluations": run.evaluations,
-                **_loop_counters(solver, run.resumed)}
+    _note_loop_conditions(solver)
+    counters = {"steps": run.steps, "rejected": run.rejected, "evaluations": run.evaluations}
     info = _info(model, chosen, {**options, "compiled": True, "loop_wall_time": loop_wall},
                  "success" if status == OK else "failed", message, counters)
     if run.unsolved:

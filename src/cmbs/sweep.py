@@ -254,7 +254,7 @@ def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, form
     if batched and plan is None:
         raise CmbsError("sweep: the batched path needs state-only variants (q0, qd0, u) and a run the compiled "
                         "loops take (rk4, rk45, rk23 or dop853 with t_end a multiple of dt; lagrange, baumgarte, "
-                        "penalty, projection or udwadia-kalaba; no project)")
+                        "penalty, projection, udwadia-kalaba or matrix-r; no project)")
     from tqdm import tqdm   # here: importing it takes about 25 ms, a launch's budget
 
     with tqdm(total=len(variants), desc=f"sweep {nominal.name}", unit="variant", disable=not progress,

@@ -13,11 +13,12 @@ then the velocities are projected with all rows at the new q:
 
 A⁺ by SVD, singular values below ``threshold``·σ_max discarded (as
 :func:`cmbs.dynamics.projection.pseudo_inverse`).  :func:`correct_positions` and
-:func:`project_velocities` are the two steps on terms already evaluated;
-:func:`cmbs.simulate.project_state` calls them on terms the model evaluates in Python, and
-:class:`DriftProjection` is the kernel tuple the compiled loops take: it wraps a formulation's
-kernel (:mod:`cmbs.dynamics.field`), forwards its solve and stage hook and projects in its
-after-step and output hooks.
+:func:`project_velocities` are the two steps on terms already evaluated, :func:`project` the
+whole projection on a model's kernel tuple (or, run as Python, on a model only Python
+evaluates); :func:`cmbs.simulate.project_state` calls it, and :class:`DriftProjection` is the
+kernel tuple the compiled loops take: it wraps a formulation's kernel
+(:mod:`cmbs.dynamics.field`), forwards its solve and stage hook and projects in its after-step
+and output hooks.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ import numpy as np
 from cmbs.dynamics.base import NON_FINITE, OK
 from cmbs.dynamics.field import after_step, solve, stage_state
 from cmbs.jit import njit, njit_borrowing
-from cmbs.model.compiled import evaluate, terms_views
+from cmbs.model.compiled import evaluate
 from cmbs.model.model import Model
 
 #: :func:`correct_positions` moved the coordinates (besides OK: within the tolerance, nothing done).
@@ -106,8 +107,7 @@ class DriftProjection(NamedTuple):
     """A formulation's kernel (``inner``) with drift projection after each accepted step and at
     each output state of an adaptive loop: the holonomic ``rows``, the ``tolerance`` on max |Φ_h|,
     at most ``iterations`` Newton steps, the SVD ``threshold``, the number of constraints ``m``
-    (the terms' layout), zero velocities (the terms are evaluated at q̇ = 0, as
-    :func:`cmbs.simulate.project_state` evaluates them) and zero inputs."""
+    (the terms' layout), zero velocities and zero inputs (the terms are evaluated with them)."""
 
     inner: NamedTuple
     rows: np.ndarray
@@ -124,24 +124,38 @@ def drift_projection(inner: NamedTuple, model: Model, tolerance: float, iteratio
     """The kernel of ``inner`` (a formulation's kernel for ``model``) with drift projection to
     ``tolerance``, the arguments of :func:`cmbs.simulate.project_state`."""
     return DriftProjection(inner, np.flatnonzero(model.holonomic).astype(np.int64), float(tolerance),
-                           int(iterations), float(threshold), int(model.m), np.zeros(model.n), np.zeros(model.n_u))
+                           int(iterations), float(threshold), int(model.m), np.zeros(model.n),
+                           np.zeros(model.n_u))
 
 
 @njit(cache=True)
-def project_drift(kernel, model, q, qd, t, buffer):
-    """The projection of (q, q̇) at t in place, the terms evaluated by the ``model`` kernel into
-    ``buffer``; OK or NON_FINITE."""
+def project(model, q, qd, t, zeros, u, buffer, m, rows, tolerance, iterations, threshold):
+    """The projection of (q, q̇) at t in place (module docstring): at most ``iterations`` Newton
+    steps on the holonomic ``rows`` until max |Φ_h| < ``tolerance``, then the velocities; the
+    terms evaluated by the ``model`` kernel at q̇ = ``zeros`` with inputs ``u`` into ``buffer``,
+    laid out as :class:`~cmbs.model.model.Terms` with ``m`` constraints.  OK, or NON_FINITE where
+    the terms are not finite (the positions as the last finite step left them)."""
     n = q.shape[0]
-    _, phi, A, _, phi_t, _ = terms_views(model, n, kernel.m, buffer)
-    for _ in range(kernel.iterations if kernel.rows.shape[0] > 0 else 0):
-        evaluate(model, q, kernel.zeros, t, kernel.u, buffer)
-        status = correct_positions(A, phi, kernel.rows, kernel.tolerance, kernel.threshold, q)
+    phi = buffer[n:n + m]
+    A = buffer[n + m:n + m + m * n].reshape((m, n))
+    phi_t = buffer[n + 2 * m + m * n:n + 3 * m + m * n]
+    for _ in range(iterations if rows.shape[0] > 0 else 0):
+        evaluate(model, q, zeros, t, u, buffer)
+        status = correct_positions(A, phi, rows, tolerance, threshold, q)
         if status == NON_FINITE:
             return NON_FINITE
         if status == OK:
             break
-    evaluate(model, q, kernel.zeros, t, kernel.u, buffer)
-    return project_velocities(A, phi_t, kernel.threshold, qd)
+    evaluate(model, q, zeros, t, u, buffer)
+    return project_velocities(A, phi_t, threshold, qd)
+
+
+@njit(cache=True)
+def project_drift(kernel, model, q, qd, t, buffer):
+    """The projection of (q, q̇) at t in place with the settings of the ``kernel``
+    (:func:`project`); OK or NON_FINITE."""
+    return project(model, q, qd, t, kernel.zeros, kernel.u, buffer, kernel.m, kernel.rows, kernel.tolerance,
+                   kernel.iterations, kernel.threshold)
 
 
 # The three hooks only forward: compiled into their caller (cmbs.jit.njit's note on compile time).

@@ -14,11 +14,9 @@ model, q, q̇, t, buffer) -> status`` on each stage state before its field, in p
 ``after_step(kernel, model, q, q̇, t, buffer) -> status`` on each accepted state, in place.
 :func:`unchanged` is both for a formulation that takes the states as they are; matrix R
 (:class:`cmbs.dynamics.matrix_r_kernels.MatrixRKernel`) recovers its dependent coordinates and
-velocities there, and its after-step hook returns :data:`REPARTITION` when its partition has
-become ill-conditioned: the loop then stops at that accepted state, and Python (the solver's
-``resume``, :meth:`cmbs.dynamics.matrix_r.MatrixRSolver.resume`) chooses a new partition and
-resumes the loop from there with the kernel it returns.  A hook's failure status ends the run
-(the solver's ``loop_failure(status, t)`` gives its message,
+velocities there, and its after-step hook chooses a new partition in place when the partition
+has become ill-conditioned.  A hook's failure status ends the run (the solver's
+``loop_failure(status, t)`` gives its message,
 :meth:`cmbs.dynamics.matrix_r.MatrixRSolver.loop_failure`).
 A state the after-step hook left is one the stage hook leaves as it is (at the same time, with
 the same kernel: matrix R's recovery of a recovered state changes nothing), so a loop need not
@@ -48,9 +46,6 @@ solve = type_dispatch("solve")
 stage_state = type_dispatch("stage_state")
 #: ``after_step(kernel, model, q, qd, t, buffer) -> status``: the formulation's accepted state, in place.
 after_step = type_dispatch("after_step")
-#: The status of an after-step hook that hands the run back to Python, which resumes it (besides
-#: OK, SINGULAR and NON_FINITE).
-REPARTITION = 3
 
 
 @njit_borrowing(cache=True, inline="always")

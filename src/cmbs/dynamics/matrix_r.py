@@ -19,17 +19,21 @@ times (see ROUNDING_CONDITION), so close to a singular position the integrated v
 kept (``velocity_recovery_growth``), and runs report the worst stage.
 
 The partition is given by the user (names of the independent coordinates) or chosen
-automatically by LU factorisation with partial pivoting of Aᵀ (pivot columns of A are
-dependent), and chosen again when κ grows by ``condition_growth``, so that the method follows
-the mechanism through configurations where its first choice of independent coordinates stops
-determining the others.  κ, not cond(A_d): a block can stay perfectly conditioned while it
-shrinks against the rest of A (a pendulum's x as it swings under the pivot).
+automatically: constraint rows by QR with column pivoting of the row-scaled Aᵀ, dependent
+coordinates by Gaussian elimination with partial pivoting of those rows' transpose (pivot
+columns of A are dependent); and chosen again when κ grows by ``condition_growth``, so that the
+method follows the mechanism through configurations where its first choice of independent
+coordinates stops determining the others.  κ, not cond(A_d): a block can stay perfectly
+conditioned while it shrinks against the rest of A (a pendulum's x as it swings under the
+pivot).  The choice and the test are compiled
+(:func:`cmbs.dynamics.matrix_r_kernels.update_partition`): the compiled loops re-partition inside
+their after-step hook, and this module's solver calls the same routine.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, Sequence
 
 import numpy as np
 
@@ -37,11 +41,8 @@ from cmbs.dynamics import matrix_r_kernels as kernels
 from cmbs.dynamics.base import NON_FINITE, SINGULAR, Accelerations, check_parameters
 from cmbs.errors import CmbsError, ConvergenceError, SingularSystemError
 from cmbs.jit import interpreted
-from cmbs.lazy import on_first_use
 from cmbs.model.compiled import model_kernel
 from cmbs.model.model import Model, Terms
-
-linalg = on_first_use("scipy.linalg")
 
 #: κ₁ (:func:`partition_condition`) at an evaluated stage above which :func:`rounding_note`
 #: warns.  At a state δ from a singular position, κ ~ 1/δ; the positions a recovery reaches are then uncertain by
@@ -126,28 +127,25 @@ class Partition:
 
 def choose_partition(A: np.ndarray, rank_tolerance: float, independent: np.ndarray | None = None,
                      rank: int | None = None) -> Partition:
-    """Choose r independent constraint rows (pivoted QR of Aᵀ, rows scaled to unit norm) and r
-    dependent coordinates: the pivot rows of an LU factorisation with partial pivoting of those
-    rows' transpose (or the complement of the user's ``independent`` coordinates).
+    """Choose r independent constraint rows (QR with column pivoting of Aᵀ, rows scaled to unit
+    norm) and r dependent coordinates: the pivot rows of Gaussian elimination with partial
+    pivoting of those rows' transpose (or the complement of the user's ``independent``
+    coordinates): :func:`~cmbs.dynamics.matrix_r_kernels.choose_partition`, the choice the
+    compiled loops make when they re-partition.
 
     r is ``rank`` when given, else the numerical rank of A (singular values of the row-scaled A
-    above ``rank_tolerance`` times the largest)."""
-    m, n = A.shape
-    if m == 0:
-        return Partition(np.arange(n), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
-    norms = np.linalg.norm(A, axis=1)
-    scaled = A / np.where(norms > 0, norms, 1.0)[:, None]
-    if rank is None:
-        sigma = np.linalg.svd(scaled, compute_uv=False)
-        rank = int(np.sum(sigma > rank_tolerance * max(sigma[0], 1.0)))
-    _, _, row_pivots = linalg.qr(scaled.T, pivoting=True, mode="economic")
-    rows = np.sort(row_pivots[:rank]).astype(np.int64)
+    above ``rank_tolerance`` times the largest, :func:`~cmbs.dynamics.matrix_r_kernels.numerical_rank`)."""
+    A = np.ascontiguousarray(A, dtype=float)
+    n = A.shape[1]
+    r = int(kernels.numerical_rank(A, float(rank_tolerance))) if rank is None else int(rank)
     if independent is None:
-        permutation, _, _ = linalg.lu(A[rows].T)
-        dependent = np.sort(np.argmax(permutation, axis=0)[:rank]).astype(np.int64)
+        dependent, free = np.empty(r, dtype=np.int64), np.empty(n - r, dtype=np.int64)
     else:
-        dependent = np.setdiff1d(np.arange(n), independent)
-    return Partition(np.setdiff1d(np.arange(n), dependent), dependent, rows)
+        dependent = np.setdiff1d(np.arange(n), independent).astype(np.int64)
+        free = np.setdiff1d(np.arange(n), dependent).astype(np.int64)
+    rows = np.empty(r, dtype=np.int64)
+    kernels.choose_partition(A, independent is None, rows, dependent, free)
+    return Partition(free, dependent, rows)
 
 
 def partition_condition(A_rows: np.ndarray, dependent: np.ndarray, norm: int) -> float:
@@ -185,107 +183,73 @@ class MatrixRSolver:
         self.model = model
         self.p = parameters
         self.user = None if parameters.independent is None else model.coordinate_indices(parameters.independent)
-        A0 = model.jacobian(model.q0, 0.0)
-        self.partition = choose_partition(A0, parameters.rank_tolerance, self.user)
-        if self.user is not None and len(self.partition.rows) != len(self.partition.dependent):
+        A0 = np.ascontiguousarray(model.jacobian(model.q0, 0.0), dtype=float)
+        partition = choose_partition(A0, parameters.rank_tolerance, self.user)
+        if self.user is not None and len(partition.rows) != len(partition.dependent):
             raise CmbsError(
                 f"matrix-r: {len(self.user)} independent coordinates given, but the model has "
-                f"{model.n - len(self.partition.rows)} degrees of freedom")
-        self.repartitions = 0
+                f"{model.n - len(partition.rows)} degrees of freedom")
         self.worst_condition = 0.0     # largest κ₁ met by a recovery, and its time
         self.worst_time = 0.0
-        self.work = kernels.accelerations_work(model.n, self.partition.independent.size, self.partition.rows.size)
-        self._set_partition(self.partition)
+        self.work = kernels.accelerations_work(model.n, partition.independent.size, partition.rows.size)
         #: κ₁ above which the velocities are not recovered (``velocity_recovery_growth``)
         self.recovery_limit = parameters.velocity_recovery_growth * partition_condition(
-            A0[self.partition.rows], self.partition.dependent, 1)
-        #: κ₂ of the partition when it was chosen
-        self.reference_condition = self._condition(A0)
+            A0[partition.rows], partition.dependent, 1)
+        self._no_input = np.zeros(model.n_u)
+        self._loop_worst = np.zeros(2)     # [κ₁, t] of the compiled loops' recoveries (:meth:`kernel`)
+        self._kernel = kernels.MatrixRKernel(
+            model.m, partition.rows, partition.dependent, partition.independent, float(parameters.position_tolerance),
+            int(parameters.max_iterations), float(self.recovery_limit), self.user is None,
+            float(parameters.condition_growth), np.zeros(3), np.zeros(1, dtype=np.int64), self._no_input,
+            self._loop_worst, *self.work)
+        kernels.set_reference(A0, self._kernel)
         self.update_partition(A0, 0.0)
         kernel = model_kernel(model)
         self._terms = model.new_terms()
         self._equations = kernel if kernel is not None else kernels.PythonEquations(model, self._terms)
         self._recover = kernels.recover if kernel is not None else interpreted(kernels.recover)
-        self._no_input = np.zeros(model.n_u)
         self._worst = np.zeros(2)
-        self._loop_worst = np.zeros(2)     # [κ₁, t] of the compiled loops' recoveries (:meth:`kernel`)
 
-    def _set_partition(self, partition: Partition) -> None:
-        """Keep ``partition`` and its index arrays as the kernels take them."""
-        self.partition = partition
-        self._indices = tuple(np.ascontiguousarray(part, dtype=np.int64)
-                              for part in (partition.rows, partition.dependent, partition.independent))
+    @property
+    def partition(self) -> Partition:
+        """The current partition (a copy: :meth:`update_partition` changes the kernel's in place)."""
+        kernel = self._kernel
+        return Partition(kernel.independent.copy(), kernel.dependent.copy(), kernel.rows.copy())
 
-    def partition_limit(self) -> float:
-        """κ₂ of the partition above which :meth:`update_partition` acts: ``condition_growth``
-        times its value when chosen (automatic partition), at most SINGULAR_CONDITION, where it
-        raises for a user's partition."""
-        if self.user is not None:
-            return kernels.SINGULAR_CONDITION
-        return min(self.p.condition_growth * self.reference_condition, kernels.SINGULAR_CONDITION)
+    @property
+    def _indices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The kernel's rows, dependent and independent coordinates, as the kernels take them."""
+        kernel = self._kernel
+        return kernel.rows, kernel.dependent, kernel.independent
 
-    def exceeds_limit(self, A: np.ndarray) -> bool:
-        """True when κ₂ of the partition at ``A`` exceeds :meth:`partition_limit` or A_d is
-        singular (:func:`~cmbs.dynamics.matrix_r_kernels.exceeds`, the compiled loops' test)."""
-        rows, dependent, _ = self._indices
-        Ad, pivots, side = self.work[:3]
-        return not kernels.factor_dependent(A, rows, dependent, Ad, pivots) or \
-            bool(kernels.exceeds(A, rows, dependent, Ad, pivots, side, self.partition_limit()))
+    @property
+    def repartitions(self) -> int:
+        """How many times the partition was chosen again (here or in the compiled loops)."""
+        return int(self._kernel.repartitions[0])
 
     def update_partition(self, A: np.ndarray, t: float) -> None:
         """Choose the partition again when κ₂ has grown by ``condition_growth`` since it was
-        chosen (automatic partition), or raise when A_d is singular (user partition)."""
-        A = np.ascontiguousarray(A, dtype=float)
-        if not self.exceeds_limit(A):
-            return
-        condition = self._condition(A)
-        if self.user is None and condition > self.p.condition_growth * self.reference_condition:
-            condition = self.repartition(A)
-        if condition > kernels.SINGULAR_CONDITION:
-            names = [self.model.coordinate_names[k] for k in self.partition.independent]
-            raise SingularSystemError(
-                f"model {self.model.name!r} at t={t:.6g}: the dependent block A_d is singular (condition ‖A_r‖‖A_d⁻¹‖ "
-                f"{condition:.3g}) with independent coordinates {', '.join(names)}; choose other independent "
-                "coordinates or let matrix-r choose them automatically")
+        chosen (automatic partition), or raise when A_d is singular (user partition):
+        :func:`~cmbs.dynamics.matrix_r_kernels.update_partition`, as the compiled loops' hook."""
+        status = kernels.update_partition(np.ascontiguousarray(A, dtype=float), self._kernel)
+        if status == kernels.SINGULAR_PARTITION:
+            raise SingularSystemError(self._singular_message(t))
 
     def repartition(self, A: np.ndarray) -> float:
-        """Choose the partition again at the configuration of ``A``; returns the new κ₂.
+        """Choose the partition again at the configuration of ``A``, with as many dependent
+        coordinates as at the start (:func:`~cmbs.dynamics.matrix_r_kernels.repartition`); returns
+        the new κ₂."""
+        return float(kernels.repartition(np.ascontiguousarray(A, dtype=float), self._kernel))
 
-        The number of dependent coordinates stays the rank found at the initial configuration:
-        near a singular position the numerical rank of A drops for an instant, and taking that
-        drop for a change of mobility would release a constraint the mechanism still obeys."""
-        self._set_partition(choose_partition(A, self.p.rank_tolerance, self.user, rank=self.partition.rows.size))
-        self.repartitions += 1
-        self.reference_condition = self._condition(A)
-        return self.reference_condition
-
-    def _condition(self, A: np.ndarray) -> float:
-        """κ₂: the partition's condition in the 2-norm (the re-partition test); see
-        :func:`partition_condition`."""
-        rows, dependent, _ = self._indices
-        return float(kernels.condition_two(np.ascontiguousarray(A, dtype=float), rows, dependent))
+    def _singular_message(self, t: float) -> str:
+        """The message of a partition found singular at ``t`` (:func:`singular_partition_message`)."""
+        return singular_partition_message(self.model.name, self.model.coordinate_names, self._kernel, t)
 
     def kernel(self) -> kernels.MatrixRKernel:
-        """The :class:`~cmbs.dynamics.matrix_r_kernels.MatrixRKernel` of the current partition, on
-        this solver's work arrays; the largest κ₁ its recoveries meet is noted by
-        :meth:`note_loop_conditions`."""
-        rows, dependent, independent = self._indices
-        return kernels.MatrixRKernel(self.model.m, rows, dependent, independent, float(self.p.position_tolerance),
-                                     int(self.p.max_iterations), float(self.recovery_limit),
-                                     float(self.partition_limit()), self._no_input, self.work, self._loop_worst)
-
-    def resume(self, q: np.ndarray, t: float) -> kernels.MatrixRKernel:
-        """The kernel a compiled loop goes on with after it handed back the recovered state
-        (q, t) (status REPARTITION, :func:`~cmbs.dynamics.matrix_r_kernels._after_step`): the
-        partition chosen again there (:meth:`update_partition`).  Raises
-        :class:`~cmbs.errors.CmbsError` where the run cannot go on: a user partition at a
-        singular A_d, or no new partition although the loop asked for one."""
-        before = self.repartitions
-        self.update_partition(self.model.jacobian(q, t), t)
-        if self.repartitions == before:    # Python's A disagrees with the loop's: cannot go on
-            raise CmbsError(f"model {self.model.name!r} at t={t:.6g}: the partition's condition calls for a new "
-                            "partition but none was chosen")
-        return self.kernel()
+        """The :class:`~cmbs.dynamics.matrix_r_kernels.MatrixRKernel` of this solver: its partition,
+        conditions and counts, which the compiled loops update in place, and its work arrays; the
+        largest κ₁ its recoveries meet is noted by :meth:`note_loop_conditions`."""
+        return self._kernel
 
     def note_loop_conditions(self) -> None:
         """Keep the largest κ₁ the compiled loops' recoveries met (:meth:`note_condition`)."""
@@ -293,13 +257,16 @@ class MatrixRSolver:
 
     def loop_failure(self, status: int, t: float) -> str:
         """The message of a compiled loop stopped by a recovery with ``status`` at ``t``
-        (:data:`~cmbs.dynamics.matrix_r_kernels.NOT_CONVERGED` or ``UNRECOVERED``), else ""."""
+        (:data:`~cmbs.dynamics.matrix_r_kernels.NOT_CONVERGED`, ``UNRECOVERED`` or
+        ``SINGULAR_PARTITION``), else ""."""
         if status == kernels.NOT_CONVERGED:
             return (f"model {self.model.name!r} at t={t:.6g}: matrix-r position recovery did not converge in "
                     f"{self.p.max_iterations} iterations")
         if status == kernels.UNRECOVERED:
             return (f"model {self.model.name!r} at t={t:.6g}: matrix-r position recovery met non-finite constraints "
                     "or a singular block A_d")
+        if status == kernels.SINGULAR_PARTITION:
+            return self._singular_message(t)
         return ""
 
     def velocity_matrix(self, terms: Terms) -> np.ndarray:
@@ -350,10 +317,13 @@ class MatrixRSolver:
 
     def after_step(self, q: np.ndarray, qd: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Recover the dependent coordinates and velocities, then re-partition if needed (at the
-        recovered q, whose A the recovery left in its terms)."""
+        recovered q, whose A the recovery left in its terms) and recover again with a new
+        partition, as the compiled loops' hook
+        (:func:`~cmbs.dynamics.matrix_r_kernels._after_step`)."""
         q, qd = self.recover(q, qd, t)
+        before = self.repartitions
         self.update_partition(self._terms.A, t)
-        return q, qd
+        return (q, qd) if self.repartitions == before else self.recover(q, qd, t)
 
     def recover(self, q: np.ndarray, qd: np.ndarray, t: float,
                 integrated_velocities: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -383,6 +353,17 @@ class MatrixRSolver:
             raise SingularSystemError(f"model {model.name!r} at t={t:.6g}: matrix-r position recovery met non-finite "
                                       "constraints or a singular block A_d")
         return q, qd
+
+
+def singular_partition_message(model_name: str, coordinate_names: Sequence[str], kernel: kernels.MatrixRKernel,
+                               t: float) -> str:
+    """The message of a run stopped at ``t`` where the partition of ``kernel`` has a singular A_d
+    (:data:`~cmbs.dynamics.matrix_r_kernels.SINGULAR_PARTITION`, κ₂ in its MET), naming its
+    independent coordinates."""
+    names = ", ".join(coordinate_names[k] for k in kernel.independent)
+    return (f"model {model_name!r} at t={t:.6g}: the dependent block A_d is singular (condition ‖A_r‖‖A_d⁻¹‖ "
+            f"{kernel.conditions[kernels.MET]:.3g}) with independent coordinates {names}; choose other independent "
+            "coordinates or let matrix-r choose them automatically")
 
 
 def rounding_note(worst_condition: float, worst_time: float) -> str:

@@ -23,7 +23,6 @@ from typing import NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
-from cmbs.dynamics.field import REPARTITION
 from cmbs.dynamics.kkt import lu_in_place, lu_solve, lu_solve_transposed, solve_in_place
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate
@@ -35,9 +34,21 @@ NOT_CONVERGED, VELOCITIES_KEPT = 4, 5
 #: :class:`~cmbs.errors.SingularSystemError` does, where an adaptive loop would retry a
 #: NON_FINITE stage with a smaller step.  (Apart from the adaptive loop's own codes.)
 UNRECOVERED = 7
+#: The status of an update of the partition (:func:`update_partition`) that found A_d singular
+#: (κ₂ above SINGULAR_CONDITION) and no better partition: a user's partition, or an automatic one
+#: chosen again there: it ends the run (the solver's message, ``loop_failure``).
+SINGULAR_PARTITION = 8
 #: κ₂ above which a partition's A_d counts as singular (a user partition fails, an automatic one
 #: is chosen again)
 SINGULAR_CONDITION = 1e12
+#: The entries of a :class:`MatrixRKernel`'s ``conditions``: κ₂ of the partition when it was
+#: chosen, the κ₂ above which :func:`update_partition` acts, and the κ₂ of the singular
+#: partition an update met (for the message of SINGULAR_PARTITION).
+REFERENCE, LIMIT, MET = 0, 1, 2
+#: Relative difference below which two pivot candidates of the partition's choice count as equal:
+#: ties in exact arithmetic (every column of the row-scaled Aᵀ has norm 1 at the first step; a
+#: symmetric mechanism has equal entries) differ by rounding, and the first of them is chosen.
+PIVOT_TIE = 1e-12
 
 
 class PythonEquations(NamedTuple):
@@ -145,6 +156,134 @@ def exceeds(A, rows, dependent, Ad, pivots, side, limit):
     :func:`condition_two` only where :func:`condition_two_bound`, from the LU factors of A_d,
     cannot rule it out."""
     return condition_two_bound(A, rows, Ad, pivots, side) > limit and condition_two(A, rows, dependent) > limit
+
+
+@njit(cache=True)
+def row_scaled(A):
+    """A with each row divided by its Euclidean norm (a zero row left as it is)."""
+    m, n = A.shape
+    scaled = np.empty((m, n))
+    for a in range(m):
+        norm = 0.0
+        for j in range(n):
+            norm += A[a, j] * A[a, j]
+        norm = np.sqrt(norm)
+        if norm == 0.0:
+            norm = 1.0
+        for j in range(n):
+            scaled[a, j] = A[a, j] / norm
+    return scaled
+
+
+@njit(cache=True)
+def numerical_rank(A, tolerance):
+    """The numerical rank of A: the singular values of the row-scaled A (:func:`row_scaled`)
+    above ``tolerance`` times the largest (or times 1, if that is larger)."""
+    if A.shape[0] == 0:
+        return 0
+    sigma = np.linalg.svd(row_scaled(A), full_matrices=False)[1]
+    cutoff = tolerance * max(sigma[0], 1.0)
+    rank = 0
+    for value in sigma:
+        if value > cutoff:
+            rank += 1
+    return rank
+
+
+@njit(cache=True)
+def pivot_columns(B, count, chosen):
+    """The first ``count`` pivot columns of the Householder QR factorisation with column pivoting
+    of ``B`` (Businger & Golub 1965; Golub & Van Loan, Matrix Computations, 4th ed., §5.4.2) into
+    ``chosen``, in the order chosen; ``B`` is overwritten.  Step k brings forward the column of
+    largest norm in rows k.. (the first on a tie, as LAPACK's dgeqp3, up to PIVOT_TIE), whose
+    Householder reflection then zeroes it below row k in every column.  The norms are computed
+    afresh at each step, not downdated."""
+    rows, columns = B.shape
+    order = np.arange(columns)
+    for k in range(count):
+        pivot, largest = k, -1.0
+        for j in range(k, columns):
+            norm = 0.0
+            for i in range(k, rows):
+                norm += B[i, j] * B[i, j]
+            if norm > largest * (1.0 + PIVOT_TIE):
+                pivot, largest = j, norm
+        if pivot != k:
+            for i in range(rows):
+                B[i, k], B[i, pivot] = B[i, pivot], B[i, k]
+            order[k], order[pivot] = order[pivot], order[k]
+        chosen[k] = order[k]
+        alpha = -np.sqrt(largest) if B[k, k] > 0.0 else np.sqrt(largest)
+        B[k, k] -= alpha                     # v = x - α e₁ in B[k:, k]; H = I - 2 v vᵀ / vᵀv
+        length = 0.0
+        for i in range(k, rows):
+            length += B[i, k] * B[i, k]
+        if length == 0.0:
+            continue
+        for j in range(k + 1, columns):
+            along = 0.0
+            for i in range(k, rows):
+                along += B[i, k] * B[i, j]
+            along *= 2.0 / length
+            for i in range(k, rows):
+                B[i, j] -= along * B[i, k]
+
+
+@njit(cache=True)
+def pivot_rows(C, count, chosen):
+    """The first ``count`` pivot rows of Gaussian elimination with partial pivoting of ``C``
+    (Golub & Van Loan §3.4.3) into ``chosen``, in the order chosen; ``C`` is overwritten.  Step k
+    brings forward the row of largest |C[i, k]| in rows k.. (the first on a tie, as LAPACK's
+    dgetrf, up to PIVOT_TIE), then eliminates column k below it."""
+    rows, columns = C.shape
+    order = np.arange(rows)
+    for k in range(count):
+        pivot, largest = k, abs(C[k, k])
+        for i in range(k + 1, rows):
+            if abs(C[i, k]) > largest * (1.0 + PIVOT_TIE):
+                pivot, largest = i, abs(C[i, k])
+        if pivot != k:
+            for j in range(columns):
+                C[k, j], C[pivot, j] = C[pivot, j], C[k, j]
+            order[k], order[pivot] = order[pivot], order[k]
+        chosen[k] = order[k]
+        if C[k, k] == 0.0:
+            continue
+        for i in range(k + 1, rows):
+            factor = C[i, k] / C[k, k]
+            for j in range(k + 1, columns):
+                C[i, j] -= factor * C[k, j]
+
+
+@njit(cache=True)
+def choose_partition(A, automatic, rows, dependent, independent):
+    """The partition at the configuration of ``A``, in place: r = len(rows) constraint rows, the
+    first r pivots of a QR factorisation with column pivoting of the row-scaled Aᵀ
+    (:func:`pivot_columns`: the rows farthest from dependent on the ones before); when
+    ``automatic``, r dependent coordinates, the first r pivots of Gaussian elimination with
+    partial pivoting of those rows' transpose (:func:`pivot_rows`: the coordinates whose block
+    A_d the elimination keeps regular), and the others independent, each in increasing order.
+    Without ``automatic`` the dependent and independent coordinates are the user's, as given."""
+    r, n = rows.shape[0], A.shape[1]
+    chosen = np.empty(r, dtype=np.int64)
+    pivot_columns(row_scaled(A).T.copy(), r, chosen)
+    rows[:] = np.sort(chosen)
+    if not automatic:
+        return
+    block = np.empty((n, r))
+    for j in range(n):
+        for a in range(r):
+            block[j, a] = A[rows[a], j]
+    pivot_rows(block, r, chosen)
+    dependent[:] = np.sort(chosen)
+    is_dependent = np.zeros(n, dtype=np.bool_)
+    for j in range(r):
+        is_dependent[dependent[j]] = True
+    b = 0
+    for j in range(n):
+        if not is_dependent[j]:
+            independent[b] = j
+            b += 1
 
 
 @njit(cache=True)
@@ -330,14 +469,18 @@ def factored_velocity_matrix(A, rows, dependent, independent, Ad, pivots, side, 
 
 
 class MatrixRKernel(NamedTuple):
-    """Matrix R as the compiled loops take it (:mod:`cmbs.dynamics.field`): the partition
-    (constraint rows, dependent and independent coordinates), the recovery's tolerance, iteration
-    limit and κ₁ limit (:attr:`~cmbs.dynamics.matrix_r.MatrixRSolver.recovery_limit`), the κ₂
-    above which a step hands the run back for a new partition
-    (:meth:`~cmbs.dynamics.matrix_r.MatrixRSolver.partition_limit`), zero inputs for the
-    recovery's evaluations, the work arrays of :func:`accelerations_work` and ``worst`` = [κ₁, t],
-    the largest κ₁ a recovery met.  Made by :meth:`~cmbs.dynamics.matrix_r.MatrixRSolver.kernel`,
-    again after every new partition."""
+    """Matrix R as the compiled loops take it (:mod:`cmbs.dynamics.field`) and as
+    :class:`~cmbs.dynamics.matrix_r.MatrixRSolver` keeps it: the partition (constraint rows,
+    dependent and independent coordinates: arrays of fixed sizes, changed in place by
+    :func:`update_partition`), the recovery's tolerance, iteration limit and κ₁ limit
+    (:attr:`~cmbs.dynamics.matrix_r.MatrixRSolver.recovery_limit`), whether the partition is
+    chosen automatically and κ₂'s growth that calls for a new one (``condition_growth``), the
+    ``conditions`` (κ₂ entries REFERENCE, LIMIT, MET) and the number of ``repartitions`` (one
+    entry), zero inputs for the recovery's evaluations, ``worst`` = [κ₁, t], the largest κ₁ a
+    recovery met, and the work arrays of :func:`accelerations_work`, each a field (a tuple
+    inside the tuple would keep numba from running a batch of kernels in parallel, as
+    :func:`cmbs.integrate.compiled_rk4.rk4_batch` does).  Made once by
+    :class:`~cmbs.dynamics.matrix_r.MatrixRSolver`, whose state it is."""
 
     m: int
     rows: np.ndarray
@@ -346,10 +489,75 @@ class MatrixRKernel(NamedTuple):
     tolerance: float
     iterations: int
     recovery_limit: float
-    partition_limit: float
+    automatic: bool
+    condition_growth: float
+    conditions: np.ndarray
+    repartitions: np.ndarray
     no_input: np.ndarray
-    work: tuple
     worst: np.ndarray
+    Ad: np.ndarray
+    pivots: np.ndarray
+    side: np.ndarray
+    R: np.ndarray
+    reduced: np.ndarray
+    reduced_rhs: np.ndarray
+    S: np.ndarray
+    MR: np.ndarray
+    force: np.ndarray
+
+
+@njit(cache=True)
+def kernel_work(kernel):
+    """The work arrays of ``kernel`` as :func:`accelerations` takes them."""
+    return (kernel.Ad, kernel.pivots, kernel.side, kernel.R, kernel.reduced, kernel.reduced_rhs, kernel.S, kernel.MR,
+            kernel.force)
+
+
+@njit(cache=True)
+def set_reference(A, kernel):
+    """κ₂ of the kernel's partition at ``A`` as its REFERENCE and the LIMIT above which
+    :func:`update_partition` acts: ``condition_growth`` times the reference for an automatic
+    partition, at most SINGULAR_CONDITION (where a user's partition fails).  Returns κ₂."""
+    conditions = kernel.conditions
+    conditions[REFERENCE] = condition_two(A, kernel.rows, kernel.dependent)
+    conditions[LIMIT] = SINGULAR_CONDITION
+    if kernel.automatic:
+        conditions[LIMIT] = min(kernel.condition_growth * conditions[REFERENCE], SINGULAR_CONDITION)
+    return conditions[REFERENCE]
+
+
+@njit(cache=True)
+def repartition(A, kernel):
+    """The kernel's partition chosen again at the configuration of ``A`` (:func:`choose_partition`;
+    the constraint rows only for a user's partition), counted; returns its κ₂.
+
+    The number of dependent coordinates stays the rank found at the initial configuration: near a
+    singular position the numerical rank of A drops for an instant, and taking that drop for a
+    change of mobility would release a constraint the mechanism still obeys."""
+    choose_partition(A, kernel.automatic, kernel.rows, kernel.dependent, kernel.independent)
+    kernel.repartitions[0] += 1
+    return set_reference(A, kernel)
+
+
+@njit(cache=True)
+def update_partition(A, kernel):
+    """The partition at ``A`` kept while κ₂ stays within the kernel's LIMIT (:func:`exceeds`),
+    else chosen again (:func:`repartition`) when κ₂ has grown by ``condition_growth`` since it
+    was chosen (automatic partition).  Returns OK, or SINGULAR_PARTITION (κ₂ in MET) where the
+    partition kept or chosen has κ₂ above SINGULAR_CONDITION."""
+    rows, dependent = kernel.rows, kernel.dependent
+    Ad, pivots, side = kernel.Ad, kernel.pivots, kernel.side
+    conditions = kernel.conditions
+    if factor_dependent(A, rows, dependent, Ad, pivots) and \
+            not exceeds(A, rows, dependent, Ad, pivots, side, conditions[LIMIT]):
+        return OK
+    condition = condition_two(A, rows, dependent)
+    if kernel.automatic and condition > kernel.condition_growth * conditions[REFERENCE]:
+        condition = repartition(A, kernel)
+    if condition > SINGULAR_CONDITION:
+        conditions[MET] = condition
+        return SINGULAR_PARTITION
+    return OK
 
 
 @njit(cache=True)
@@ -357,18 +565,17 @@ def _solve(kernel, terms, t, qd, qdd, lam):
     """q̈, λ by matrix R at the terms (:func:`factored_accelerations`), at the state as it is (a
     loop recovers its stage states before, :func:`_stage_state`)."""
     Q, _, A, gamma, _, M = terms
-    return factored_accelerations(Q, A, gamma, M, kernel.rows, kernel.dependent, kernel.independent, kernel.work,
-                                  qdd, lam)
+    return factored_accelerations(Q, A, gamma, M, kernel.rows, kernel.dependent, kernel.independent,
+                                  kernel_work(kernel), qdd, lam)
 
 
 @njit(cache=True)
 def _recovered(kernel, model, q, qd, t, buffer):
     """:func:`recover` of (q, q̇) in place with the kernel's partition and limits: OK (also where
     the integrated velocities are kept), NOT_CONVERGED or UNRECOVERED."""
-    work = kernel.work
     status = recover(model, q, qd, t, kernel.no_input, buffer, q.shape[0], kernel.m, kernel.rows, kernel.dependent,
-                     kernel.independent, kernel.tolerance, kernel.iterations, kernel.recovery_limit, work[0], work[1],
-                     work[2], kernel.worst)
+                     kernel.independent, kernel.tolerance, kernel.iterations, kernel.recovery_limit, kernel.Ad,
+                     kernel.pivots, kernel.side, kernel.worst)
     if status == VELOCITIES_KEPT:
         return OK
     return UNRECOVERED if status == NON_FINITE else status
@@ -383,21 +590,34 @@ def _stage_state(kernel, model, q, qd, t, buffer):
 
 @njit(cache=True)
 def _after_step(kernel, model, q, qd, t, buffer):
-    """The after-step hook: the accepted state recovered in place, then REPARTITION when κ₂ of
-    the partition there exceeds the kernel's limit (:func:`exceeds`, on the recovery's factors
-    of A_d), for Python to choose a new partition (:meth:`MatrixRSolver.after_step
-    <cmbs.dynamics.matrix_r.MatrixRSolver.after_step>`)."""
+    """The after-step hook: the accepted state recovered in place, the partition updated there
+    (:func:`update_partition`, on the terms the recovery left), and after a new partition
+    recovered again with it, so that the stage hook leaves the state as it is
+    (:meth:`MatrixRSolver.after_step <cmbs.dynamics.matrix_r.MatrixRSolver.after_step>`)."""
     status = _recovered(kernel, model, q, qd, t, buffer)
     if status != OK:
         return status
     n, m = q.shape[0], kernel.m
-    A = buffer[n + m:n + m + m * n].reshape((m, n))           # the recovery left the terms at q
-    work = kernel.work
-    if exceeds(A, kernel.rows, kernel.dependent, work[0], work[1], work[2], kernel.partition_limit):
-        return REPARTITION
-    return OK
+    before = kernel.repartitions[0]
+    status = update_partition(buffer[n + m:n + m + m * n].reshape((m, n)), kernel)
+    if status != OK or kernel.repartitions[0] == before:
+        return status
+    return _recovered(kernel, model, q, qd, t, buffer)
+
+
+@njit(cache=True)
+def _fresh(kernel):
+    """A copy of ``kernel`` with a partition, conditions, counts and work arrays of its own (for
+    runs beside each other)."""
+    return MatrixRKernel(kernel.m, kernel.rows.copy(), kernel.dependent.copy(), kernel.independent.copy(),
+                         kernel.tolerance, kernel.iterations, kernel.recovery_limit, kernel.automatic,
+                         kernel.condition_growth, kernel.conditions.copy(), kernel.repartitions.copy(),
+                         kernel.no_input, kernel.worst.copy(), kernel.Ad.copy(), kernel.pivots.copy(),
+                         kernel.side.copy(), kernel.R.copy(), kernel.reduced.copy(), kernel.reduced_rhs.copy(),
+                         kernel.S.copy(), kernel.MR.copy(), kernel.force.copy())
 
 
 MatrixRKernel.solve = staticmethod(_solve)
 MatrixRKernel.stage_state = staticmethod(_stage_state)
 MatrixRKernel.after_step = staticmethod(_after_step)
+MatrixRKernel.fresh = staticmethod(_fresh)

@@ -19,12 +19,8 @@ and ``after_step`` do: every stage state is the hook's (matrix R: recovered; its
 slope of q), every accepted state passes the after-step hook before its derivative is
 evaluated (then without FSAL, as on the Python path), and every output state passes the output
 hook before it is recorded (drift projection, :class:`cmbs.dynamics.drift.DriftProjection`, as
-the Python path projects its interpolated outputs).  Where that hook hands the run back
-(REPARTITION), :func:`adaptive` calls ``resume`` for the kernel to go on with (matrix R: a new
-partition, chosen at the recovered state as the Python path's ``after_step`` chooses it), which
-finishes that step as the Python path does (the derivative at the new state, the continuous
-extension's stages and the outputs with the new kernel), and goes on: the loop's state (time,
-states, stages, step size, controller, counters) is kept between the calls of :func:`_steps`.
+the Python path projects its interpolated outputs).  Matrix R chooses a new partition inside its
+after-step hook, as the Python path's ``after_step`` does.
 """
 
 from __future__ import annotations
@@ -33,11 +29,10 @@ import math
 
 import numpy as np
 
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 from cmbs.dynamics.base import NON_FINITE, OK
-from cmbs.dynamics.field import REPARTITION, after_step, field, output_state, stage_state
-from cmbs.errors import CmbsError
+from cmbs.dynamics.field import after_step, field, output_state, stage_state
 from cmbs.integrate.compiled_rk4 import record_constraints
 from cmbs.integrate.tableaus import Tableau
 from cmbs.jit import interpreted, njit
@@ -156,7 +151,7 @@ def _dense_value(F, y, x, h, value, slope):
         slope[i] = derivative / h
 
 
-#: statuses besides OK, SINGULAR, NON_FINITE and the formulation's (REPARTITION, matrix R's)
+#: statuses besides OK, SINGULAR, NON_FINITE and the formulation's hooks' (matrix R's)
 UNDERFLOW, TOO_MANY_STEPS = 5, 6
 #: The steps after which an adaptive run stops with TOO_MANY_STEPS.
 MAX_STEPS = 10_000_000
@@ -165,9 +160,8 @@ MAX_STEPS = 10_000_000
 class AdaptiveRun(NamedTuple):
     """The end of an adaptive run: the records (t, q, q̇, q̈, λ, |Φ|, |Φ̇|, -Aᵀλ) and how many
     rows were recorded, the status and the time it refers to, the counters (steps, rejected,
-    evaluations, outputs from the interpolant, resumptions), the state (q, q̇) the status refers
-    to (where a stage failed, for a failed run) and the message of a run that ``resume``
-    stopped ("" else)."""
+    evaluations, outputs from the interpolant) and the state (q, q̇) the status refers to (where
+    a stage failed, for a failed run)."""
 
     records: tuple
     recorded: int
@@ -177,42 +171,25 @@ class AdaptiveRun(NamedTuple):
     rejected: int
     evaluations: int
     unsolved: int
-    resumed: int
     state: np.ndarray
-    message: str
 
 
 def adaptive(model: NamedTuple, formulation: NamedTuple, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray,
              rtol: float, atol: float, u: np.ndarray, buffer_size: int, m: int, tableau: Tableau,
-             adjusts_state: bool, max_steps: int = MAX_STEPS,
-             resume: Callable[[np.ndarray, float], NamedTuple] | None = None) -> AdaptiveRun:
+             adjusts_state: bool, max_steps: int = MAX_STEPS) -> AdaptiveRun:
     """Integrate from t_out[0] to t_out[-1] by ``tableau`` (the controller's exponent
     1/(min(p, p̂) + 1), the starting step's 1/(p + 1), DOP853's second error estimate and
     continuous extension, FSAL unless the formulation ``adjusts_state`` after each step, as the
-    Python loop).  Where the formulation's after-step hook hands the run back (REPARTITION) at
-    an accepted state, ``resume(q, t)`` returns the kernel to go on with, which finishes that
-    step (its derivative at the new state, its outputs) and goes on; or it raises
-    :class:`~cmbs.errors.CmbsError`, which stops the run there with that status."""
+    Python loop)."""
     n = q0.shape[0]
     method = loop_method(tableau, adjusts_state)
     times = np.ascontiguousarray(t_out, dtype=float)
-    y, y_new, k1, stages, clock, counts, where, buffer, records = interpreted(run_arrays)(
+    y, y_new, k1, stages, counts, where, buffer, records = interpreted(run_arrays)(
         np.asarray(q0, dtype=float), np.asarray(qd0, dtype=float), times, m, method[0], method[6], buffer_size)
-    resumed, message = 0, ""
-    while True:
-        status, t_stop = _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, records, buffer, times,
-                                float(rtol), float(atol), u, *method, int(max_steps))
-        if status != REPARTITION:
-            break
-        try:
-            formulation = resume(y_new[:n].copy(), t_stop)
-        except CmbsError as error:
-            message = str(error)
-            break
-        resumed += 1
-    state = y_new if status == REPARTITION else where
+    status, t_stop = _steps(model, formulation, y, y_new, k1, stages, counts, where, records, buffer, times,
+                            float(rtol), float(atol), u, *method, int(max_steps))
     return AdaptiveRun(records, int(counts[0]), int(status), float(t_stop), int(counts[1]), int(counts[2]),
-                       int(counts[3]), int(counts[4]), resumed, state, message)
+                       int(counts[3]), int(counts[4]), where)
 
 
 def loop_method(tableau: Tableau, adjusts_state: bool) -> tuple:
@@ -227,9 +204,8 @@ def loop_method(tableau: Tableau, adjusts_state: bool) -> tuple:
 def run_arrays(q0, qd0, t_out, m, c, dense_c, buffer_size):
     """The arrays of an adaptive run from (q0, q̇0) with outputs at ``t_out`` and a method with
     the nodes ``c`` and the continuous extension's ``dense_c``: the state y = (q, q̇), the step's
-    new state, the derivative at y, the stages (the step's, then the extension's), the clock (t,
-    next step size, the controller's previous error, the size of a step handed back), the counts
-    of :func:`_steps`, the state of a failure, the terms buffer and the records.  Plain numpy:
+    new state, the derivative at y, the stages (the step's, then the extension's), the counts of
+    :func:`_steps`, the state of a failure, the terms buffer and the records.  Plain numpy:
     :func:`adaptive` calls it interpreted, :func:`cmbs.integrate.compiled_batch.adaptive_batch`
     compiled, once per variant."""
     n = q0.shape[0]
@@ -239,10 +215,8 @@ def run_arrays(q0, qd0, t_out, m, c, dense_c, buffer_size):
                np.zeros((count, m)), np.zeros(count), np.zeros(count), np.zeros((count, n)))
     y = np.concatenate((q0, qd0))
     stages = np.zeros((c.shape[0] + dense_c.shape[0], d))
-    clock = np.zeros(4)
-    clock[0] = t_out[0]
     counts = np.zeros(5, dtype=np.int64)   # outputs recorded, steps, rejected, evaluations, from the interpolant
-    return y, np.zeros(d), np.zeros(d), stages, clock, counts, np.zeros(d), np.zeros(buffer_size), records
+    return y, np.zeros(d), np.zeros(d), stages, counts, np.zeros(d), np.zeros(buffer_size), records
 
 
 def _method_arrays(tableau: Tableau) -> tuple[np.ndarray, ...]:
@@ -256,17 +230,12 @@ def _method_arrays(tableau: Tableau) -> tuple[np.ndarray, ...]:
 
 
 @njit(cache=True)
-def _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, records, buffer, t_out, rtol, atol, u, c,
-           a, b, b_error, b_error_low, dense_a, dense_c, dense_d, exponent, start_exponent, first_same_as_last,
-           max_steps):
-    """The loop of :func:`adaptive` from the state ``y`` at t = clock[0] with ``counts`` =
-    (outputs recorded, steps, rejected, evaluations, outputs from the interpolant), all updated in
-    place.  With no output recorded yet it evaluates the derivative ``k1`` there, records
-    t_out[0] and chooses the starting step; else it goes on with ``k1``, the step size clock[1]
-    and the controller's error clock[2], first finishing the step of size clock[3] > 0 to the
-    state ``y_new`` (its ``stages`` kept) that the after-step hook handed back.  Returns the
-    status and the time it refers to; REPARTITION where the hook hands back an accepted state
-    (in ``y_new``, its step's size in clock[3]); a failed stage's state in ``where``."""
+def _steps(model, formulation, y, y_new, k1, stages, counts, where, records, buffer, t_out, rtol, atol, u, c, a, b,
+           b_error, b_error_low, dense_a, dense_c, dense_d, exponent, start_exponent, first_same_as_last, max_steps):
+    """The loop of :func:`adaptive` from the state ``y`` at t_out[0], into ``counts`` = (outputs
+    recorded, steps, rejected, evaluations, outputs from the interpolant): it evaluates the
+    derivative ``k1`` there, records t_out[0], chooses the starting step and steps to t_out[-1].
+    Returns the status and the time it refers to; a failed stage's state in ``where``."""
     d = y.shape[0]
     n = d // 2
     T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE = records
@@ -279,104 +248,93 @@ def _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, recor
     F = np.zeros((3 + dense_d.shape[0], d))
     low, value, slope, state = np.empty(d), np.empty(d), np.empty(d), np.empty(d)
     work, k_new, scale = np.empty(d), np.empty(d), np.empty(d)
-    next_out, steps, rejected, evaluations, unsolved = counts[0], counts[1], counts[2], counts[3], counts[4]
-    t, h, factor_old, handed_back = clock[0], clock[1], clock[2], clock[3]
+    next_out, steps, rejected, evaluations, unsolved = 0, 0, 0, 0, 0
+    t, h, factor_old = t_out[0], 0.0, 1e-4
     t_end = t_out[count - 1]
     t_stop = t
-    status = OK
-    if next_out == 0:
-        status = _rhs(model, formulation, y, t, u, buffer, terms, lam, state, k1)
+    status = _rhs(model, formulation, y, t, u, buffer, terms, lam, state, k1)
+    evaluations += 1
+    if status != OK:
+        _copy(state, where)
+    else:
+        unsolved += _record(model, formulation, t, y, k1, u, buffer, terms, next_out, T, Qs, QDs, QDDs, LAMs, PHI,
+                            PHID, FORCE)
+        next_out += 1
+        # Hairer & Wanner's starting step (Solving ODEs I, §II.4), as the Python loop
+        for i in range(d):
+            scale[i] = atol + abs(y[i]) * rtol
+        d0, d1 = _rms(y, scale), _rms(k1, scale)
+        h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+        h0 = min(h0, t_end - t)
+        for i in range(d):
+            work[i] = y[i] + h0 * k1[i]
+        _rhs(model, formulation, work, t + h0, u, buffer, terms, lam, state, k_new)
         evaluations += 1
-        if status != OK:
-            _copy(state, where)
-        else:
-            unsolved += _record(model, formulation, t, y, k1, u, buffer, terms, next_out, T, Qs, QDs, QDDs, LAMs,
-                                PHI, PHID, FORCE)
-            next_out += 1
-            # Hairer & Wanner's starting step (Solving ODEs I, §II.4), as the Python loop
-            for i in range(d):
-                scale[i] = atol + abs(y[i]) * rtol
-            d0, d1 = _rms(y, scale), _rms(k1, scale)
-            h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-            h0 = min(h0, t_end - t)
-            for i in range(d):
-                work[i] = y[i] + h0 * k1[i]
-            _rhs(model, formulation, work, t + h0, u, buffer, terms, lam, state, k_new)
-            evaluations += 1
-            for i in range(d):
-                work[i] = k_new[i] - k1[i]
-            d2 = _rms(work, scale) / h0
-            h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** start_exponent
-            h = min(100.0 * h0, h1, t_end - t)
-            factor_old = 1e-4
+        for i in range(d):
+            work[i] = k_new[i] - k1[i]
+        d2 = _rms(work, scale) / h0
+        h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** start_exponent
+        h = min(100.0 * h0, h1, t_end - t)
     while status == OK and next_out < count:
-        resumed = handed_back > 0.0
-        if resumed:                         # the step the hook handed back, with the kernel resumed
-            h_try = handed_back
-            handed_back = 0.0
-        else:
-            if steps >= max_steps:
-                status, t_stop = TOO_MANY_STEPS, t
+        if steps >= max_steps:
+            status, t_stop = TOO_MANY_STEPS, t
+            break
+        h_try = min(h, t_end - t)
+        for i in range(d):
+            stages[0, i] = k1[i]
+        finite = True
+        for i in range(1, s):
+            _combination(y, h_try, a[i], stages, i, work)
+            status = _rhs(model, formulation, work, t + c[i] * h_try, u, buffer, terms, lam, state, stages[i])
+            evaluations += 1
+            if status != OK:
+                t_stop = t + c[i] * h_try
                 break
-            h_try = min(h, t_end - t)
+        if status == NON_FINITE:        # retried with a smaller step below
+            status = OK
+            finite = False
+        elif status != OK:              # a singular stage, or its hook failed: the run ends
+            _copy(state, where)
+            break
+        if finite:
+            _combination(y, h_try, b, stages, s, y_new)
             for i in range(d):
-                stages[0, i] = k1[i]
-            finite = True
-            for i in range(1, s):
-                _combination(y, h_try, a[i], stages, i, work)
-                status = _rhs(model, formulation, work, t + c[i] * h_try, u, buffer, terms, lam, state, stages[i])
-                evaluations += 1
-                if status != OK:
-                    t_stop = t + c[i] * h_try
-                    break
-            if status == NON_FINITE:        # retried with a smaller step below
-                status = OK
-                finite = False
-            elif status != OK:              # a singular stage, or its hook failed: the run ends
-                _copy(state, where)
-                break
-            if finite:
-                _combination(y, h_try, b, stages, s, y_new)
-                for i in range(d):
-                    if not math.isfinite(y_new[i]):
-                        finite = False
-            if not finite:
-                if h_try > 1e-14 * max(1.0, abs(t)):
-                    h = h_try / 10.0
-                    rejected += 1
-                    continue
-                status, t_stop = NON_FINITE, t + h_try
+                if not math.isfinite(y_new[i]):
+                    finite = False
+        if not finite:
+            if h_try > 1e-14 * max(1.0, abs(t)):
+                h = h_try / 10.0
+                rejected += 1
+                continue
+            status, t_stop = NON_FINITE, t + h_try
+            _copy(y, where)
+            break
+        for i in range(d):
+            scale[i] = atol + rtol * max(abs(y[i]), abs(y_new[i]))
+        error = _error_norm(h_try, b_error, b_error_low, stages, s, scale, work, low)
+        if error > 1.0:
+            h = h_try * max(0.2, 0.9 * error ** -exponent)
+            rejected += 1
+            if h < 1e-14 * max(1.0, abs(t)):
+                status, t_stop = UNDERFLOW, t
                 _copy(y, where)
                 break
-            for i in range(d):
-                scale[i] = atol + rtol * max(abs(y[i]), abs(y_new[i]))
-            error = _error_norm(h_try, b_error, b_error_low, stages, s, scale, work, low)
-            if error > 1.0:
-                h = h_try * max(0.2, 0.9 * error ** -exponent)
-                rejected += 1
-                if h < 1e-14 * max(1.0, abs(t)):
-                    status, t_stop = UNDERFLOW, t
-                    _copy(y, where)
-                    break
-                continue
-            error = max(error, 1e-10)
-            growth = 0.9 * error ** (-0.7 * exponent) * factor_old ** (0.4 * exponent)
-            h = h_try * min(5.0, max(0.2, growth))
-            factor_old = error
-            status = after_step(formulation, model, y_new[:n], y_new[n:], t + h_try, buffer)
-            if status != OK:
-                t_stop = t + h_try
-                if status == REPARTITION:   # Python chooses the new kernel, then the step goes on
-                    handed_back = h_try
-                else:
-                    _copy(y_new, where)
-                break
+            continue
+        error = max(error, 1e-10)
+        growth = 0.9 * error ** (-0.7 * exponent) * factor_old ** (0.4 * exponent)
+        h = h_try * min(5.0, max(0.2, growth))
+        factor_old = error
+        status = after_step(formulation, model, y_new[:n], y_new[n:], t + h_try, buffer)
+        if status != OK:
+            t_stop = t + h_try
+            _copy(y_new, where)
+            break
         t_new = t + h_try
         if first_same_as_last:
             for i in range(d):
                 k_new[i] = stages[s - 1, i]
-        else:                               # a handed-back state meets its new kernel's stage hook
-            status = _rhs(model, formulation, y_new, t_new, u, buffer, terms, lam, state, k_new, resumed)
+        else:                               # the after-step hook's state: the stage hook leaves it
+            status = _rhs(model, formulation, y_new, t_new, u, buffer, terms, lam, state, k_new, False)
             evaluations += 1
             if status == NON_FINITE:        # as the Python loop: the next step meets it
                 status = OK
@@ -412,7 +370,6 @@ def _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, recor
         _copy(y_new, y)
         _copy(k_new, k1)
     counts[0], counts[1], counts[2], counts[3], counts[4] = next_out, steps, rejected, evaluations, unsolved
-    clock[0], clock[1], clock[2], clock[3] = t, h, factor_old, handed_back
     return status, t_stop
 
 

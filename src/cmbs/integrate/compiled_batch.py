@@ -6,9 +6,7 @@ variants of the initial state and the constant inputs, one variant per iteration
 ``prange`` (threads), each with its own arrays and its own copy of the formulation's work arrays
 (:func:`cmbs.integrate.compiled_rk4.fresh`): each variant's numbers are those of its own
 :func:`cmbs.simulate` run.  The fixed-step RK4 batch is
-:func:`cmbs.integrate.compiled_rk4.rk4_batch`, beside its loop.  Neither takes a formulation
-that hands a run back to Python (matrix R, :func:`cmbs.integrate.compiled_plan.compiled_run`
-with ``batched``).
+:func:`cmbs.integrate.compiled_rk4.rk4_batch`, beside its loop.
 """
 
 from __future__ import annotations
@@ -30,9 +28,9 @@ def adaptive_batch(model, formulation, Q0, QD0, U0, t_out, kept, rtol, atol, met
     Qs (N, kept, n), QDs and PHIs (N, kept); its status, the time it refers to (where a failed
     run stopped) and the number of kept outputs it reached."""
     for v in prange(Q0.shape[0]):
-        y, y_new, k1, stages, clock, counts, where, buffer, records = run_arrays(Q0[v], QD0[v], t_out, m, method[0],
-                                                                                 method[6], buffer_size)
-        status, t_stop = _steps(model, fresh(formulation), y, y_new, k1, stages, clock, counts, where, records, buffer,
+        y, y_new, k1, stages, counts, where, buffer, records = run_arrays(Q0[v], QD0[v], t_out, m, method[0], method[6],
+                                                                          buffer_size)
+        status, t_stop = _steps(model, fresh(formulation), y, y_new, k1, stages, counts, where, records, buffer,
                                 t_out, rtol, atol, U0[v], method[0], method[1], method[2], method[3], method[4],
                                 method[5], method[6], method[7], method[8], method[9], method[10], max_steps)
         count = np.searchsorted(kept, counts[0])      # the kept outputs among the rows recorded

@@ -4,15 +4,14 @@ A run is compiled when its model, formulation and inputs each have a compiled ke
 (:func:`cmbs.model.compiled.model_kernel`, :func:`cmbs.dynamics.field.formulation_kernel`,
 :func:`inputs_kernel`) and its integrator has a compiled loop for them: rk4 (t_end a multiple of
 dt) with any inputs kernel, rk45/rk23/dop853 with constant inputs; with drift projection the
-formulation's kernel is wrapped in :class:`~cmbs.dynamics.drift.DriftProjection` (not for matrix
-R, whose recovery would have to run again on each projected state, nor for a batch).  The
-index-3 integrators (backward Euler, generalized-α: :mod:`cmbs.integrate.compiled_index3`)
-bring their own formulation: they need the model's and the inputs' kernels only (a held law
-with t_end a multiple of dt); so does the trapezoidal rule in matrix R's independent
-coordinates (:mod:`cmbs.integrate.compiled_reduced`), with constant inputs.
-:func:`cmbs.simulate` and :func:`cmbs.sweep` ask here; a batch of runs in one compiled call
-(:func:`cmbs.integrate.compiled_rk4.rk4_batch`) takes only the formulations that never hand a run
-back to Python (matrix R does, to choose a new partition).
+formulation's kernel is wrapped in :class:`~cmbs.dynamics.drift.DriftProjection` (not for a
+batch).  The index-3 integrators (backward Euler, generalized-α:
+:mod:`cmbs.integrate.compiled_index3`) bring their own formulation: they need the model's and
+the inputs' kernels only (a held law with t_end a multiple of dt); so does the trapezoidal rule
+in matrix R's independent coordinates (:mod:`cmbs.integrate.compiled_reduced`), with constant
+inputs.  :func:`cmbs.simulate` and :func:`cmbs.sweep` ask here; a batch of runs in one compiled
+call (:func:`cmbs.integrate.compiled_rk4.rk4_batch`) takes every formulation kernel, each run
+with its own copy (matrix R: its own partition too).
 """
 
 from __future__ import annotations
@@ -59,12 +58,10 @@ def compiled_run(model: Model, chosen: Formulation, solver: object, integrator: 
     """(model, formulation, inputs) kernel tuples when a compiled loop can run the simulation of
     ``model`` under ``chosen`` (bound as ``solver``) with ``integrator``, else None; the
     formulation's is None for an index-3 integrator (:data:`INDEX3`) and the trapezoidal rule,
-    which bring their own.  ``batched``: for many runs in one compiled call, which no
-    ``solver.resume`` can take up (:func:`cmbs.integrate.compiled_rk4.rk4`).  ``project``: drift
-projection to ``projection_tolerance`` after each step (explicit integrators only)."""
-    if batched and hasattr(solver, "resume"):
-        return None
-    if project and (batched or hasattr(solver, "resume") or integrator != "rk4" and integrator not in ADAPTIVE):
+    which bring their own.  ``batched``: for many runs in one compiled call
+    (:func:`cmbs.integrate.compiled_rk4.rk4_batch`), without drift projection.  ``project``: drift
+    projection to ``projection_tolerance`` after each step (explicit integrators only)."""
+    if project and (batched or integrator != "rk4" and integrator not in ADAPTIVE):
         return None
     if integrator not in ("rk4", "trapezoidal") and integrator not in ADAPTIVE and integrator not in INDEX3:
         return None

@@ -13,12 +13,11 @@ from A_d q̈_d = γ_r - A_z z̈ (``dependent_accelerations``); then, with R = [-
 
 where C_t = -∂Q/∂q̇ and K_t = -∂Q/∂q are forward differences over all n coordinates with the
 steps 1e-7 max(1, |x_k|) and the inputs held (:func:`cmbs.integrate.implicit.forward_difference_tangents`).
-After a step the accepted full state is the expansion at the last iterate evaluated, and the
-integrator's z, ż, z̈ are taken from it.  At each output instant
-the partition's κ₂ is tested as matrix R's after-step hook in the explicit loops tests it
-(:func:`cmbs.dynamics.matrix_r_kernels.exceeds`); above the limit the run
-is handed back to Python, which chooses the partition again
-(:meth:`cmbs.dynamics.matrix_r.MatrixRSolver.update_partition`) and resumes.
+After a step the accepted full state is the expansion at the last iterate evaluated, the
+partition is updated there as matrix R's after-step hook in the explicit loops updates it
+(:func:`cmbs.dynamics.matrix_r_kernels.update_partition`: chosen again in place when κ₂ has
+grown by ``condition_growth``), and the integrator's z, ż, z̈ are taken from it in the
+independent coordinates of that partition (their number is fixed).
 """
 
 from __future__ import annotations
@@ -29,28 +28,28 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import OK
-from cmbs.dynamics.matrix_r_kernels import (NOT_CONVERGED, MatrixRKernel, dependent_accelerations, exceeds,
-                                            factor_dependent, recover, velocity_matrix)
+from cmbs.dynamics.matrix_r import singular_partition_message
+from cmbs.dynamics.matrix_r_kernels import (MET, NOT_CONVERGED, MatrixRKernel, dependent_accelerations, recover,
+                                            update_partition, velocity_matrix)
 from cmbs.integrate.compiled_index3 import dense_newton_solve
-from cmbs.integrate.implicit import DIVERGED, HANDED_BACK, STOPPED, forward_difference_tangents
+from cmbs.integrate.implicit import DIVERGED, STOPPED, forward_difference_tangents
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
 
 #: Why a :class:`ReducedProblem` stopped its run (``failure[0]``): the position recovery did not
 #: converge, it met a non-finite Φ or an exactly singular A_d, the forces or the mass matrix are
-#: not finite.
-RECOVERY_NOT_CONVERGED, RECOVERY_FAILED, NON_FINITE_TERMS = 1, 2, 3
+#: not finite, the partition's A_d is singular (κ₂ above 1e12, no better partition).
+RECOVERY_NOT_CONVERGED, RECOVERY_FAILED, NON_FINITE_TERMS, PARTITION_SINGULAR = 1, 2, 3, 4
 
 
 class ReducedProblem(NamedTuple):
-    """The trapezoidal rule's problem for one partition: the model's kernel, its constant inputs
-    u and terms buffer; matrix R's kernel of the partition (:class:`MatrixRKernel`: constraint
-    rows, dependent and independent coordinates, the recovery's tolerance and iterations, the κ₂
-    above which the run is handed back, zero inputs and ``worst``, the largest κ₁ a recovery
-    met); the accepted full state ``full`` and the last expansion ``last`` (each q, q̇, q̈),
-    shared by the problems of a run; its work arrays; ``failure`` (why the problem stopped the
-    run: code, value, time); ``records`` (q, q̇, q̈ of the kept outputs) and the model's name for
-    the messages."""
+    """The trapezoidal rule's problem: the model's kernel, its constant inputs u and terms buffer;
+    matrix R's kernel (:class:`MatrixRKernel`: the partition, updated in place, the recovery's
+    tolerance and iterations, zero inputs and ``worst``, the largest κ₁ a recovery met); the
+    accepted full state ``full`` and the last expansion ``last`` (each q, q̇, q̈), shared by the
+    problems of a run; its work arrays; ``failure`` (why the problem stopped the run: code, value,
+    time); ``records`` (q, q̇, q̈ of the kept outputs); the model's name and its coordinate names
+    (one per line) for the messages."""
 
     model: NamedTuple
     u: np.ndarray
@@ -62,6 +61,7 @@ class ReducedProblem(NamedTuple):
     failure: np.ndarray
     records: tuple
     name: str
+    coordinate_names: str
 
     def stop_message(self) -> str:
         """The message of the failure the problem stopped the run for (as the Python path's)."""
@@ -72,27 +72,26 @@ class ReducedProblem(NamedTuple):
         if code == RECOVERY_FAILED:
             return (f"model {self.name!r} at t={t:.6g}: matrix-r position recovery met non-finite constraints or "
                     "a singular block A_d")
+        if code == PARTITION_SINGULAR:
+            return singular_partition_message(self.name, self.coordinate_names.split("\n"), self.partition, t)
         return f"model {self.name!r} at t={t:.6g}: non-finite forces or mass matrix"
 
 
 def reduced_problems(kernel: NamedTuple, model: object, solver: object, u: np.ndarray, full: tuple, last: tuple,
                      outputs: int) -> Callable[[], ReducedProblem]:
-    """The maker of the :class:`ReducedProblem` of ``model`` (``kernel``) with inputs ``u`` for
-    the current partition of ``solver`` (a :class:`~cmbs.dynamics.matrix_r.MatrixRSolver`: its
-    :meth:`~cmbs.dynamics.matrix_r.MatrixRSolver.kernel`, whose ``worst`` is the solver's), all
-    sharing the full states ``full`` and ``last``, the terms buffer, ``failure`` and the records
-    of ``outputs`` outputs."""
+    """The maker of the :class:`ReducedProblem` of ``model`` (``kernel``) with inputs ``u`` under
+    ``solver`` (a :class:`~cmbs.dynamics.matrix_r.MatrixRSolver`: its
+    :meth:`~cmbs.dynamics.matrix_r.MatrixRSolver.kernel`, whose partition and ``worst`` are the
+    solver's) for a run or its retry, all sharing the full states ``full`` and ``last``, the terms
+    buffer, the work arrays and the records of ``outputs`` outputs, each with a ``failure`` of its
+    own."""
     n = model.n
-    buffer, failure = model.new_terms().buffer.copy(), np.zeros(3)
+    partition = solver.kernel()
+    buffer, work = model.new_terms().buffer.copy(), reduced_work(n, partition.independent.size, partition.rows.size)
     records = (np.zeros((outputs, n)), np.zeros((outputs, n)), np.zeros((outputs, n)))
-
-    def make() -> ReducedProblem:
-        partition = solver.kernel()
-        return ReducedProblem(kernel, u, buffer, partition, full, last,
-                              reduced_work(n, partition.independent.size, partition.rows.size), failure, records,
-                              model.name)
-
-    return make
+    names = "\n".join(model.coordinate_names)
+    return lambda: ReducedProblem(kernel, u, buffer, partition, full, last, work, np.zeros(3), records, model.name,
+                                  names)
 
 
 def reduced_work(n: int, k: int, r: int) -> tuple:
@@ -228,8 +227,10 @@ def _record(problem, row, step, stage, t, state):
 
 @njit(cache=True)
 def _after_step(problem, t, state):
-    """The accepted full state is the last expansion; the integrator's z, ż, z̈ (and the auxiliary
-    acceleration) are taken from it."""
+    """The accepted full state is the last expansion; the partition is updated there
+    (:func:`update_partition`; a singular one noted in ``failure``, for :func:`_at_output`), and
+    the integrator's z, ż, z̈ (and the auxiliary acceleration) are taken from it in the
+    partition's independent coordinates."""
     z, zd, zdd, _, x = state
     full_q, full_qd, full_qdd = problem.full
     last_q, last_qd, last_qdd = problem.last
@@ -237,7 +238,12 @@ def _after_step(problem, t, state):
         full_q[i] = last_q[i]
         full_qd[i] = last_qd[i]
         full_qdd[i] = last_qdd[i]
-    independent = problem.partition.independent
+    partition = problem.partition
+    n, m = full_q.shape[0], partition.m
+    evaluate(problem.model, full_q, problem.work[11], t, partition.no_input, problem.buffer)
+    if update_partition(terms_views(problem.model, n, m, problem.buffer)[2], partition) != OK:
+        problem.failure[0], problem.failure[1], problem.failure[2] = PARTITION_SINGULAR, partition.conditions[MET], t
+    independent = partition.independent
     for b in range(independent.shape[0]):
         c = independent[b]
         z[b] = full_q[c]
@@ -248,18 +254,8 @@ def _after_step(problem, t, state):
 
 @njit(cache=True)
 def _at_output(problem, t):
-    """HANDED_BACK when κ₂ of the partition at the accepted state exceeds ``limit`` (or A_d is
-    singular there), else OK."""
-    full_q = problem.full[0]
-    Ad, pivots, side, zeros = problem.work[0], problem.work[1], problem.work[2], problem.work[11]
-    partition = problem.partition
-    n, m, rows, dependent = full_q.shape[0], partition.m, partition.rows, partition.dependent
-    evaluate(problem.model, full_q, zeros, t, partition.no_input, problem.buffer)
-    A = terms_views(problem.model, n, m, problem.buffer)[2]
-    if not factor_dependent(A, rows, dependent, Ad, pivots) or exceeds(A, rows, dependent, Ad, pivots, side,
-                                                                        partition.partition_limit):
-        return HANDED_BACK
-    return OK
+    """STOPPED where the step's partition update found A_d singular (:func:`_after_step`), else OK."""
+    return STOPPED if problem.failure[0] == PARTITION_SINGULAR else OK
 
 
 ReducedProblem.residual = staticmethod(_residual)

@@ -4,22 +4,20 @@ The loop is written once: it takes the model, the formulation and the inputs as 
 (:mod:`cmbs.model.compiled`, :mod:`cmbs.dynamics.field`, :class:`ConstantInputs` or
 :class:`cmbs.control.compiled_torque.ComputedTorqueKernel`) and calls :func:`cmbs.dynamics.field.field`
 at each stage, after the formulation's stage hook, and its after-step hook on each new state
-(matrix R recovers its dependent coordinates there, and hands the run back to Python for a new
-partition, after which :func:`rk4` resumes the loop); numba compiles one specialisation per
-combination of their classes, containing only the code that combination needs, and caches it.
-:func:`rk4_batch` runs many initial states and inputs in parallel (numba threads), for the
-formulations that never hand a run back.
+(matrix R recovers its dependent coordinates there, and chooses a new partition when its
+condition calls for one); numba compiles one specialisation per combination of their classes,
+containing only the code that combination needs, and caches it.  :func:`rk4_batch` runs many
+initial states and inputs in parallel (numba threads).
 """
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from cmbs.dynamics.base import OK
-from cmbs.dynamics.field import REPARTITION, after_step, field, stage_state
-from cmbs.errors import CmbsError
+from cmbs.dynamics.field import after_step, field, stage_state
 from cmbs.jit import interpreted, njit, njit_borrowing, prange, type_dispatch
 from cmbs.model.compiled import terms_views
 
@@ -40,38 +38,22 @@ ConstantInputs.apply = staticmethod(_keep)
 
 
 def rk4(model: NamedTuple, formulation: NamedTuple, inputs: NamedTuple, q0: np.ndarray, qd0: np.ndarray, h: float,
-        steps: int, every: int, u0: np.ndarray, buffer_size: int, m: int,
-        resume: Callable[[np.ndarray, float], NamedTuple] | None = None) -> tuple:
+        steps: int, every: int, u0: np.ndarray, buffer_size: int, m: int) -> tuple:
     """Fixed-step RK4 for ``steps`` steps of size ``h`` from t = 0; records (t, q, q̇, q̈, λ, u,
     |Φ|max, |Φ̇|max, f_c = -Aᵀλ) every ``every`` steps (only those are stored).  Returns the
     records, the number recorded and a status code with the time, the steps completed, the state
-    and inputs it refers to (for a failed run: where the formulation could not go on), then the
-    message of a run ``resume`` stopped ("" else) and the number of resumptions.
-
-    Where the formulation's after-step hook hands the run back (REPARTITION) at a new state,
-    ``resume(q, t)`` (the solver's, e.g. :meth:`cmbs.dynamics.matrix_r.MatrixRSolver.resume`)
-    returns the formulation kernel the loop resumes with from that step, or raises
-    :class:`~cmbs.errors.CmbsError`: the run then stops there with status REPARTITION.
+    and inputs it refers to (for a failed run: where the formulation could not go on).
 
     The inputs start at ``u0``; the ``inputs`` kernel may change them at each stage.  The
     recorded u at t_n is the input applied from t_n on, with q̈, λ evaluated with it.
     """
     state, records, work = interpreted(_rk4_arrays)(q0, qd0, u0, m, steps // every + 1, buffer_size)
     q, qd, u, sq, sv = state
-    step, recorded, resumed = 0, 0, 0
-    while True:
-        recorded, status, t_stop, step = _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv,
-                                                    work, records, step, recorded)
-        if status != REPARTITION:
-            break
-        try:
-            formulation = resume(q, t_stop)
-        except CmbsError as error:
-            return *records, recorded, status, t_stop, step, q, qd, u, str(error), resumed
-        resumed += 1
+    recorded, status, t_stop, step = _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, work,
+                                                records, 0, 0)
     if status != OK:
-        return *records, recorded, status, t_stop, step, sq, sv, u, "", resumed
-    return *records, recorded, OK, steps * h, steps, q, qd, u, "", resumed
+        return *records, recorded, status, t_stop, step, sq, sv, u
+    return *records, recorded, OK, steps * h, steps, q, qd, u
 
 
 @njit(cache=True)
@@ -95,8 +77,8 @@ def _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, wo
     """The loop of :func:`rk4` on the arrays :func:`_rk4_arrays` allocated (state q, q̇, u
     updated in place; stage state sq, sv), from step ``start_step`` with ``recorded`` records
     written.  Returns (records written, status, time and step of a failed stage); where the
-    after-step hook fails or hands the run back at the new state of step k, its status, time and
-    step k + 1 (from which the loop resumes: that state is recorded there)."""
+    after-step hook fails at the new state of step k, its status, time and step k + 1 (a loop
+    that goes on from there records that state first)."""
     n = q.shape[0]
     buffer, kq, kv, lam, stage_lam = work
     T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE = records

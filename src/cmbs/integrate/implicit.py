@@ -89,9 +89,8 @@ Residual = Callable[[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
                     tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
 
 #: Status codes of :func:`newton_steps` besides OK (0): the Newton matrix is singular, the
-#: correction (or the matrix) is not finite, Newton did not converge, the problem stopped the run,
-#: the problem hands the run back to its caller at an output instant (which may resume it there).
-SINGULAR, DIVERGED, NOT_CONVERGED, STOPPED, HANDED_BACK = 1, 2, 3, 4, 5
+#: correction (or the matrix) is not finite, Newton did not converge, the problem stopped the run.
+SINGULAR, DIVERGED, NOT_CONVERGED, STOPPED = 1, 2, 3, 4
 #: Newton iterations a step may take.
 NEWTON_ITERATIONS = 25
 
@@ -107,7 +106,7 @@ record_output = type_dispatch("record")
 #: ``after_step(problem, t, (q, v, a, λ, x))``: the problem may adjust the accepted state in place.
 after_step = type_dispatch("after_step")
 #: ``at_output(problem, t) -> status``: after the outputs of an instant of ``t_out`` are stored
-#: (a progress bar; a check that may stop the run or hand it back).
+#: (a progress bar; a check that may stop the run).
 at_output = type_dispatch("at_output")
 #: ``differenced(problem, point, t, step, which, shifted, out)``: the function f whose tangents
 #: :func:`forward_difference_tangents` takes, into ``out``, at the iterate ``point`` = (q, v, ...) of
@@ -205,18 +204,16 @@ def python_tangents(function: Callable[[np.ndarray, np.ndarray], np.ndarray], q:
 class CallbackProblem(NamedTuple):
     """A problem given as Python functions: the loop then runs interpreted.  ``function`` is the
     residual (:data:`Residual`); a :class:`NonFiniteResidual` raised by it ends the run as
-    :data:`DIVERGED`, an exception of the types ``stop_on`` raised by it or by ``check`` with
-    its text as the message (kept in ``stopped[0]``).  Optional:
-    ``progress(t)`` and ``check(t) -> bool`` (True hands the run back) at each output instant,
-    ``adjust(t, (q, v, a, λ, x))`` after each step, ``keep(row, t, (q, v, a, λ))`` at each output
-    kept."""
+    :data:`DIVERGED`, an exception of the types ``stop_on`` raised by it (or by ``adjust``, at
+    the next output instant) as :data:`STOPPED` with its text as the message (kept in
+    ``stopped[0]``).  Optional: ``progress(t)`` at each output instant, ``adjust(t, (q, v, a, λ,
+    x))`` after each step, ``keep(row, t, (q, v, a, λ))`` at each output kept."""
 
     function: Residual
     progress: Callable[[float], None] | None
     stop_on: tuple[type[Exception], ...]
     stopped: list
     adjust: Callable[[float, tuple], None] | None = None
-    check: Callable[[float], bool] | None = None
     keep: Callable[[int, float, tuple], None] | None = None
 
     def stop_message(self) -> str:
@@ -253,19 +250,16 @@ def _callback_record(problem: CallbackProblem, row: int, step: int, stage: int, 
 
 def _callback_after_step(problem: CallbackProblem, t: float, state: tuple) -> None:
     if problem.adjust is not None:
-        problem.adjust(t, state)
+        try:
+            problem.adjust(t, state)
+        except problem.stop_on as error:
+            problem.stopped[0] = str(error)
 
 
 def _callback_at_output(problem: CallbackProblem, t: float) -> int:
     if problem.progress is not None:
         problem.progress(t)
-    if problem.check is None:
-        return OK
-    try:
-        return HANDED_BACK if problem.check(t) else OK
-    except problem.stop_on as error:
-        problem.stopped[0] = str(error)
-        return STOPPED
+    return STOPPED if problem.stopped[0] else OK
 
 
 CallbackProblem.residual = staticmethod(_callback_residual)
