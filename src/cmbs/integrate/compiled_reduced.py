@@ -31,7 +31,7 @@ import numpy as np
 from cmbs.dynamics.base import OK
 from cmbs.dynamics.matrix_r_kernels import (NOT_CONVERGED, MatrixRKernel, dependent_accelerations, exceeds,
                                             factor_dependent, recover, velocity_matrix)
-from cmbs.integrate.compiled_index3 import dense_newton_solve
+from cmbs.integrate.compiled_index3 import dense_newton_back_solve, dense_newton_factor
 from cmbs.integrate.implicit import DIVERGED, HANDED_BACK, STOPPED, forward_difference_tangents
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
@@ -264,7 +264,8 @@ def _at_output(problem, t):
 
 ReducedProblem.residual = staticmethod(_residual)
 ReducedProblem.differenced = staticmethod(_differenced)
-ReducedProblem.newton_solve = staticmethod(dense_newton_solve)
+ReducedProblem.newton_factor = staticmethod(dense_newton_factor)
+ReducedProblem.newton_back_solve = staticmethod(dense_newton_back_solve)
 ReducedProblem.record = staticmethod(_record)
 ReducedProblem.after_step = staticmethod(_after_step)
 ReducedProblem.at_output = staticmethod(_at_output)
