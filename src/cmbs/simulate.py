@@ -494,23 +494,31 @@ def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, g
     a0, lam0 = _consistent_start(model, inputs, q0, qd0)
     terms = model.new_terms()
 
-    def residual(t, q, v, a, lam):
-        def dynamic(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
-            """r_dyn = M a + Aᵀλ - Q at (qq, vv) with the inputs applied there, by the compiled
-            problem's routine (:func:`~cmbs.integrate.implicit.dynamic_residual`)."""
+    def dynamic(t: float, a: np.ndarray, lam: np.ndarray) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+        """r_dyn = M a + Aᵀλ - Q as a function of (q, v) at t, with the inputs applied there, by
+        the compiled problem's routine (:func:`~cmbs.integrate.implicit.dynamic_residual`); the
+        terms stay in ``terms``."""
+        def at(qq: np.ndarray, vv: np.ndarray) -> np.ndarray:
             model.evaluate(qq, vv, t, inputs(t, qq, vv), out=terms)
             _require_finite_dynamics(terms)
             r = np.empty(model.n)
             dynamic_residual(terms.M, terms.A, terms.Q, a, lam, r)
             return r
 
-        r = dynamic(q, v)
+        return at
+
+    def residual(t, q, v, a, lam):
+        at = dynamic(t, a, lam)
+        r = at(q, v)
         M, A, phi = terms.M.copy(), terms.A.copy(), terms.phi.copy()
-        K, C = python_tangents(dynamic, q, v)
+        K, C = python_tangents(at, q, v)
         return r, phi, M, A, C, K
 
+    def value(t, q, v, a, lam):
+        return dynamic(t, a, lam)(q, v), terms.phi.copy()
+
     return integrate_index3(residual, q0, qd0, a0, lam0, grid, scheme=scheme, step=dt,
-                            tolerance=tolerance, progress=bar, stop_on=(CmbsError,), keep_every=every)
+                            tolerance=tolerance, progress=bar, stop_on=(CmbsError,), keep_every=every, value=value)
 
 
 def _run_compiled_index3(model: Model, plan: tuple, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray,
@@ -561,7 +569,8 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
     inputs), else interpreted on the Python problem of :func:`_python_reduced_problem`; this
     function drives both alike."""
     from cmbs.dynamics.base import OK
-    from cmbs.integrate.implicit import NEWTON_ITERATIONS, counter_dict, failure_message, newton_run, newton_state
+    from cmbs.integrate.implicit import (NEWTON_ITERATIONS, counter_dict, failure_message, newton_counters,
+                                         newton_run, newton_state)
 
     terms = model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0))
     full = (q0.copy(), qd0.copy(), solver.accelerations(terms, q0, qd0, 0.0).qdd)
@@ -575,7 +584,7 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
 
         problem_for = reduced_problems(kernel, model, solver, np.array(inputs(0.0, q0, qd0), dtype=float), full,
                                        last, times.size)
-    counts = np.zeros(3, dtype=np.int64)
+    counts = newton_counters()
     first, retried, message, stored = 0, -1, "", times.size
     while True:
         problem = problem_for()

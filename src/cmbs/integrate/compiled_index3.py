@@ -13,8 +13,10 @@ the tangents by forward differences with the steps 1e-7 max(1, |x_k|) of each co
 velocity x_k (:func:`cmbs.integrate.implicit.forward_difference_tangents`), the inputs evaluated
 at each shifted state (a computed-torque law's dependence on the state is part of the tangent; a
 held law keeps the sample it took at the step's first iterate).  Its records at the outputs
-are λ (Newton's), u, max|Φ|, max|A v + Φ_t| and f_c = -Aᵀλ.  The Newton matrix is solved by
-Gaussian elimination with partial pivoting (:func:`cmbs.dynamics.kkt.solve_in_place`).
+are λ (Newton's), u, max|Φ|, max|A v + Φ_t| and f_c = -Aᵀλ.  At an iterate where the loop keeps
+its factored Newton matrix, the residual kernel gives r_dyn and Φ only (:data:`residual_value`:
+one model evaluation instead of the 2n + 1 of the tangents).  The Newton matrix is factored by
+LU with partial pivoting (:func:`cmbs.dynamics.kkt.lu_in_place`).
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import OK
-from cmbs.dynamics.kkt import solve_in_place
+from cmbs.dynamics.kkt import lu_in_place, lu_solve
 from cmbs.integrate.compiled_rk4 import apply_inputs, record_constraints
 from cmbs.integrate.implicit import DIVERGED, dynamic_residual, forward_difference_tangents
 from cmbs.jit import njit
@@ -99,11 +101,30 @@ def _residual(problem, step, stage, t, state, out):
 
 
 @njit(cache=True)
-def dense_newton_solve(problem, matrix, rhs):
-    """The Newton correction into ``rhs`` by Gaussian elimination with partial pivoting
-    (``matrix`` destroyed); False when exactly singular.  The ``newton_solve`` of this module's
-    and :mod:`cmbs.integrate.compiled_reduced`'s problems."""
-    return solve_in_place(matrix, rhs)
+def _residual_value(problem, step, stage, t, state, out):
+    """r_dyn and Φ at the iterate ``state`` into ``out`` (:data:`cmbs.integrate.implicit.residual_value`:
+    the loop keeps its matrix); OK."""
+    q, v, a, lam = state
+    r, phi = out[0], out[1]
+    n, m = q.shape[0], lam.shape[0]
+    _dynamic_residual(problem, q, v, a, lam, t, step, stage, r)
+    _, phi_now, _, _, _, _ = terms_views(problem.model, n, m, problem.buffer)
+    phi[:] = phi_now
+    return OK
+
+
+@njit(cache=True)
+def dense_newton_factor(problem, matrix, pivots):
+    """The LU factors with partial pivoting of the Newton matrix in place, its row swaps in
+    ``pivots``; False when exactly singular.  The ``newton_factor`` of this module's and
+    :mod:`cmbs.integrate.compiled_reduced`'s problems."""
+    return lu_in_place(matrix, pivots)
+
+
+@njit(cache=True)
+def dense_newton_back_solve(problem, factors, pivots, rhs):
+    """The Newton correction into ``rhs`` by the factors of :func:`dense_newton_factor`."""
+    lu_solve(factors, pivots, rhs)
 
 
 @njit(cache=True)
@@ -132,7 +153,9 @@ def _at_output(problem, t):
 
 Index3Problem.residual = staticmethod(_residual)
 Index3Problem.differenced = staticmethod(_differenced)
-Index3Problem.newton_solve = staticmethod(dense_newton_solve)
+Index3Problem.residual_value = staticmethod(_residual_value)
+Index3Problem.newton_factor = staticmethod(dense_newton_factor)
+Index3Problem.newton_back_solve = staticmethod(dense_newton_back_solve)
 Index3Problem.record = staticmethod(_record)
 Index3Problem.after_step = staticmethod(_after_step)
 Index3Problem.at_output = staticmethod(_at_output)

@@ -31,7 +31,7 @@ from cmbs.dynamics.base import OK
 from cmbs.dynamics.matrix_r import singular_partition_message
 from cmbs.dynamics.matrix_r_kernels import (MET, NOT_CONVERGED, MatrixRKernel, dependent_accelerations, recover,
                                             update_partition, velocity_matrix)
-from cmbs.integrate.compiled_index3 import dense_newton_solve
+from cmbs.integrate.compiled_index3 import dense_newton_back_solve, dense_newton_factor
 from cmbs.integrate.implicit import DIVERGED, STOPPED, forward_difference_tangents
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
@@ -260,7 +260,8 @@ def _at_output(problem, t):
 
 ReducedProblem.residual = staticmethod(_residual)
 ReducedProblem.differenced = staticmethod(_differenced)
-ReducedProblem.newton_solve = staticmethod(dense_newton_solve)
+ReducedProblem.newton_factor = staticmethod(dense_newton_factor)
+ReducedProblem.newton_back_solve = staticmethod(dense_newton_back_solve)
 ReducedProblem.record = staticmethod(_record)
 ReducedProblem.after_step = staticmethod(_after_step)
 ReducedProblem.at_output = staticmethod(_at_output)
