@@ -4,10 +4,8 @@ solution of Newton's method proper (a matrix at every iterate) to Newton's toler
 factors a matrix far less often, forms one afresh where a stiff spring calls for it, and fails
 only where Newton's method proper fails, with its message."""
 
-import math
 
 import numpy as np
-import pytest
 
 import cmbs
 from cmbs.integrate.implicit import generalized_alpha, integrate_index3

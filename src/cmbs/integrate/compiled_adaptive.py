@@ -181,7 +181,6 @@ def adaptive(model: NamedTuple, formulation: NamedTuple, q0: np.ndarray, qd0: np
     1/(min(p, p̂) + 1), the starting step's 1/(p + 1), DOP853's second error estimate and
     continuous extension, FSAL unless the formulation ``adjusts_state`` after each step, as the
     Python loop)."""
-    n = q0.shape[0]
     method = loop_method(tableau, adjusts_state)
     times = np.ascontiguousarray(t_out, dtype=float)
     y, y_new, k1, stages, counts, where, buffer, records = interpreted(run_arrays)(

@@ -235,7 +235,7 @@ class CallbackProblem(NamedTuple):
     the next output instant) as :data:`STOPPED` with its text as the message (kept in
     ``stopped[0]``).  Optional: ``progress(t)`` at each output instant, ``adjust(t, (q, v, a, λ,
     x))`` after each step, ``keep(row, t, (q, v, a, λ))`` at each output kept, ``value(t, q, v,
-    a, λ) -> (r_dyn, Φ)``: the residual without the matrices (else ``function`` serves).
+    a, λ) -> (r_dyn, Φ)``: the residual without the matrices (else ``function`` serves)."""
 
     function: Residual
     progress: Callable[[float], None] | None
