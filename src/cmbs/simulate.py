@@ -27,6 +27,7 @@ from cmbs.dynamics import Formulation, formulation as make_formulation
 from cmbs.dynamics.matrix_r import MatrixRSolver, rounding_note
 from cmbs.dynamics.drift import CORRECTED, correct_positions, project_velocities
 from cmbs.errors import CmbsError, SingularSystemError, did_you_mean
+from cmbs.integrate.continuity import BranchWatch
 from cmbs.integrate.explicit import Integration, integrate as integrate_explicit
 from cmbs.integrate.grid import whole_steps
 from cmbs.integrate.implicit import BACKWARD_EULER, TRAPEZOIDAL, Scheme, generalized_alpha, integrate_index3
@@ -432,7 +433,7 @@ def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.
     result = integrate_explicit(field, np.concatenate([q0, qd0]), grid if fixed else grid[::every], tableau=tableau,
                                 rtol=rtol, atol=atol, step=dt if fixed else None,
                                 after_step=after_step if project or solver.adjusts_state else None, progress=bar,
-                                stop_on=(CmbsError,), keep_every=every if fixed else 1)
+                                stop_on=(CmbsError,), keep_every=every if fixed else 1, watch=BranchWatch(model))
     if project and tableau.b_error is not None:     # adaptive: outputs between steps are interpolated
         for row, t in zip(result.y, result.t):
             q, qd = project_state(model, row[:n], row[n:], float(t), tolerance=projection_tolerance)

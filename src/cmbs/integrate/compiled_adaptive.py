@@ -39,8 +39,9 @@ from cmbs.dynamics.base import NON_FINITE, OK
 from cmbs.dynamics.field import REPARTITION, after_step, field, output_state, stage_state
 from cmbs.errors import CmbsError
 from cmbs.integrate.compiled_rk4 import record_constraints
+from cmbs.integrate.continuity import LEFT_BRANCH, jump_message, kept_records, left_branch, watch_array
 from cmbs.integrate.tableaus import Tableau
-from cmbs.jit import njit
+from cmbs.jit import interpreted, njit
 from cmbs.model.compiled import terms_views
 
 
@@ -208,9 +209,11 @@ def adaptive(model: NamedTuple, formulation: NamedTuple, q0: np.ndarray, qd0: np
     fsal = bool(tableau.first_same_as_last and not adjusts_state)
     times = np.ascontiguousarray(t_out, dtype=float)
     resumed, message = 0, ""
+    watch = interpreted(watch_array)(n)
     while True:
         status, t_stop = _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, records, buffer, times,
-                                float(rtol), float(atol), u, *method, exponent, start_exponent, fsal, int(max_steps))
+                                float(rtol), float(atol), u, *method, exponent, start_exponent, fsal, int(max_steps),
+                                watch)
         if status != REPARTITION:
             break
         try:
@@ -219,6 +222,8 @@ def adaptive(model: NamedTuple, formulation: NamedTuple, q0: np.ndarray, qd0: np
             message = str(error)
             break
         resumed += 1
+    if status == LEFT_BRANCH:
+        message = jump_message(watch)
     state = y_new if status == REPARTITION else where
     return AdaptiveRun(records, int(counts[0]), int(status), float(t_stop), int(counts[1]), int(counts[2]),
                        int(counts[3]), int(counts[4]), resumed, state, message)
@@ -237,15 +242,18 @@ def _method_arrays(tableau: Tableau) -> tuple[np.ndarray, ...]:
 @njit(cache=True)
 def _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, records, buffer, t_out, rtol, atol, u, c,
            a, b, b_error, b_error_low, dense_a, dense_c, dense_d, exponent, start_exponent, first_same_as_last,
-           max_steps):
+           max_steps, watch):
     """The loop of :func:`adaptive` from the state ``y`` at t = clock[0] with ``counts`` =
     (outputs recorded, steps, rejected, evaluations, outputs from the interpolant), all updated in
     place.  With no output recorded yet it evaluates the derivative ``k1`` there, records
     t_out[0] and chooses the starting step; else it goes on with ``k1``, the step size clock[1]
     and the controller's error clock[2], first finishing the step of size clock[3] > 0 to the
-    state ``y_new`` (its ``stages`` kept) that the after-step hook handed back.  Returns the
-    status and the time it refers to; REPARTITION where the hook hands back an accepted state
-    (in ``y_new``, its step's size in clock[3]); a failed stage's state in ``where``."""
+    state ``y_new`` (its ``stages`` kept) that the after-step hook handed back.  The branch watch
+    (:mod:`cmbs.integrate.continuity`) sees each accepted state with its derivative, and ends the
+    run (LEFT_BRANCH) where the motion left its branch, the outputs after the jump's start
+    dropped.  Returns the status and the time it refers to; REPARTITION where the hook hands
+    back an accepted state (in ``y_new``, its step's size in clock[3]); a failed stage's state in
+    ``where``."""
     d = y.shape[0]
     n = d // 2
     T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE = records
@@ -269,6 +277,7 @@ def _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, recor
         if status != OK:
             _copy(state, where)
         else:
+            left_branch(watch, t, y[n:], k1[n:], terms[2])     # the first state starts the watch
             unsolved += _record(model, formulation, t, y, k1, u, buffer, terms, next_out, T, Qs, QDs, QDDs, LAMs,
                                 PHI, PHID, FORCE)
             next_out += 1
@@ -364,6 +373,10 @@ def _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, recor
                 _copy(state, where)
                 break
         steps += 1
+        if left_branch(watch, t_new, y_new[n:], k_new[n:], terms[2]):
+            status, t_stop = LEFT_BRANCH, t_new
+            next_out = kept_records(T, next_out, watch)
+            break
         if extra > 0 and next_out < count and t_out[next_out] <= t_new + 1e-12 * max(1.0, abs(t_new)):
             for i in range(extra):              # the continuous extension's stages
                 _combination(y, h_try, dense_a[i], stages, s + i, work)
