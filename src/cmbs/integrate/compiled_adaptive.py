@@ -209,7 +209,7 @@ def adaptive(model: NamedTuple, formulation: NamedTuple, q0: np.ndarray, qd0: np
     fsal = bool(tableau.first_same_as_last and not adjusts_state)
     times = np.ascontiguousarray(t_out, dtype=float)
     resumed, message = 0, ""
-    watch = interpreted(watch_array)(n)
+    watch = interpreted(watch_array)(n, m)
     while True:
         status, t_stop = _steps(model, formulation, y, y_new, k1, stages, clock, counts, where, records, buffer, times,
                                 float(rtol), float(atol), u, *method, exponent, start_exponent, fsal, int(max_steps),

@@ -59,7 +59,7 @@ def rk4(model: NamedTuple, formulation: NamedTuple, inputs: NamedTuple, q0: np.n
     """
     state, records, work = interpreted(_rk4_arrays)(q0, qd0, u0, m, steps // every + 1, buffer_size)
     q, qd, u, sq, sv = state
-    watch = interpreted(watch_array)(q0.shape[0])
+    watch = interpreted(watch_array)(q0.shape[0], m)
     step, recorded, resumed = 0, 0, 0
     while True:
         recorded, status, t_stop, step = _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv,
@@ -197,7 +197,7 @@ def rk4_batch(model, formulation, inputs, Q0, QD0, U0, h, steps, every, buffer_s
         state, records, work = _rk4_arrays(Q0[v], QD0[v], U0[v], m, steps // every + 1, buffer_size)
         q, qd, u, sq, sv = state
         count, status, _, _ = _rk4_steps(model, fresh(formulation), inputs, h, steps, every, q, qd, u, sq, sv, work,
-                                         records, 0, 0, watch_array(q.shape[0]))
+                                         records, 0, 0, watch_array(q.shape[0], m))
         Qs[v, :count] = records[1][:count]
         QDs[v, :count] = records[2][:count]
         PHIs[v, :count] = records[6][:count]

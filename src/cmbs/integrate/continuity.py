@@ -17,9 +17,11 @@ constraints between two admissible velocities (A q̇ = -Φ_t before and after, A
 over the short time) has A Δq̇ ≈ 0, hence Δq̇ᵀ M Δq̇ = μᵀ A Δq̇ ≈ 0: none unless A M⁻¹Aᵀ is
 (nearly) singular.  A velocity jump at a regular configuration is thus an applied force's (a
 stiff contact, an input) and no branch change: the watch fails a run only where the
-row-normalised constraint Jacobian is within :data:`NEAR_SINGULAR` of rank loss, σ_min/σ_max ≤
-0.1 (σ_min/σ_max is the relative distance to the nearest rank-deficient matrix, Eckart-Young;
-on A02 it is 0.37 θ, θ the crank angle from the horizontal, so the gate holds within 15°).  It
+constraint Jacobian is within :data:`NEAR_SINGULAR` of rank loss, σ_min / max(σ_max, 1) ≤ 0.1 for
+A with each row divided by its norm at the first state (as the formulations' rank tests scale
+it, so that a row that vanishes, the joint-coordinate slider-crank's at 90°, is seen; σ_min/σ_max
+is the relative distance to the nearest rank-deficient matrix, Eckart-Young).  On A02 the ratio
+is 0.37 θ, θ the crank angle from the horizontal: the gate holds within 15° of the passage.  It
 is evaluated only when one of the two tests below finds a jump, so it costs nothing otherwise.
 
 **The two tests** (the velocity change is measured in the Euclidean norm of q̇, against the
@@ -42,7 +44,7 @@ The reference a_ref is the largest |q̈| met so far, lagged: it follows a larger
 than d(ln a_ref)/dt = :data:`FOLLOW` · a_ref / |q̇|, ten times the rate at which the motion's own
 time scale τ = |q̇| / |q̈| (the time in which the accelerations change the velocity by its own
 size) lets accelerations grow.  A physical motion's accelerations change on that scale, so
-a_ref keeps up with them (on A02 from rest to the largest |q̈| = 81 m/s² the ratio |q̈| / a_ref
+a_ref keeps up with them (on A02, from |q̈| = 1.7 m/s² at the start to the largest, 81 m/s², |q̈| / a_ref
 stays below 1.6 at FOLLOW = 10, 3.3 at FOLLOW = 3); a burst of 10⁻⁴-10⁻² s cannot move it.
 
 **Thresholds.**  JUMP = 0.5: a change of branch moves the velocity from one branch's tangent to
@@ -79,7 +81,7 @@ JUMP = 0.5
 BURST = 10.0
 #: The reference acceleration follows larger ones at this many times the motion's own rate |q̈|/|q̇|.
 FOLLOW = 10.0
-#: σ_min/σ_max of the row-normalised constraint Jacobian at or below which a configuration is near-singular.
+#: σ_min / max(σ_max, 1) of the row-scaled constraint Jacobian at or below which a configuration is near-singular.
 NEAR_SINGULAR = 0.1
 
 # the watch array: scalars, then the previous state's q̇ and q̈ and the window's first q̇
@@ -89,13 +91,25 @@ SCALARS = 12
 
 
 @njit(cache=True)
-def watch_array(n):
-    """The state of a watch over ``n`` coordinates, not started (its first state starts it).
-    Plain numpy: called interpreted from Python (:func:`cmbs.jit.interpreted`), compiled from a
-    batch of runs."""
-    watch = np.zeros(SCALARS + 3 * n)
+def watch_array(n, m):
+    """The state of a watch over ``n`` coordinates and ``m`` constraints, not started (its first
+    state starts it).  Plain numpy: called interpreted from Python (:func:`cmbs.jit.interpreted`),
+    compiled from a batch of runs."""
+    watch = np.zeros(SCALARS + 3 * n + m)
     watch[T_PREVIOUS] = np.nan
     return watch
+
+
+@njit_borrowing(cache=True)
+def keep_row_scale(watch, n, A):
+    """The row scale of the watch's Jacobians, 1/‖row i of A‖ at its first state (1 for a row of
+    zeros), into the end of ``watch``."""
+    start = SCALARS + 3 * n
+    for i in range(A.shape[0]):
+        total = 0.0
+        for j in range(A.shape[1]):
+            total += A[i, j] * A[i, j]
+        watch[start + i] = 1.0 / math.sqrt(total) if total > 0.0 else 1.0
 
 
 @njit_borrowing(cache=True)
@@ -165,25 +179,18 @@ def _note_jump(watch, start, end, change, speed, reference):
 
 
 @njit(cache=True)
-def singularity(A):
-    """σ_min/σ_max of A with each non-zero row scaled to unit norm (0 when A has more rows than
-    columns or a row of zeros; 1 without rows): from the Gram matrix G = (SA)(SA)ᵀ, its
-    Cholesky factor (a failed factorization: 0), inverse iteration for λ_min and the power
-    method for λ_max (30 iterations each, from a fixed start; a Rayleigh quotient bounds λ_min
-    from above, so the ratio errs towards regular).  Allocates its own work arrays."""
+def singularity(A, scale):
+    """σ_min / max(σ_max, 1) of SA, S = diag(``scale``) (0 when A has more rows than columns; 1
+    without rows), as the formulations' rank tests measure it (:func:`cmbs.dynamics.kkt.certify`):
+    from the Gram matrix G = (SA)(SA)ᵀ, its Cholesky factor (a failed factorization: 0), inverse
+    iteration for λ_min and the power method for λ_max (30 iterations each, from a fixed start;
+    a Rayleigh quotient bounds λ_min from above, so the ratio errs towards regular).  Allocates
+    its own work arrays."""
     m, n = A.shape
     if m == 0:
         return 1.0
     if m > n:
         return 0.0
-    scale = np.empty(m)
-    for i in range(m):
-        total = 0.0
-        for j in range(n):
-            total += A[i, j] * A[i, j]
-        if total == 0.0:
-            return 0.0
-        scale[i] = 1.0 / math.sqrt(total)
     G = np.empty((m, m))
     for i in range(m):
         for k in range(i + 1):
@@ -199,7 +206,7 @@ def singularity(A):
             for j in range(k):
                 total -= L[i, j] * L[k, j]
             if i == k:
-                if total <= 1e-15 * m:
+                if total <= 1e-30 * max(G[i, i], 1.0):
                     return 0.0
                 L[i, i] = math.sqrt(total)
             else:
@@ -234,7 +241,7 @@ def singularity(A):
         smallest = 1.0 / product                # x unit: xᵀG⁻¹x → 1/λ_min
         for i in range(m):
             x[i] = y[i]
-    return math.sqrt(max(smallest, 0.0) / largest)
+    return math.sqrt(max(smallest, 0.0)) / max(math.sqrt(largest), 1.0)
 
 
 @njit(cache=True)
@@ -264,12 +271,17 @@ def _power(G, x, y):
 
 @njit_borrowing(cache=True)
 def left_branch(watch, t, qd, qdd, A):
-    """The watch at an accepted state (t, q̇, q̈) with constraint Jacobian ``A`` there: True when
-    the velocity jumped (:func:`velocity_jump`) at a near-singular configuration
-    (:func:`singularity` ≤ :data:`NEAR_SINGULAR`, left in ``watch[SINGULARITY]``)."""
+    """The watch at an accepted state (t, q̇, q̈) with constraint Jacobian ``A`` there (the first
+    state's sets the row scale): True when the velocity jumped (:func:`velocity_jump`) at a
+    near-singular configuration (:func:`singularity` ≤ :data:`NEAR_SINGULAR`, left in
+    ``watch[SINGULARITY]``)."""
+    n = qd.shape[0]
+    if not math.isfinite(watch[T_PREVIOUS]):
+        keep_row_scale(watch, n, A)
     if not velocity_jump(watch, t, qd, qdd):
         return False
-    watch[SINGULARITY] = singularity(A)
+    start = SCALARS + 3 * n
+    watch[SINGULARITY] = singularity(A, watch[start:start + A.shape[0]])
     return watch[SINGULARITY] <= NEAR_SINGULAR
 
 
@@ -302,14 +314,20 @@ class BranchWatch:
 
     def __init__(self, model: object):
         self.model = model
-        self.watch = interpreted(watch_array)(model.n)
+        self.watch = interpreted(watch_array)(model.n, model.m)
 
     def __call__(self, t: float, y: np.ndarray, dy: np.ndarray) -> tuple[float, str] | None:
-        n = self.model.n
+        n, m = self.model.n, self.model.m
         qd, qdd = np.ascontiguousarray(y[n:]), np.ascontiguousarray(dy[n:])
+        if not np.isfinite(self.watch[T_PREVIOUS]):
+            keep_row_scale(self.watch, n, self._jacobian(t, y))
         if not velocity_jump(self.watch, float(t), qd, qdd):
             return None
-        self.watch[SINGULARITY] = singularity(np.ascontiguousarray(self.model.jacobian(y[:n], float(t)), dtype=float))
+        start = SCALARS + 3 * n
+        self.watch[SINGULARITY] = singularity(self._jacobian(t, y), self.watch[start:start + m])
         if self.watch[SINGULARITY] > NEAR_SINGULAR:
             return None
         return float(self.watch[JUMP_FROM]), jump_message(self.watch)
+
+    def _jacobian(self, t: float, y: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(self.model.jacobian(y[:self.model.n], float(t)), dtype=float)
