@@ -186,13 +186,15 @@ def test_a02_runs_that_say_success_stay_on_the_branch_and_failed_ones_keep_only_
 def test_a02_python_loop_ends_at_the_same_jump(formulation, integrator):
     """The Python loop watches as the compiled ones do: the same failure, its samples on the
     branch and on the exact B0 (the two loops round differently near the singular position, so
-    the jump's instant may differ by a step)."""
+    the jump's instant may differ by a step; lagrange rk4's velocity grows tenfold there, which
+    the message calls a divergence)."""
     model = cmbs.load("n-four-bar", N=N)
     options = dict(dt=1e-3, every=50) if integrator == "rk4" else dict(dt=0.05)
     runs = [cmbs.simulate(model, t_end=4.0, formulation=formulation, integrator=integrator, compiled=compiled,
                           **options) for compiled in (False, True)]
     for run in runs:
-        assert run.info["status"] == "failed" and run.info["message"].startswith("the velocity jumped by")
+        assert run.info["status"] == "failed"
+        assert run.info["message"].startswith(("the velocity jumped by", "the motion diverged: |q̇| grew"))
         assert off_branch(run) <= 1e-3 and b0_error(run).max() <= 1e-3
     assert runs[0].t[-1] == runs[1].t[-1]
 

@@ -86,8 +86,11 @@ NEAR_SINGULAR = 0.1
 
 # the watch array: scalars, then the previous state's q̇ and q̈ and the window's first q̇
 REFERENCE, T_PREVIOUS, SPEED_PREVIOUS, OPEN, T_WINDOW, SPEED_WINDOW = 0, 1, 2, 3, 4, 5
-JUMP_FROM, JUMP_TO, JUMP_SIZE, JUMP_SPEED, JUMP_REFERENCE, SINGULARITY = 6, 7, 8, 9, 10, 11
-SCALARS = 12
+JUMP_FROM, JUMP_TO, JUMP_SIZE, JUMP_SPEED, JUMP_REFERENCE, SINGULARITY, SPEED_FROM, SPEED_TO = range(6, 14)
+SCALARS = 14
+#: A jump after which |q̇| is this many times what it was is a divergence, not a change of branch
+#: (which keeps the kinetic energy: the forces are bounded and the time short).
+DIVERGED = 10.0
 
 
 @njit(cache=True)
@@ -112,56 +115,44 @@ def keep_row_scale(watch, n, A):
         watch[start + i] = 1.0 / math.sqrt(total) if total > 0.0 else 1.0
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def velocity_jump(watch, t, qd, qdd):
     """Tests (a) and (b) of the module at the accepted state (t, q̇, q̈), then the state becomes
     the previous one.  True when the velocity jumped: the interval (``JUMP_FROM``, ``JUMP_TO``),
-    the change, the speed and a_ref are left in ``watch``.  A non-finite state is passed over
-    (the loops fail on it themselves); the first state starts the watch."""
+    the change, the speeds and a_ref are left in ``watch``.  A non-finite state is passed over
+    (the loops fail on it themselves); the first state starts the watch, and until a state with
+    accelerations (a_ref > 0) there is nothing to judge a jump by.  One pass over the
+    coordinates, squared norms compared (compiled into the loops)."""
     n = qd.shape[0]
-    speed, acceleration = 0.0, 0.0
+    previous = SCALARS                                 # q̇ at SCALARS, q̈ at SCALARS + n, q̇_w after
+    h = t - watch[T_PREVIOUS]
+    speed, acceleration, defect, change = 0.0, 0.0, 0.0, 0.0
     for i in range(n):
         speed += qd[i] * qd[i]
         acceleration += qdd[i] * qdd[i]
+        step = qd[i] - watch[previous + i]
+        change += step * step
+        gap = step - 0.5 * h * (watch[previous + n + i] + qdd[i])
+        defect += gap * gap
     speed, acceleration = math.sqrt(speed), math.sqrt(acceleration)
     if not (math.isfinite(speed) and math.isfinite(acceleration)):
         return False
-    previous, window = SCALARS, SCALARS + 2 * n        # q̇ at SCALARS, q̈ at SCALARS + n, q̇_w after
     jumped = False
-    if math.isfinite(watch[T_PREVIOUS]):
-        h = t - watch[T_PREVIOUS]
-        reference = watch[REFERENCE]
-        defect, change = 0.0, 0.0
-        for i in range(n):
-            step = qd[i] - watch[previous + i]
-            change += step * step
-            gap = step - 0.5 * h * (watch[previous + n + i] + qdd[i])
-            defect += gap * gap
-        defect, change = math.sqrt(defect), math.sqrt(change)
-        if defect > JUMP * max(speed, watch[SPEED_PREVIOUS]):                      # (a)
-            _note_jump(watch, watch[T_PREVIOUS], t, change, max(speed, watch[SPEED_PREVIOUS]), reference)
+    reference = watch[REFERENCE]
+    if math.isfinite(h) and reference > 0.0:          # else no acceleration yet to judge by
+        if defect > (JUMP * max(speed, watch[SPEED_PREVIOUS])) ** 2:                # (a)
+            _note_jump(watch, watch[T_PREVIOUS], t, math.sqrt(change), watch[SPEED_PREVIOUS], speed, reference)
             jumped = True
-        if change > BURST * reference * h:                                         # (b)
-            if watch[OPEN] == 0.0:
-                watch[OPEN], watch[T_WINDOW], watch[SPEED_WINDOW] = 1.0, watch[T_PREVIOUS], watch[SPEED_PREVIOUS]
-                for i in range(n):
-                    watch[window + i] = watch[previous + i]
-            total = 0.0
-            for i in range(n):
-                total += (qd[i] - watch[window + i]) ** 2
-            total = math.sqrt(total)
-            scale = max(speed, watch[SPEED_WINDOW])
-            if total - BURST * reference * (t - watch[T_WINDOW]) > JUMP * scale:
-                _note_jump(watch, watch[T_WINDOW], t, total, scale, reference)
-                jumped = True
+        if change > (BURST * reference * h) ** 2:                                   # (b)
+            jumped = _window_jump(watch, t, qd, speed, reference) or jumped
         else:
             watch[OPEN] = 0.0
-        if reference == 0.0 or speed == 0.0:
-            watch[REFERENCE] = max(reference, acceleration)
-        else:
+        if speed > 0.0:
             watch[REFERENCE] = max(reference, min(acceleration, reference * (1.0 + FOLLOW * h * reference / speed)))
+        else:
+            watch[REFERENCE] = max(reference, acceleration)
     else:
-        watch[REFERENCE] = acceleration
+        watch[REFERENCE] = max(reference, acceleration)
     watch[T_PREVIOUS], watch[SPEED_PREVIOUS] = t, speed
     for i in range(n):
         watch[previous + i] = qd[i]
@@ -169,13 +160,35 @@ def velocity_jump(watch, t, qd, qdd):
     return jumped
 
 
+@njit_borrowing(cache=True)
+def _window_jump(watch, t, qd, speed, reference):
+    """Test (b) at a step that changed the velocity by more than BURST a_ref h: the window opens at
+    the previous state unless open; True when the change over it exceeds BURST a_ref (t - t_w) by
+    JUMP of the speed."""
+    n = qd.shape[0]
+    previous, window = SCALARS, SCALARS + 2 * n
+    if watch[OPEN] == 0.0:
+        watch[OPEN], watch[T_WINDOW], watch[SPEED_WINDOW] = 1.0, watch[T_PREVIOUS], watch[SPEED_PREVIOUS]
+        for i in range(n):
+            watch[window + i] = watch[previous + i]
+    total = 0.0
+    for i in range(n):
+        total += (qd[i] - watch[window + i]) ** 2
+    total = math.sqrt(total)
+    if total - BURST * reference * (t - watch[T_WINDOW]) > JUMP * max(speed, watch[SPEED_WINDOW]):
+        _note_jump(watch, watch[T_WINDOW], t, total, watch[SPEED_WINDOW], speed, reference)
+        return True
+    return False
+
+
 @njit_borrowing(cache=True, inline="always")
-def _note_jump(watch, start, end, change, speed, reference):
+def _note_jump(watch, start, end, change, speed_before, speed_after, reference):
     """Keep the jump over (start, end), the earlier start of tests (a) and (b) when both found one."""
     if watch[JUMP_TO] == end and watch[JUMP_FROM] <= start:
         return
     watch[JUMP_FROM], watch[JUMP_TO], watch[JUMP_SIZE] = start, end, change
-    watch[JUMP_SPEED], watch[JUMP_REFERENCE] = speed, reference
+    watch[JUMP_SPEED], watch[JUMP_REFERENCE] = max(speed_before, speed_after), reference
+    watch[SPEED_FROM], watch[SPEED_TO] = speed_before, speed_after
 
 
 @njit(cache=True)
@@ -269,7 +282,7 @@ def _power(G, x, y):
     return largest
 
 
-@njit_borrowing(cache=True)
+@njit_borrowing(cache=True, inline="always")
 def left_branch(watch, t, qd, qdd, A):
     """The watch at an accepted state (t, q̇, q̈) with constraint Jacobian ``A`` there (the first
     state's sets the row scale): True when the velocity jumped (:func:`velocity_jump`) at a
@@ -297,13 +310,19 @@ def kept_records(T, recorded, watch):
 
 
 def jump_message(watch: np.ndarray) -> str:
-    """Why the watch ended a run: the jump, when and where, and what to try."""
+    """Why the watch ended a run: the jump, when and where, and what to try; a divergence (|q̇|
+    grown :data:`DIVERGED` times) is said to be one."""
     start, end, change, speed = watch[JUMP_FROM], watch[JUMP_TO], watch[JUMP_SIZE], watch[JUMP_SPEED]
-    return (f"the velocity jumped by |Δq̇| = {change:.3g} ({change / speed:.2g} times |q̇|) between t={start:.6g} and "
-            f"t={end:.6g}, far more than the accelerations before explain (reference |q̈| {watch[JUMP_REFERENCE]:.3g}), "
-            f"near a singular configuration (σ_min/σ_max of the constraint Jacobian {watch[SINGULARITY]:.2g}): the "
-            f"motion left its assembly branch (a change of branch takes an impulse, which no bounded force gives); "
-            f"the outputs after t={start:.6g} are dropped.  Try a smaller dt or rtol, or integrator 'generalized-alpha'")
+    where = (f"between t={start:.6g} and t={end:.6g}, far more than the accelerations before explain (reference "
+             f"|q̈| {watch[JUMP_REFERENCE]:.3g}), near a singular configuration (σ_min/σ_max of the constraint Jacobian "
+             f"{watch[SINGULARITY]:.2g})")
+    dropped = f"the outputs after t={start:.6g} are dropped"
+    if watch[SPEED_TO] > DIVERGED * watch[SPEED_FROM]:
+        return (f"the motion diverged: |q̇| grew from {watch[SPEED_FROM]:.3g} to {watch[SPEED_TO]:.3g} {where}; "
+                f"{dropped}.  Try a smaller dt or rtol, or integrator 'generalized-alpha'")
+    return (f"the velocity jumped by |Δq̇| = {change:.3g} ({change / speed:.2g} times |q̇|) {where}: the motion left "
+            f"its assembly branch (a change of branch takes an impulse, which no bounded force gives); {dropped}.  "
+            "Try a smaller dt or rtol, or integrator 'generalized-alpha'")
 
 
 class BranchWatch:
