@@ -53,9 +53,13 @@ apart or more (A02's: 55°; the jumps measured there are 1.3 to 1.9 times |q̇|)
 physical accelerations stay within a small factor of the lagged reference (above), bursts reach
 10² to 10⁵ times it.  Measured on A02 (N = 2, rk4 at 1 ms, rk45, dop853, every formulation):
 runs that stay on the branch have defects up to 0.12 |q̇| and never open a window; the runs
-that leave it are caught at the passage.  The existing test suite's runs (pendulums,
-slider-cranks through dead centres, four-bars, stiff springs, Baumgarte, penalty, the human
-model) meet no alarm.
+that leave it are caught at the passage.  In the test suite (pendulums, slider-cranks through
+their singular positions, four-bars, stiff springs, Baumgarte, penalty, the human model) no run
+that stays on its branch meets an alarm; the natural slider-crank under projection and
+Udwadia-Kalaba with the Moore-Penrose inverse, which switches branch at 1.99 s, now fails there,
+and Andrews' squeezer under RK4 at 10 ms fails when |q̇| grows 10⁹ times in a step (reported as
+a divergence: a jump after which |q̇| is :data:`DIVERGED` times what it was is no change of
+branch, which keeps the kinetic energy).
 
 The watch keeps its state in one float array (:func:`watch_array`), updated in place by
 :func:`left_branch` at every accepted state (the first call starts it), in the compiled loops
