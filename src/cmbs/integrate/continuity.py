@@ -317,15 +317,15 @@ def jump_message(watch: np.ndarray) -> str:
     """Why the watch ended a run: the jump, when and where, and what to try; a divergence (|q̇|
     grown :data:`DIVERGED` times) is said to be one."""
     start, end, change, speed = watch[JUMP_FROM], watch[JUMP_TO], watch[JUMP_SIZE], watch[JUMP_SPEED]
-    where = (f"between t={start:.6g} and t={end:.6g}, far more than the accelerations before explain (reference "
-             f"|q̈| {watch[JUMP_REFERENCE]:.3g}), near a singular configuration (σ_min/σ_max of the constraint Jacobian "
-             f"{watch[SINGULARITY]:.2g})")
+    where = (f"between t={start:.6g} and t={end:.6g}, far more than the accelerations before explain "
+             f"(reference |q̈| {watch[JUMP_REFERENCE]:.3g}), near a singular configuration (σ_min/σ_max of the "
+             f"constraint Jacobian {watch[SINGULARITY]:.2g})")
     dropped = f"the outputs after t={start:.6g} are dropped"
     if watch[SPEED_TO] > DIVERGED * watch[SPEED_FROM]:
         return (f"the motion diverged: |q̇| grew from {watch[SPEED_FROM]:.3g} to {watch[SPEED_TO]:.3g} {where}; "
                 f"{dropped}.  Try a smaller dt or rtol, or integrator 'generalized-alpha'")
-    return (f"the velocity jumped by |Δq̇| = {change:.3g} ({change / speed:.2g} times |q̇|) {where}: the motion left "
-            f"its assembly branch (a change of branch takes an impulse, which no bounded force gives); {dropped}.  "
+    return (f"the velocity jumped by |Δq̇| = {change:.3g} ({change / speed:.2g} times |q̇|) {where}: the motion "
+            f"left its assembly branch (a change of branch takes an impulse, which no bounded force gives); {dropped}.  "
             "Try a smaller dt or rtol, or integrator 'generalized-alpha'")
 
 
