@@ -325,7 +325,8 @@ def jump_message(watch: np.ndarray) -> str:
         return (f"the motion diverged: |q̇| grew from {watch[SPEED_FROM]:.3g} to {watch[SPEED_TO]:.3g} {where}; "
                 f"{dropped}.  Try a smaller dt or rtol, or integrator 'generalized-alpha'")
     return (f"the velocity jumped by |Δq̇| = {change:.3g} ({change / speed:.2g} times |q̇|) {where}: the motion "
-            f"left its assembly branch (a change of branch takes an impulse, which no bounded force gives); {dropped}.  "
+            f"left its assembly branch (a change of branch takes an impulse, which no bounded force gives); "
+            f"{dropped}.  "
             "Try a smaller dt or rtol, or integrator 'generalized-alpha'")
 
 
