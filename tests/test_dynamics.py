@@ -165,11 +165,18 @@ def slider_crank_runs():
 
 
 @pytest.mark.parametrize("name", ["projection", "udwadia-kalaba", "matrix-r"])
-def test_slider_crank_passes_its_singular_positions(slider_crank_runs, name):
+def test_slider_crank_passes_its_singular_positions_or_says_where_it_left_its_branch(slider_crank_runs, name):
+    """A run that passes the crossings stays on the branch θ2 = -2θ1; one whose velocity jumps
+    there onto the other branch (the index-1 projection and Udwadia-Kalaba with the Moore-Penrose
+    inverse used to, at 1.99 s, and said success) fails saying so, its outputs on the branch."""
     run = slider_crank_runs[name]
-    assert run.info["status"] == "success" and run.t[-1] == pytest.approx(10.0)
-    crossings = np.sum(np.diff(np.floor((run["theta1"] - np.pi / 2) / np.pi)) != 0)
-    assert crossings >= 3  # the crank passes ±90° (B over O) several times
+    if run.info["status"] == "success":
+        assert run.t[-1] == pytest.approx(10.0)
+        crossings = np.sum(np.diff(np.floor((run["theta1"] - np.pi / 2) / np.pi)) != 0)
+        assert crossings >= 3  # the crank passes ±90° (B over O) several times
+    else:
+        assert run.info["message"].startswith("the velocity jumped by")
+    assert branch_deviation(run) < 1e-8
     energy = run["energy"]
     assert np.abs(energy - energy[0]).max() / energy[0] <= 1e-6
 

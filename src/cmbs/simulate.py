@@ -27,6 +27,7 @@ from cmbs.dynamics import Formulation, drift, formulation as make_formulation
 from cmbs.dynamics.matrix_r import MatrixRSolver, rounding_note
 from cmbs.dynamics.matrix_r_kernels import PythonEquations
 from cmbs.errors import CmbsError, SingularSystemError, did_you_mean
+from cmbs.integrate.continuity import LEFT_BRANCH, BranchWatch
 from cmbs.integrate.explicit import Integration, integrate as integrate_explicit
 from cmbs.integrate.grid import whole_steps
 from cmbs.integrate.implicit import BACKWARD_EULER, TRAPEZOIDAL, Scheme, generalized_alpha, integrate_index3
@@ -430,7 +431,7 @@ def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.
     result = integrate_explicit(field, np.concatenate([q0, qd0]), grid if fixed else grid[::every], tableau=tableau,
                                 rtol=rtol, atol=atol, step=dt if fixed else None,
                                 after_step=after_step if project or solver.adjusts_state else None, progress=bar,
-                                stop_on=(CmbsError,), keep_every=every if fixed else 1)
+                                stop_on=(CmbsError,), keep_every=every if fixed else 1, watch=BranchWatch(model))
     if project and tableau.b_error is not None:     # adaptive: outputs between steps are interpolated
         for row, t in zip(result.y, result.t):
             q, qd = project_state(model, row[:n], row[n:], float(t), tolerance=projection_tolerance)
@@ -838,17 +839,16 @@ def _run_compiled(model: Model, solver, chosen: Formulation, plan: tuple, inputs
     model_part, formulation, law = plan
     u0 = np.array(inputs(0.0, q0, qd0), dtype=float) if isinstance(law, ConstantInputs) else np.zeros(model.n_u)
     loop_started = time.perf_counter()
-    (T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, done, q_fail, qd_fail, u_fail) = rk4(
-        model_part, formulation, law, np.array(q0), np.array(qd0), dt, steps, options["every"], u0,
-        model.new_terms().buffer.size, model.m)
+    (T, Q, QD, QDD, LAM, U, PHI, PHID, FORCE, recorded, status, t_fail, done, q_fail, qd_fail, u_fail,
+     message) = rk4(model_part, formulation, law, np.array(q0), np.array(qd0), dt, steps, options["every"], u0,
+                    model.new_terms().buffer.size, model.m)
     loop_wall = time.perf_counter() - loop_started
-    message = ""
-    if status == SINGULAR:
+    if status == SINGULAR:                      # (LEFT_BRANCH: the loop's message, the branch watch's)
         message = _singular_message(model, solver, q_fail, qd_fail, t_fail, u_fail)
     elif status == NON_FINITE:
         message = (f"non-finite state or accelerations at t={t_fail:.6g}: the motion diverged; try a smaller "
                    "step, drift projection (project=True) or another formulation")
-    elif status != OK:
+    elif status not in (OK, LEFT_BRANCH):
         message = solver.loop_failure(status, t_fail)     # the formulation's hooks failed
     _note_loop_conditions(solver)
     counters = {"steps": done, "evaluations": 4 * done}
@@ -883,12 +883,12 @@ def _run_compiled_adaptive(model: Model, solver, chosen: Formulation, plan: tupl
                                      explicit_method(options["integrator"]),
                                      solver.adjusts_state or options["project"])
     loop_wall = time.perf_counter() - loop_started
-    status, t_stop, message = run.status, run.t_stop, ""
+    status, t_stop, message = run.status, run.t_stop, run.message    # (the branch watch's, else "")
     if status == SINGULAR:
         message = _singular_message(model, solver, run.state[:model.n], run.state[model.n:], t_stop, u)
     elif status in compiled_adaptive.REASONS:
         message = f"{compiled_adaptive.REASONS[status]} at t={t_stop:.6g}"
-    elif status != OK:
+    elif status not in (OK, LEFT_BRANCH):
         message = solver.loop_failure(status, t_stop)     # the formulation's hooks failed
     _note_loop_conditions(solver)
     counters = {"steps": run.steps, "rejected": run.rejected, "evaluations": run.evaluations}

@@ -532,8 +532,11 @@ def _failure_reason(status: int) -> str:
     """What a batched run's failure ``status`` means."""
     from cmbs.dynamics.base import NON_FINITE, SINGULAR
     from cmbs.integrate.compiled_adaptive import REASONS
+    from cmbs.integrate.continuity import LEFT_BRANCH
 
-    return {**REASONS, SINGULAR: "singular system (rank of A)", NON_FINITE: "the motion diverged"}.get(status, "failed")
+    return {**REASONS, SINGULAR: "singular system (rank of A)", NON_FINITE: "the motion diverged",
+            LEFT_BRANCH: "the motion left its assembly branch (a velocity jump near a singular configuration)"
+            }.get(status, "failed")
 
 
 # ---------------------------------------------------------------------------------- assembly

@@ -34,6 +34,7 @@ from typing import NamedTuple
 from cmbs.dynamics.base import NON_FINITE, OK
 from cmbs.dynamics.field import after_step, field, output_state, stage_state
 from cmbs.integrate.compiled_rk4 import record_constraints
+from cmbs.integrate.continuity import LEFT_BRANCH, jump_message, kept_records, left_branch, watch_array
 from cmbs.integrate.tableaus import Tableau
 from cmbs.jit import interpreted, njit
 from cmbs.model.compiled import terms_views
@@ -161,7 +162,7 @@ class AdaptiveRun(NamedTuple):
     """The end of an adaptive run: the records (t, q, q̇, q̈, λ, |Φ|, |Φ̇|, -Aᵀλ) and how many
     rows were recorded, the status and the time it refers to, the counters (steps, rejected,
     evaluations, outputs from the interpolant) and the state (q, q̇) the status refers to (where
-    a stage failed, for a failed run)."""
+    a stage failed, for a failed run) and the message of a run the branch watch ended ("" else)."""
 
     records: tuple
     recorded: int
@@ -172,6 +173,7 @@ class AdaptiveRun(NamedTuple):
     evaluations: int
     unsolved: int
     state: np.ndarray
+    message: str
 
 
 def adaptive(model: NamedTuple, formulation: NamedTuple, q0: np.ndarray, qd0: np.ndarray, t_out: np.ndarray,
@@ -185,10 +187,12 @@ def adaptive(model: NamedTuple, formulation: NamedTuple, q0: np.ndarray, qd0: np
     times = np.ascontiguousarray(t_out, dtype=float)
     y, y_new, k1, stages, counts, where, buffer, records = interpreted(run_arrays)(
         np.asarray(q0, dtype=float), np.asarray(qd0, dtype=float), times, m, method[0], method[6], buffer_size)
+    watch = interpreted(watch_array)(q0.shape[0], m)
     status, t_stop = _steps(model, formulation, y, y_new, k1, stages, counts, where, records, buffer, times,
-                            float(rtol), float(atol), u, *method, int(max_steps))
+                            float(rtol), float(atol), u, *method, int(max_steps), watch)
+    message = jump_message(watch) if status == LEFT_BRANCH else ""
     return AdaptiveRun(records, int(counts[0]), int(status), float(t_stop), int(counts[1]), int(counts[2]),
-                       int(counts[3]), int(counts[4]), where)
+                       int(counts[3]), int(counts[4]), where, message)
 
 
 def loop_method(tableau: Tableau, adjusts_state: bool) -> tuple:
@@ -230,11 +234,15 @@ def _method_arrays(tableau: Tableau) -> tuple[np.ndarray, ...]:
 
 @njit(cache=True)
 def _steps(model, formulation, y, y_new, k1, stages, counts, where, records, buffer, t_out, rtol, atol, u, c, a, b,
-           b_error, b_error_low, dense_a, dense_c, dense_d, exponent, start_exponent, first_same_as_last, max_steps):
+           b_error, b_error_low, dense_a, dense_c, dense_d, exponent, start_exponent, first_same_as_last, max_steps,
+           watch):
     """The loop of :func:`adaptive` from the state ``y`` at t_out[0], into ``counts`` = (outputs
     recorded, steps, rejected, evaluations, outputs from the interpolant): it evaluates the
     derivative ``k1`` there, records t_out[0], chooses the starting step and steps to t_out[-1].
-    Returns the status and the time it refers to; a failed stage's state in ``where``."""
+    The branch watch (:mod:`cmbs.integrate.continuity`) sees each accepted state with its
+    derivative, and ends the run (LEFT_BRANCH) where the motion left its branch, the outputs
+    after the jump's start dropped.  Returns the status and the time it refers to; a failed
+    stage's state in ``where``."""
     d = y.shape[0]
     n = d // 2
     T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE = records
@@ -256,6 +264,7 @@ def _steps(model, formulation, y, y_new, k1, stages, counts, where, records, buf
     if status != OK:
         _copy(state, where)
     else:
+        left_branch(watch, t, y[n:], k1[n:], terms[2])     # the first state starts the watch
         unsolved += _record(model, formulation, t, y, k1, u, buffer, terms, next_out, T, Qs, QDs, QDDs, LAMs, PHI,
                             PHID, FORCE)
         next_out += 1
@@ -342,6 +351,10 @@ def _steps(model, formulation, y, y_new, k1, stages, counts, where, records, buf
                 _copy(state, where)
                 break
         steps += 1
+        if left_branch(watch, t_new, y_new[n:], k_new[n:], terms[2]):
+            status, t_stop = LEFT_BRANCH, t_new
+            next_out = kept_records(T, next_out, watch)
+            break
         if extra > 0 and next_out < count and t_out[next_out] <= t_new + 1e-12 * max(1.0, abs(t_new)):
             for i in range(extra):              # the continuous extension's stages
                 _combination(y, h_try, dense_a[i], stages, s + i, work)

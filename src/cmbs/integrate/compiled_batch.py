@@ -15,6 +15,7 @@ import numpy as np
 
 from cmbs.integrate.compiled_adaptive import _steps, run_arrays
 from cmbs.integrate.compiled_rk4 import fresh
+from cmbs.integrate.continuity import watch_array
 from cmbs.jit import njit, prange
 
 
@@ -32,7 +33,8 @@ def adaptive_batch(model, formulation, Q0, QD0, U0, t_out, kept, rtol, atol, met
                                                                           buffer_size)
         status, t_stop = _steps(model, fresh(formulation), y, y_new, k1, stages, counts, where, records, buffer,
                                 t_out, rtol, atol, U0[v], method[0], method[1], method[2], method[3], method[4],
-                                method[5], method[6], method[7], method[8], method[9], method[10], max_steps)
+                                method[5], method[6], method[7], method[8], method[9], method[10], max_steps,
+                                watch_array(Q0.shape[1], m))
         count = np.searchsorted(kept, counts[0])      # the kept outputs among the rows recorded
         for j in range(count):
             row = kept[j]

@@ -38,6 +38,7 @@ from cmbs.dynamics.kkt import gram_bounds, has_structure, workspace_views
 from cmbs.dynamics.lagrange import LagrangeKernel
 from cmbs.dynamics.projection import PROJECTION_REGULAR, ProjectionKernel
 from cmbs.integrate.compiled_rk4 import _rk4_arrays, _rk4_steps, fresh
+from cmbs.integrate.continuity import watch_array
 from cmbs.jit import interpreted, njit, njit_borrowing, prange
 from cmbs.model.natural import NaturalKernel, layout
 from cmbs.model.natural_lanes import LANES, evaluate_lanes
@@ -145,7 +146,7 @@ def rk4_lanes(model: NamedTuple, formulation: NamedTuple, inputs: NamedTuple, Q0
         own_schur[27][:] = resume_reference[v]
         own_schur[28][:, :] = resume_A0[v]
         done, status, _, _ = _rk4_steps(model, own, inputs, h, steps, every, *single, work, records, left_at[v],
-                                        records_before[v])
+                                        records_before[v], interpreted(watch_array)(n, m))
         first = records_before[v]
         Qs[v, first:done] = records[1][first:done]
         QDs[v, first:done] = records[2][first:done]

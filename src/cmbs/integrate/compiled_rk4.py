@@ -18,6 +18,7 @@ import numpy as np
 
 from cmbs.dynamics.base import OK
 from cmbs.dynamics.field import after_step, field, stage_state
+from cmbs.integrate.continuity import LEFT_BRANCH, jump_message, kept_records, left_branch, watch_array
 from cmbs.jit import interpreted, njit, njit_borrowing, prange, type_dispatch
 from cmbs.model.compiled import terms_views
 
@@ -49,11 +50,13 @@ def rk4(model: NamedTuple, formulation: NamedTuple, inputs: NamedTuple, q0: np.n
     """
     state, records, work = interpreted(_rk4_arrays)(q0, qd0, u0, m, steps // every + 1, buffer_size)
     q, qd, u, sq, sv = state
+    watch = interpreted(watch_array)(q0.shape[0], m)
     recorded, status, t_stop, step = _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, work,
-                                                records, 0, 0)
+                                                records, 0, 0, watch)
     if status != OK:
-        return *records, recorded, status, t_stop, step, sq, sv, u
-    return *records, recorded, OK, steps * h, steps, q, qd, u
+        message = jump_message(watch) if status == LEFT_BRANCH else ""
+        return *records, recorded, status, t_stop, step, sq, sv, u, message
+    return *records, recorded, OK, steps * h, steps, q, qd, u, ""
 
 
 @njit(cache=True)
@@ -73,12 +76,15 @@ def _rk4_arrays(q0, qd0, u0, m, records, buffer_size):
 
 
 @njit_borrowing(cache=True)
-def _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, work, records, start_step, recorded):
+def _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, work, records, start_step, recorded,
+               watch):
     """The loop of :func:`rk4` on the arrays :func:`_rk4_arrays` allocated (state q, q̇, u
     updated in place; stage state sq, sv), from step ``start_step`` with ``recorded`` records
-    written.  Returns (records written, status, time and step of a failed stage); where the
-    after-step hook fails at the new state of step k, its status, time and step k + 1 (a loop
-    that goes on from there records that state first)."""
+    written; the branch watch (:mod:`cmbs.integrate.continuity`) sees each step's state, and
+    where it finds the run left its branch the loop stops there (status LEFT_BRANCH) keeping the
+    records up to the jump's start.  Returns (records written, status, time and step of a failed
+    stage); where the after-step hook fails at the new state of step k, its status, time and step
+    k + 1 (a loop that goes on from there records that state first)."""
     n = q.shape[0]
     buffer, kq, kv, lam, stage_lam = work
     T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE = records
@@ -109,6 +115,8 @@ def _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, wo
             if status != OK:
                 return recorded, status, st, step
             if stage == 0:
+                if left_branch(watch, t, qd, kv[0], terms[2]):
+                    return kept_records(T, recorded, watch), LEFT_BRANCH, t, step
                 if step % every == 0:
                     T[recorded] = t
                     for i in range(n):
@@ -171,7 +179,7 @@ def rk4_batch(model, formulation, inputs, Q0, QD0, U0, h, steps, every, buffer_s
         state, records, work = _rk4_arrays(Q0[v], QD0[v], U0[v], m, steps // every + 1, buffer_size)
         q, qd, u, sq, sv = state
         count, status, _, _ = _rk4_steps(model, fresh(formulation), inputs, h, steps, every, q, qd, u, sq, sv, work,
-                                         records, 0, 0)
+                                         records, 0, 0, watch_array(q.shape[0], m))
         Qs[v, :count] = records[1][:count]
         QDs[v, :count] = records[2][:count]
         PHIs[v, :count] = records[6][:count]

@@ -23,6 +23,9 @@ from cmbs.integrate.tableaus import Tableau
 
 VectorField = Callable[[float, np.ndarray], np.ndarray]
 AfterStep = Callable[[float, np.ndarray], np.ndarray]
+#: ``watch(t, y, y')`` at each accepted state: None, or (t_from, message) to end the run as failed
+#: with the outputs after t_from dropped (:class:`cmbs.integrate.continuity.BranchWatch`).
+Watch = Callable[[float, np.ndarray, np.ndarray], "tuple[float, str] | None"]
 
 
 @dataclass
@@ -63,7 +66,8 @@ def _hermite(t0: float, y0: np.ndarray, f0: np.ndarray, t1: float, y1: np.ndarra
 def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tableau, rtol: float = 1e-6,
               atol: float = 1e-9, step: float | None = None, after_step: AfterStep | None = None,
               max_steps: int = 10_000_000, progress: Callable[[float], None] | None = None,
-              stop_on: tuple[type[Exception], ...] = (), keep_every: int = 1) -> Integration:
+              stop_on: tuple[type[Exception], ...] = (), keep_every: int = 1,
+              watch: Watch | None = None) -> Integration:
     """Integrate from ``t_out[0]`` through ``t_out[-1]``.
 
     Parameters
@@ -83,6 +87,10 @@ def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tab
         With a fixed ``step``: of the instants ``t_out`` (which the steps hit), keep only
         ``t_out[::keep_every]`` (whose last must be ``t_out[-1]``); the others are stepped through
         but not stored, so the kept outputs are those of the run that keeps all, bit for bit.
+    watch
+        Called with every accepted state (the first included) and its derivative; when it
+        returns (t_from, message) the run ends as failed with that message, keeping the outputs
+        up to t_from.
     """
     t_out = np.asarray(t_out, dtype=float)
     y = np.array(y0, dtype=float)
@@ -105,8 +113,9 @@ def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tab
     t = float(t_out[0])
     next_out = 0
 
-    def fail(message: str) -> Integration:
+    def fail(message: str, until: float = np.inf) -> Integration:
         stored = -(-next_out // keep_every)          # the kept instants before t_out[next_out]
+        stored = min(stored, int(np.searchsorted(kept, until + 1e-12 * max(1.0, abs(until)), side="right")))
         return Integration(kept[:stored], out_y[:stored], out_dy[:stored], "failed", message, counters)
 
     try:
@@ -114,6 +123,8 @@ def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tab
     except stop_on as error:
         return fail(str(error))
     out_y[0], out_dy[0] = y, k1
+    if watch is not None:                           # the first state starts the watch
+        watch(t, y, k1)
     stages = np.zeros((len(tableau.c), d))
     next_out = 1
     t_end = float(t_out[-1])
@@ -160,6 +171,9 @@ def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tab
         except stop_on as error:
             return fail(str(error))
         counters["steps"] += 1
+        left = watch(t_new, y_new, k_new) if watch is not None else None
+        if left is not None:
+            return fail(left[1], left[0])
         while next_out < t_out.size and t_out[next_out] <= t_new + 1e-12 * max(1.0, abs(t_new)):
             end = next_out
             while end < t_out.size and t_out[end] <= t_new + 1e-12 * max(1.0, abs(t_new)):
