@@ -208,4 +208,4 @@ def test_the_message_names_the_jump_and_what_to_try():
     assert 2.6 < start < end < 2.7                        # the passage at 2.657 s
     assert run.t[-1] <= start
     assert "near a singular configuration" in message and "left its assembly branch" in message
-    assert "generalized-alpha" in message
+    assert "generalized-alpha" in message and "projection_tolerance=1e-12" in message

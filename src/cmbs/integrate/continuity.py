@@ -326,8 +326,9 @@ def jump_message(watch: np.ndarray) -> str:
                 f"{dropped}.  Try a smaller dt or rtol, or integrator 'generalized-alpha'")
     return (f"the velocity jumped by |Δq̇| = {change:.3g} ({change / speed:.2g} times |q̇|) {where}: the motion "
             f"left its assembly branch (a change of branch takes an impulse, which no bounded force gives); "
-            f"{dropped}.  "
-            "Try a smaller dt or rtol, or integrator 'generalized-alpha'")
+            f"{dropped}.  Try a smaller dt or rtol, drift projection to a tight tolerance (project=True, "
+            "projection_tolerance=1e-12; the CLI's --project --projection-tolerance 1e-12) or integrator "
+            "'generalized-alpha' (docs/formulations.md, \"Singular positions\")")
 
 
 class BranchWatch:
