@@ -236,12 +236,7 @@ def singularity(A, scale):
         x[i] = 1.0 + 0.5 * math.sin(1.0 + 2.3 * i)
     smallest = 0.0
     for _ in range(30):                         # inverse iteration: solve G y = x by L, Lᵀ
-        norm = 0.0
-        for i in range(m):
-            norm += x[i] * x[i]
-        norm = math.sqrt(norm)
-        for i in range(m):
-            x[i] /= norm
+        _normalize(x)
         for i in range(m):
             total = x[i]
             for j in range(i):
@@ -262,17 +257,23 @@ def singularity(A, scale):
 
 
 @njit(cache=True)
+def _normalize(x):
+    """x ← x / |x| in place (the power and inverse iterations' step)."""
+    norm = 0.0
+    for i in range(x.shape[0]):
+        norm += x[i] * x[i]
+    norm = math.sqrt(norm)
+    for i in range(x.shape[0]):
+        x[i] /= norm
+
+
+@njit(cache=True)
 def _power(G, x, y):
     """λ_max of the symmetric positive definite G by 30 steps of the power method from ``x``."""
     m = G.shape[0]
     largest = 0.0
     for _ in range(30):
-        norm = 0.0
-        for i in range(m):
-            norm += x[i] * x[i]
-        norm = math.sqrt(norm)
-        for i in range(m):
-            x[i] /= norm
+        _normalize(x)
         product = 0.0
         for i in range(m):
             total = 0.0
