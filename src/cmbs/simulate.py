@@ -296,8 +296,7 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
                         f"formulation and inputs without Python callables (formulations {COMPILED_FORMULATIONS}; "
                         "constant inputs or a ComputedTorque law, alone or in a ZeroOrderHold with period dt), "
                         "integrator rk4 with t_end a multiple of dt, backward-euler or generalized-alpha or, with "
-                        "constant inputs, rk45, rk23, dop853 or trapezoidal (--project: rk4, rk45, rk23 or dop853, not "
-                        "with matrix-r)")
+                        "constant inputs, rk45, rk23, dop853 or trapezoidal (--project: rk4, rk45, rk23 or dop853)")
     run_options = {"integrator": integrator, "dt": dt, "every": every, "rtol": rtol, "atol": atol, "project": project}
     if plan is not None and compiled is not False and integrator in INDEX3:
         trajectory = _run_compiled_index3(model, plan, inputs, q_start, qd_start, grid, INDEX3[integrator],
