@@ -13,7 +13,8 @@ udwadia-kalaba, matrix-r, at their default options) with rk4 at h = 1 ms and wit
 dop853 at the default tolerances (rtol 1e-6, atol 1e-9), and generalized-α at h = 1 ms (which
 brings its own index-3 Lagrange formulation); then projection and udwadia-kalaba again with rk4
 and dop853 and drift projection after every step to max |Φ| < 1e-12 (``project=True,
-projection_tolerance=1e-12``; "+proj" in the table); outputs every 0.05 s, as the benchmark asks.
+projection_tolerance=1e-12``; "+proj" in the table), and matrix-r with dop853 at rtol 1e-8
+(" 1e-8" after the integrator); outputs every 0.05 s, as the benchmark asks.
 Per run: status, the time reached, max |B0 - exact| over the outputs, whether the run meets
 IFToMM high precision (success to the end and B0 within 1e-3 m at every output), the energy
 drift max |E - E0| / max T (``info["energy_drift"]``), the wall time of the run (its numba
@@ -51,28 +52,32 @@ FORMULATIONS = ("lagrange", "baumgarte", "penalty", "projection", "udwadia-kalab
 EXPLICIT = ("rk4", "rk45", "dop853")
 DRIFT_TOLERANCE = 1e-12   # max |Φ| after the drift projection of the "+proj" configurations
 PROJECTED = ("projection", "udwadia-kalaba")
+TIGHT_RTOL = 1e-8         # rtol of the tight configuration of matrix-r with dop853
 
 
-def configurations() -> list[tuple[str | None, str, bool]]:
-    """(formulation, integrator, drift projection) triples: each formulation with each explicit
-    integrator, generalized-α with its own formulation (None), and the :data:`PROJECTED`
-    formulations with rk4 and dop853 and drift projection."""
-    return [(formulation, integrator, False) for formulation in FORMULATIONS for integrator in EXPLICIT] + \
-        [(None, "generalized-alpha", False)] + \
-        [(formulation, integrator, True) for formulation in PROJECTED for integrator in ("rk4", "dop853")]
+def configurations() -> list[tuple[str | None, str, bool, float | None]]:
+    """(formulation, integrator, drift projection, rtol or None for the default) tuples: each
+    formulation with each explicit integrator, generalized-α with its own formulation (None), the
+    :data:`PROJECTED` formulations with rk4 and dop853 and drift projection, and matrix-r with
+    dop853 at :data:`TIGHT_RTOL`."""
+    return [(formulation, integrator, False, None) for formulation in FORMULATIONS for integrator in EXPLICIT] + \
+        [(None, "generalized-alpha", False, None)] + \
+        [(formulation, integrator, True, None) for formulation in PROJECTED for integrator in ("rk4", "dop853")] + \
+        [("matrix-r", "dop853", False, TIGHT_RTOL)]
 
 
-def simulate(model: cmbs.Model, formulation: str | None, integrator: str, projected: bool,
+def simulate(model: cmbs.Model, formulation: str | None, integrator: str, projected: bool, rtol: float | None,
              t_end: float) -> cmbs.Trajectory:
     """One run with outputs every :data:`OUTPUT_INTERVAL`: fixed-step integrators at :data:`STEP`
-    keeping every 50th step, adaptive ones at their default tolerances; with ``projected``,
-    coordinate and velocity projection after every step to :data:`DRIFT_TOLERANCE`."""
+    keeping every 50th step, adaptive ones at ``rtol`` (None: the default tolerances); with
+    ``projected``, coordinate and velocity projection after every step to :data:`DRIFT_TOLERANCE`."""
     drift = {"project": True, "projection_tolerance": DRIFT_TOLERANCE} if projected else {}
     if integrator in ("rk4", "generalized-alpha"):
         return cmbs.simulate(model, t_end=t_end, formulation=formulation, integrator=integrator, dt=STEP,
                              every=int(round(OUTPUT_INTERVAL / STEP)), **drift)
+    tolerance = {} if rtol is None else {"rtol": rtol}
     return cmbs.simulate(model, t_end=t_end, formulation=formulation, integrator=integrator, dt=OUTPUT_INTERVAL,
-                         **drift)
+                         **drift, **tolerance)
 
 
 def b0_error(run: cmbs.Trajectory, N: int) -> float:
@@ -91,13 +96,14 @@ def branch_error(run: cmbs.Trajectory, N: int) -> float:
     return float(spread.max(initial=0.0)) if np.all(np.isfinite(spread)) else float("inf")
 
 
-def measure(N: int, formulation: str | None, integrator: str, projected: bool, t_end: float) -> dict[str, object]:
+def measure(N: int, formulation: str | None, integrator: str, projected: bool, rtol: float | None,
+            t_end: float) -> dict[str, object]:
     """Figures of one timed run (after an untimed 0.05 s warm-up run that compiles its kernels)."""
     model = cmbs.load("n-four-bar", N=N)
-    simulate(model, formulation, integrator, projected, OUTPUT_INTERVAL)
+    simulate(model, formulation, integrator, projected, rtol, OUTPUT_INTERVAL)
     started = time.perf_counter()
     try:
-        run = simulate(model, formulation, integrator, projected, t_end)
+        run = simulate(model, formulation, integrator, projected, rtol, t_end)
     except cmbs.CmbsError as error:
         return {"status": "error", "message": str(error), "wall": time.perf_counter() - started}
     wall = time.perf_counter() - started
@@ -118,11 +124,11 @@ def _child(connection: multiprocessing.connection.Connection, *arguments: object
     connection.close()
 
 
-def measure_with_timeout(N: int, formulation: str | None, integrator: str, projected: bool, t_end: float,
-                         timeout: float) -> dict[str, object]:
+def measure_with_timeout(N: int, formulation: str | None, integrator: str, projected: bool, rtol: float | None,
+                         t_end: float, timeout: float) -> dict[str, object]:
     """:func:`measure` in a child process, stopped (status "timeout") after ``timeout`` seconds."""
     receiver, sender = multiprocessing.Pipe(duplex=False)
-    child = multiprocessing.Process(target=_child, args=(sender, N, formulation, integrator, projected, t_end))
+    child = multiprocessing.Process(target=_child, args=(sender, N, formulation, integrator, projected, rtol, t_end))
     child.start()
     sender.close()
     if receiver.poll(timeout):
@@ -137,8 +143,10 @@ def measure_with_timeout(N: int, formulation: str | None, integrator: str, proje
     return result
 
 
-def row(formulation: str | None, integrator: str, projected: bool, result: dict[str, object]) -> str:
-    """One line of the table ("+proj" after the integrator of a run with drift projection)."""
+def row(formulation: str | None, integrator: str, projected: bool, rtol: float | None,
+        result: dict[str, object]) -> str:
+    """One line of the table ("+proj" after the integrator of a run with drift projection, the
+    rtol after it when not the default)."""
     def number(key: str, form: str) -> str:
         value = result.get(key)
         return "-" if value is None else format(value, form)
@@ -147,7 +155,7 @@ def row(formulation: str | None, integrator: str, projected: bool, result: dict[
     flag = "SUCCESS OFF BRANCH" if result.get("off_branch") else "success, inaccurate" if result.get("inaccurate") \
         else ""
     high = "yes" if result.get("high_precision") else "no"
-    integrator = integrator + ("+proj" if projected else "")
+    integrator = integrator + ("+proj" if projected else "") + ("" if rtol is None else f" {rtol:g}")
     return (f"  {name:<22} {integrator:<18} {result['status']:<8} {number('t_reached', '7.2f')} "
             f"{number('b0_error', '10.2e')} {number('branch_error', '9.1e')} {high:>5} {number('energy_drift', '9.1e')} "
             f"{number('wall', '8.3f')}"
@@ -168,14 +176,15 @@ def main() -> None:
         print(f"  {'formulation':<22} {'integrator':<18} {'status':<8} {'t [s]':>7} {'max|B0 err|':>10} "
               f"{'branch':>9} {'HP':>5} {'E drift':>9} {'wall [s]':>8}")
         report[str(N)] = []
-        for formulation, integrator, projected in configurations():
-            result = measure_with_timeout(N, formulation, integrator, projected, args.t_end, args.timeout)
-            print(row(formulation, integrator, projected, result), flush=True)
+        for formulation, integrator, projected, rtol in configurations():
+            result = measure_with_timeout(N, formulation, integrator, projected, rtol, args.t_end, args.timeout)
+            print(row(formulation, integrator, projected, rtol, result), flush=True)
             for key in ("message", "note"):
                 if result.get(key):
                     print(f"      {key}: {str(result[key]).splitlines()[0][:150]}")
             report[str(N)].append({"formulation": formulation, "integrator": integrator, "project": projected,
-                                   **({"projection_tolerance": DRIFT_TOLERANCE} if projected else {}), **result})
+                                   **({"projection_tolerance": DRIFT_TOLERANCE} if projected else {}),
+                                   **({} if rtol is None else {"rtol": rtol}), **result})
         runs = report[str(N)]
         print(f"  N = {N}: {sum(bool(r.get('high_precision')) for r in runs)} of {len(runs)} runs meet high "
               f"precision; {sum(bool(r.get('off_branch')) for r in runs)} say success off the branch, "

@@ -176,6 +176,70 @@ def test_user_partition_at_a_singular_block_fails_in_the_compiled_update():
         solver.update_partition(A, 1.5)
 
 
+def _a02_jacobian(model: cmbs.Model, theta: float) -> np.ndarray:
+    """A of A02 (N = 2) on its parallelogram branch with every crank at angle θ:
+    B_i = (i + cos θ, sin θ), placed by coordinate name."""
+    values = {}
+    for i in range(3):
+        values[f"B{i}.x"], values[f"B{i}.z"] = i + math.cos(theta), math.sin(theta)
+    q = np.array([values[name] for name in model.coordinate_names])
+    return np.ascontiguousarray(model.jacobian(q, 0.0))
+
+
+def _kappa_two(A: np.ndarray, rows: np.ndarray, dependent: np.ndarray) -> float:
+    """‖A_r‖₂ / σ_min(A_d) by numpy's SVDs."""
+    block = A[np.ix_(rows, dependent)]
+    return np.linalg.svd(A[rows], compute_uv=False)[0] / np.linalg.svd(block, compute_uv=False)[-1]
+
+
+def test_a_partition_chosen_near_a_singular_position_is_chosen_again_when_its_condition_grows_from_its_low():
+    """A02's cranks turning from 1e-3 rad off horizontal (a passage, where every partition's κ₂
+    is about 1/δ) to hanging vertical: the partition chosen at the passage is kept while its κ₂
+    (numpy's SVDs) falls, and chosen again at the first configuration where κ₂ exceeds
+    ``condition_growth`` (1.25) times the smallest value it had since it was chosen; each new one
+    likewise.  The update used to compare with κ₂ when the partition was chosen (4.7e3 here) and
+    kept the passage's partition to the vertical, where its block A_d turns singular (a crank's z
+    independent) and matrix R's recovery stopped converging (RK4 at 1 ms, t = 0.97 s)."""
+    model = cmbs.load("n-four-bar", N=2)
+    solver = MatrixR().bind(model)
+    kernel = solver.kernel()
+    solver.repartition(_a02_jacobian(model, -1e-3))
+    smallest = _kappa_two(_a02_jacobian(model, -1e-3), kernel.rows, kernel.dependent)
+    assert smallest > 1e3
+    chosen_again = []
+    for theta in np.linspace(-2e-3, -math.pi / 2, 800):
+        A = _a02_jacobian(model, theta)
+        kappa = _kappa_two(A, kernel.rows, kernel.dependent)
+        before = solver.repartitions
+        solver.update_partition(A, 0.0)
+        if solver.repartitions > before:
+            assert kappa > 1.25 * smallest * (1 - TIE), theta
+            chosen_again.append(theta)
+            smallest = _kappa_two(A, kernel.rows, kernel.dependent)
+        else:
+            assert kappa <= 1.25 * smallest * (1 + TIE), theta
+            smallest = min(smallest, kappa)
+    assert chosen_again and chosen_again[0] > -1.4          # well before the vertical
+    at_vertical = _a02_jacobian(model, -math.pi / 2)
+    assert _kappa_two(at_vertical, kernel.rows, kernel.dependent) < 10
+
+
+def test_an_automatic_partition_singular_where_it_was_chosen_does_not_suggest_choosing_automatically():
+    """At A02's passage exactly (the cranks horizontal, A of rank N + 1 below its rows) the
+    automatic partition chosen again is singular too: the message names the position and what
+    to try, not the automatic choice it already made."""
+    model = cmbs.load("n-four-bar", N=2)
+    solver = MatrixR().bind(model)
+    assert update_partition(_a02_jacobian(model, 0.0), solver.kernel()) == SINGULAR_PARTITION
+    message = solver.loop_failure(SINGULAR_PARTITION, 0.714)
+    assert "the dependent block A_d is singular" in message and "chosen automatically" in message
+    assert "singular position" in message and "try another dt or rtol" in message
+    assert "let matrix-r choose" not in message
+    user = MatrixR(independent=("B1.x",)).bind(model)
+    assert update_partition(_a02_jacobian(model, 0.0), user.kernel()) == SINGULAR_PARTITION
+    assert "let matrix-r choose them automatically" in user.loop_failure(SINGULAR_PARTITION, 0.714)
+
+
 @pytest.mark.parametrize("integrator, options", [("rk4", dict(dt=1e-3)), ("rk45", dict(dt=0.01))])
 def test_user_partition_becoming_singular_stops_the_compiled_run_as_the_python_loop(integrator, options):
     """The pendulum hanging 1e-11 m off the vertical with z independent swings through x = 0,

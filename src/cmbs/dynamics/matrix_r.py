@@ -21,7 +21,8 @@ kept (``velocity_recovery_growth``), and runs report the worst stage.
 The partition is given by the user (names of the independent coordinates) or chosen
 automatically: constraint rows by QR with column pivoting of the row-scaled Aᵀ, dependent
 coordinates by Gaussian elimination with partial pivoting of those rows' transpose (pivot
-columns of A are dependent); and chosen again when κ grows by ``condition_growth``, so that the
+columns of A are dependent); and chosen again when κ grows by ``condition_growth`` from its
+smallest value since the partition was chosen, so that the
 method follows the mechanism through configurations where its first choice of independent
 coordinates stops determining the others.  κ, not cond(A_d): a block can stay perfectly
 conditioned while it shrinks against the rest of A (a pendulum's x as it swings under the
@@ -69,8 +70,10 @@ class MatrixR:
         Names of the independent coordinates (default: chosen automatically).
     condition_growth
         Re-partition when the partition's condition κ₂ = ‖A_r‖₂ ‖A_d⁻¹‖₂
-        (:func:`partition_condition`) grows beyond this factor times its value when the
-        partition was chosen (automatic partition only).  The error constant of the ODE in z
+        (:func:`partition_condition`) grows beyond this factor times its smallest value since
+        the partition was chosen (automatic partition only; a partition chosen near a singular
+        position, where κ₂ is large for every partition, is so chosen again once κ₂ has fallen
+        and grown again).  The error constant of the ODE in z
         grows with κ (its derivatives hold A_d⁻¹), so re-partitioning early pays: RK4 at 1 ms,
         end error against Lagrange at 25 µs, factor 3 → 1.25 (both with cond₂(A_d) as the
         measure): closed 8-link chain (2 s) 1.1e-2 → 2.1e-4, 14-link (1 s) 4.2e-2 → 7.6e-4,
@@ -200,7 +203,7 @@ class MatrixRSolver:
         self._kernel = kernels.MatrixRKernel(
             model.m, partition.rows, partition.dependent, partition.independent, float(parameters.position_tolerance),
             int(parameters.max_iterations), float(self.recovery_limit), self.user is None,
-            float(parameters.condition_growth), np.zeros(3), np.zeros(1, dtype=np.int64), self._no_input,
+            float(parameters.condition_growth), np.zeros(2), np.zeros(1, dtype=np.int64), self._no_input,
             self._loop_worst, *self.work)
         kernels.set_reference(A0, self._kernel)
         self.update_partition(A0, 0.0)
@@ -228,8 +231,9 @@ class MatrixRSolver:
         return int(self._kernel.repartitions[0])
 
     def update_partition(self, A: np.ndarray, t: float) -> None:
-        """Choose the partition again when κ₂ has grown by ``condition_growth`` since it was
-        chosen (automatic partition), or raise when A_d is singular (user partition):
+        """Choose the partition again when κ₂ has grown by ``condition_growth`` from its
+        smallest value since the partition was chosen (automatic partition), or raise where the
+        partition kept or chosen has a singular A_d:
         :func:`~cmbs.dynamics.matrix_r_kernels.update_partition`, as the compiled loops' hook."""
         status = kernels.update_partition(np.ascontiguousarray(A, dtype=float), self._kernel)
         if status == kernels.SINGULAR_PARTITION:
@@ -359,11 +363,16 @@ def singular_partition_message(model_name: str, coordinate_names: Sequence[str],
                                t: float) -> str:
     """The message of a run stopped at ``t`` where the partition of ``kernel`` has a singular A_d
     (:data:`~cmbs.dynamics.matrix_r_kernels.SINGULAR_PARTITION`, κ₂ in its MET), naming its
-    independent coordinates."""
+    independent coordinates: a user's partition can be chosen otherwise, or automatically; an
+    automatic one was just chosen again at that configuration, a singular position for every
+    partition, which a step lands on only by chance."""
     names = ", ".join(coordinate_names[k] for k in kernel.independent)
-    return (f"model {model_name!r} at t={t:.6g}: the dependent block A_d is singular (condition ‖A_r‖‖A_d⁻¹‖ "
-            f"{kernel.conditions[kernels.MET]:.3g}) with independent coordinates {names}; choose other independent "
-            "coordinates or let matrix-r choose them automatically")
+    start = (f"model {model_name!r} at t={t:.6g}: the dependent block A_d is singular (condition ‖A_r‖‖A_d⁻¹‖ "
+             f"{kernel.conditions[kernels.MET]:.3g}) with independent coordinates {names}")
+    if kernel.automatic:
+        return (f"{start}, chosen automatically at this very configuration: a singular position, which a step "
+                "reaches only by chance; try another dt or rtol")
+    return f"{start}; choose other independent coordinates or let matrix-r choose them automatically"
 
 
 def rounding_note(worst_condition: float, worst_time: float) -> str:

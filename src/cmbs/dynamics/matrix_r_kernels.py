@@ -41,10 +41,11 @@ SINGULAR_PARTITION = 8
 #: κ₂ above which a partition's A_d counts as singular (a user partition fails, an automatic one
 #: is chosen again)
 SINGULAR_CONDITION = 1e12
-#: The entries of a :class:`MatrixRKernel`'s ``conditions``: κ₂ of the partition when it was
-#: chosen, the κ₂ above which :func:`update_partition` acts, and the κ₂ of the singular
-#: partition an update met (for the message of SINGULAR_PARTITION).
-REFERENCE, LIMIT, MET = 0, 1, 2
+#: The entries of a :class:`MatrixRKernel`'s ``conditions``: the smallest κ₂ of the partition
+#: since it was chosen (an automatic partition is chosen again when κ₂ grows by
+#: ``condition_growth`` from it), and the κ₂ of the singular partition an update met (for the
+#: message of SINGULAR_PARTITION).
+REFERENCE, MET = 0, 1
 #: Relative difference below which two pivot candidates of the partition's choice count as equal:
 #: ties in exact arithmetic (every column of the row-scaled Aᵀ has norm 1 at the first step; a
 #: symmetric mechanism has equal entries) differ by rounding, and the first of them is chosen.
@@ -148,14 +149,6 @@ def condition_two(A, rows, dependent):
             block[a, j] = A[rows[a], dependent[j]]
     smallest = np.linalg.svd(block)[1][-1]
     return np.linalg.norm(partition_rows, 2) / smallest if smallest > 0 else np.inf
-
-
-@njit(cache=True)
-def exceeds(A, rows, dependent, Ad, pivots, side, limit):
-    """True when κ₂ of the partition exceeds ``limit`` (the re-partition test): the SVDs of
-    :func:`condition_two` only where :func:`condition_two_bound`, from the LU factors of A_d,
-    cannot rule it out."""
-    return condition_two_bound(A, rows, Ad, pivots, side) > limit and condition_two(A, rows, dependent) > limit
 
 
 @njit(cache=True)
@@ -475,7 +468,7 @@ class MatrixRKernel(NamedTuple):
     :func:`update_partition`), the recovery's tolerance, iteration limit and κ₁ limit
     (:attr:`~cmbs.dynamics.matrix_r.MatrixRSolver.recovery_limit`), whether the partition is
     chosen automatically and κ₂'s growth that calls for a new one (``condition_growth``), the
-    ``conditions`` (κ₂ entries REFERENCE, LIMIT, MET) and the number of ``repartitions`` (one
+    ``conditions`` (κ₂ entries REFERENCE, MET) and the number of ``repartitions`` (one
     entry), zero inputs for the recovery's evaluations, ``worst`` = [κ₁, t], the largest κ₁ a
     recovery met, and the work arrays of :func:`accelerations_work`, each a field (a tuple
     inside the tuple would keep numba from running a batch of kernels in parallel, as
@@ -515,15 +508,9 @@ def kernel_work(kernel):
 
 @njit(cache=True)
 def set_reference(A, kernel):
-    """κ₂ of the kernel's partition at ``A`` as its REFERENCE and the LIMIT above which
-    :func:`update_partition` acts: ``condition_growth`` times the reference for an automatic
-    partition, at most SINGULAR_CONDITION (where a user's partition fails).  Returns κ₂."""
-    conditions = kernel.conditions
-    conditions[REFERENCE] = condition_two(A, kernel.rows, kernel.dependent)
-    conditions[LIMIT] = SINGULAR_CONDITION
-    if kernel.automatic:
-        conditions[LIMIT] = min(kernel.condition_growth * conditions[REFERENCE], SINGULAR_CONDITION)
-    return conditions[REFERENCE]
+    """κ₂ of the kernel's partition at ``A`` as its REFERENCE; returns κ₂."""
+    kernel.conditions[REFERENCE] = condition_two(A, kernel.rows, kernel.dependent)
+    return kernel.conditions[REFERENCE]
 
 
 @njit(cache=True)
@@ -541,19 +528,33 @@ def repartition(A, kernel):
 
 @njit(cache=True)
 def update_partition(A, kernel):
-    """The partition at ``A`` kept while κ₂ stays within the kernel's LIMIT (:func:`exceeds`),
-    else chosen again (:func:`repartition`) when κ₂ has grown by ``condition_growth`` since it
-    was chosen (automatic partition).  Returns OK, or SINGULAR_PARTITION (κ₂ in MET) where the
-    partition kept or chosen has κ₂ above SINGULAR_CONDITION."""
+    """The partition at ``A`` kept, or chosen again (:func:`repartition`, automatic partition)
+    when κ₂ has grown by ``condition_growth`` from its smallest value since the partition was
+    chosen: the REFERENCE follows κ₂ down.  A user's partition is kept; its κ₂ by SVDs only
+    where the bound from A_d's LU factors (:func:`condition_two_bound`) cannot rule out
+    SINGULAR_CONDITION.  Returns OK, or SINGULAR_PARTITION (κ₂ in MET) where
+    the partition kept or chosen has κ₂ above SINGULAR_CONDITION.
+
+    The reference must follow κ₂ down: a partition chosen near a singular position, where every
+    partition's κ₂ is large (2.3e3 on A02's N = 2, 1.7e-3 rad from a passage, RK4 at 1 ms), was
+    kept while κ₂ stayed below 1.25 times that, long after it had become a poor choice: as the
+    cranks turned vertical 0.26 s later (independent B1.z) the recovery of the dependent
+    coordinates stopped converging at κ₂ = 1.8e3.  An automatic partition's κ₂ is computed at
+    every update, since the bound (sqrt(κ₁ κ∞), 1.2 to 2 times κ₂ on A02) cannot tell a fall
+    below the reference from a rise by 1.25."""
     rows, dependent = kernel.rows, kernel.dependent
-    Ad, pivots, side = kernel.Ad, kernel.pivots, kernel.side
     conditions = kernel.conditions
-    if factor_dependent(A, rows, dependent, Ad, pivots) and \
-            not exceeds(A, rows, dependent, Ad, pivots, side, conditions[LIMIT]):
-        return OK
-    condition = condition_two(A, rows, dependent)
-    if kernel.automatic and condition > kernel.condition_growth * conditions[REFERENCE]:
-        condition = repartition(A, kernel)
+    if kernel.automatic:
+        condition = condition_two(A, rows, dependent)
+        if condition < conditions[REFERENCE]:
+            conditions[REFERENCE] = condition
+        elif condition > kernel.condition_growth * conditions[REFERENCE]:
+            condition = repartition(A, kernel)
+    else:
+        if factor_dependent(A, rows, dependent, kernel.Ad, kernel.pivots) and \
+                condition_two_bound(A, rows, kernel.Ad, kernel.pivots, kernel.side) <= SINGULAR_CONDITION:
+            return OK
+        condition = condition_two(A, rows, dependent)
     if condition > SINGULAR_CONDITION:
         conditions[MET] = condition
         return SINGULAR_PARTITION
