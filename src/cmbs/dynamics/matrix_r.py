@@ -81,7 +81,10 @@ class MatrixR:
         the re-partitions; the slider-crank through its singular positions is as accurate and
         9 % slower.  With κ₂ at 1.25: 2.0e-4, 4.5e-4, 2.8e-5 and 2.8e-10, and the pendulum and
         the particle on a circle, whose 1 × 1 A_d has condition 1 at every position, no longer
-        fail where the pendulum passes under its pivot (5 s: 5.8e-10).
+        fail where the pendulum passes under its pivot (5 s: 5.8e-10).  With the growth counted
+        from κ₂'s smallest value (needed through A02's singular positions, docs/formulations.md):
+        2.1e-4, 7.8e-4, 2.8e-5, 2.5e-10 and 4.9e-10; the 14-link figure moves with the instants
+        of re-partition (factor 1.15 to 1.4: 1.5e-4 to 1.2e-3 now, 2.4e-4 to 2.2e-3 before).
     rank_tolerance
         Relative singular-value tolerance for the rank of A.
     position_tolerance, max_iterations
