@@ -192,7 +192,7 @@ def _kappa_two(A: np.ndarray, rows: np.ndarray, dependent: np.ndarray) -> float:
     return np.linalg.svd(A[rows], compute_uv=False)[0] / np.linalg.svd(block, compute_uv=False)[-1]
 
 
-def test_a_partition_chosen_near_a_singular_position_is_chosen_again_when_its_condition_grows_from_its_low():
+def test_a_partition_chosen_at_a_passage_is_chosen_again_when_its_condition_grows_from_its_smallest_value():
     """A02's cranks turning from 1e-3 rad off horizontal (a passage, where every partition's κ₂
     is about 1/δ) to hanging vertical: the partition chosen at the passage is kept while its κ₂
     (numpy's SVDs) falls, and chosen again at the first configuration where κ₂ exceeds
@@ -225,7 +225,7 @@ def test_a_partition_chosen_near_a_singular_position_is_chosen_again_when_its_co
 
 
 def test_an_automatic_partition_singular_where_it_was_chosen_does_not_suggest_choosing_automatically():
-    """At A02's passage exactly (the cranks horizontal, A of rank N + 1 below its rows) the
+    """At A02's passage exactly (the cranks horizontal, A of rank N + 1 = 3 with 5 rows) the
     automatic partition chosen again is singular too: the message names the position and what
     to try, not the automatic choice it already made."""
     model = cmbs.load("n-four-bar", N=2)
