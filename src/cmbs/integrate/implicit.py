@@ -333,8 +333,8 @@ def integrate(problem: NamedTuple, q0: np.ndarray, v0: np.ndarray, a0: np.ndarra
     :data:`after_step` and :data:`at_output`, and may carry :data:`residual_value`) by
     :func:`newton_steps`, compiled or (``compiled`` False: a problem with Python callables)
     interpreted, keeping its factored Newton matrix while Newton contracts fast (``keep_matrix``;
-    False: Newton's method proper, a matrix at every iterate); output at ``t_out`` (each a
-    multiple of the step or hit exactly by shortening the last step before it), of which only
+    False: Newton's method proper, a matrix at every iterate); output at ``t_out`` (each reached
+    by equal steps of at most the step, the last landing on it exactly: :func:`step_to_output`), of which only
     ``t_out[::keep_every]`` are stored (``keep_every`` must divide the number of intervals, so
     that the last is kept).
 
@@ -406,6 +406,29 @@ def failure_message(problem: NamedTuple, status: int, t: float, change: float, m
         return (f"Newton iteration did not converge in {max_iterations} iterations at t={t:.6g} "
                 f"(last correction {change:.3g}); reduce the step")
     return problem.stop_message()
+
+
+#: The relative excess over the step of an interval still taken as one step by
+#: :func:`step_to_output` (the rounding of output times that are multiples of the step).
+STEP_SLACK = 1e-9
+
+
+@njit(cache=True)
+def step_to_output(t, target, step):
+    """The next step from t towards the output instant ``target``, and whether it lands there:
+    the remaining interval d = target - t divided into k = ⌈d/step - :data:`STEP_SLACK`⌉ equal
+    steps h = d/k ≤ step (1 + STEP_SLACK), the last of which ends at ``target`` exactly.
+
+    No step is a sliver left by rounding: the time accumulated by t + h drifts from a grid of
+    multiples of the step (at h = 1e-4 s, by 7e-12 s at t = 7.0058 s), and stepping by h =
+    min(step, target - t) until |t - target| ≤ 1e-12 max(1, |t|) then took a step of 7e-12 s.
+    The index-3 equations of such a step are ill-conditioned beyond use: the constraint row,
+    Φ(q_n + h v_n + h² b₁ x) = 0, fixes a to the rounding of Φ divided by h² b' (1e-16 / 1e-23),
+    and the pendulum left the step with λ ~ 1e7 and its energy wrong (generalized-α, backward
+    Euler; :func:`newton_steps`)."""
+    remaining = target - t
+    count = max(1.0, math.ceil(remaining / step - STEP_SLACK))
+    return remaining / count, count == 1.0
 
 
 @njit(cache=True)
@@ -565,11 +588,11 @@ def newton_steps(problem, t_out, first, keep_every, coefficients, step, toleranc
     change = 0.0
     factored = 0.0                          # the step size of the factors in ``matrix`` (0: none)
     while next_out < t_out.shape[0]:
-        h = min(step, t_out[next_out] - t)
+        h, lands = step_to_output(t, t_out[next_out], step)
         if h <= 1e-14 * max(1.0, abs(t)):
             next_out += 1
             continue
-        t_new = t + h
+        t_new = t_out[next_out] if lands else t + h
         status, change, factored = solve_step(h, t_new, factored, not keep_matrix)
         if status != OK and keep_matrix:
             status, change, factored = solve_step(h, t_new, 0.0, True)
@@ -585,7 +608,7 @@ def newton_steps(problem, t_out, first, keep_every, coefficients, step, toleranc
         t = t_new
         counters[0] += 1
         after_step(problem, t, state)
-        if abs(t - t_out[next_out]) <= 1e-12 * max(1.0, abs(t)):
+        if lands:
             if next_out % keep_every == 0:
                 row = next_out // keep_every
                 store(row)
