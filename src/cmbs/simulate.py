@@ -532,7 +532,8 @@ def _run_index3(model: Model, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, g
         return dynamic(t, a, lam)(q, v), terms.phi.copy()
 
     return integrate_index3(residual, q0, qd0, a0, lam0, grid, scheme=scheme, step=dt,
-                            tolerance=tolerance, progress=bar, stop_on=(CmbsError,), keep_every=every, value=value)
+                            tolerance=tolerance, progress=bar, stop_on=(CmbsError,), keep_every=every, value=value,
+                            branch=BranchWatch(model))
 
 
 def _run_compiled_index3(model: Model, plan: tuple, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray,
@@ -576,15 +577,18 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
     1e12, which stops the run for a user's partition: the problem's after-step hook, as
     :meth:`MatrixRSolver.update_partition`) and the steps go on in its independent coordinates;
     a step that fails is tried once more with independent coordinates chosen at its start
-    (automatic partition).  Of the instants of ``grid`` only ``grid[::every]`` are stored.
+    (automatic partition).  The branch watch sees each accepted full state: a run that left its
+    assembly branch fails there, keeping the outputs up to the jump.  Of the instants of ``grid``
+    only ``grid[::every]`` are stored.
 
     The loop is :func:`cmbs.integrate.implicit.newton_steps`, compiled on the problem of
     :mod:`cmbs.integrate.compiled_reduced` when the model's ``kernel`` is given (constant
     inputs), else interpreted on the Python problem of :func:`_python_reduced_problem`; this
     function drives both alike."""
     from cmbs.dynamics.base import OK
+    from cmbs.integrate.continuity import watch_array
     from cmbs.integrate.implicit import (NEWTON_ITERATIONS, counter_dict, failure_message, newton_counters,
-                                         newton_run, newton_state)
+                                         newton_run, newton_state, stored_outputs)
 
     terms = model.evaluate(q0, qd0, 0.0, inputs(0.0, q0, qd0))
     full = (q0.copy(), qd0.copy(), solver.accelerations(terms, q0, qd0, 0.0).qdd)
@@ -592,8 +596,11 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
     times = grid[::every]
     y, dy = np.zeros((times.size, 2 * model.n)), np.zeros((times.size, 2 * model.n))
     if kernel is None:
-        problem_for = _python_reduced_problem(model, solver, inputs, full, last, y, dy, bar)
+        branch = BranchWatch(model)
+        watch = branch.watch
+        problem_for = _python_reduced_problem(model, solver, inputs, full, last, y, dy, bar, branch)
     else:
+        watch = interpreted(watch_array)(model.n, model.m)
         from cmbs.integrate.compiled_reduced import reduced_problems
 
         problem_for = reduced_problems(kernel, model, solver, np.array(inputs(0.0, q0, qd0), dtype=float), full,
@@ -607,18 +614,18 @@ def _run_reduced(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.n
         out = np.zeros((times.size, 2 * independent.size))       # the loop's own (z, ż) records: unused
         status, next_out, t_stop, change = newton_run(problem, state, grid, first, scheme, dt, tolerance,
                                                       NEWTON_ITERATIONS, every, out, out.copy(), counts,
-                                                      kernel is not None)
+                                                      kernel is not None, watch)
         if kernel is not None:
             solver.note_loop_conditions()
         if status == OK:
             break
         reached = next_out - 1                      # the state is that of grid[reached]
-        if solver.user is None and retried != reached:    # once more with independent coordinates chosen here
+        if status != LEFT_BRANCH and solver.user is None and retried != reached:   # once more, partition chosen here
             retried = reached
             solver.repartition(model.jacobian(full[0], grid[reached]))
         else:
-            message = failure_message(problem, status, t_stop, change, NEWTON_ITERATIONS)
-            stored = -(-next_out // every)
+            message = failure_message(problem, status, t_stop, change, NEWTON_ITERATIONS, watch)
+            stored = stored_outputs(times, next_out, every, status, watch)
             break
         first = reached
     if kernel is not None:
@@ -645,13 +652,13 @@ def _run_compiled_trapezoidal(model: Model, solver, chosen: Formulation, plan: t
 
 
 def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, last: tuple, y: np.ndarray,
-                            dy: np.ndarray, bar: _Progress | None) -> Callable[[], object]:
+                            dy: np.ndarray, bar: _Progress | None, branch: BranchWatch) -> Callable[[], object]:
     """The trapezoidal rule's problem for :func:`_run_reduced` as Python functions (the model or
     the inputs have Python callables): a :class:`~cmbs.integrate.implicit.CallbackProblem` whose
     residual expands an iterate into ``last`` (as
     :class:`~cmbs.integrate.compiled_reduced.ReducedProblem`'s kernel does), whose steps accept
     ``last`` into ``full`` and update the partition there (:meth:`MatrixRSolver.update_partition`),
-    and which records ``full`` into ``y``, ``dy``.  Returns the maker of the problem for a run or
+    whose branch watch ``branch`` sees ``full``, and which records ``full`` into ``y``, ``dy``.  Returns the maker of the problem for a run or
     its retry."""
     from cmbs.integrate.implicit import CallbackProblem
 
@@ -686,7 +693,10 @@ def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, l
         y[row] = np.concatenate([full[0], full[1]])
         dy[row] = np.concatenate([full[1], full[2]])
 
-    return lambda: CallbackProblem(residual, bar, (CmbsError,), [""], adjust, keep)
+    def left(t: float, state: tuple) -> bool:
+        return branch(t, np.concatenate(full[:2]), np.concatenate(full[1:])) is not None
+
+    return lambda: CallbackProblem(residual, bar, (CmbsError,), [""], adjust, keep, branch=left)
 
 
 def _record(model: Model, solver, inputs: Inputs, result: Integration, chosen: Formulation | None,
