@@ -206,7 +206,7 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         ``rk45`` (Dormand-Prince), ``rk23`` (Bogacki-Shampine), ``dop853`` (Dormand-Prince, 8th
         order, for tight tolerances): adaptive with ``rtol``/``atol``;
         ``rk4``, ``trapezoidal``, ``backward-euler``, ``generalized-alpha`` (ρ∞ = 0.9): fixed
-        step ``dt``.
+        step ``dt`` (the last two need ``t_end`` a whole number of steps: :func:`short_last_step_message`).
     dt
         Step of fixed-step integrators and output interval of adaptive ones.
     every
@@ -658,8 +658,8 @@ def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, l
     residual expands an iterate into ``last`` (as
     :class:`~cmbs.integrate.compiled_reduced.ReducedProblem`'s kernel does), whose steps accept
     ``last`` into ``full`` and update the partition there (:meth:`MatrixRSolver.update_partition`),
-    whose branch watch ``branch`` sees ``full``, and which records ``full`` into ``y``, ``dy``.  Returns the maker of the problem for a run or
-    its retry."""
+    whose branch watch ``branch`` sees ``full``, and which records ``full`` into ``y``, ``dy``.
+    Returns the maker of the problem for a run or its retry."""
     from cmbs.integrate.implicit import CallbackProblem
 
     terms = model.new_terms()
