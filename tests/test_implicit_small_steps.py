@@ -82,7 +82,7 @@ def test_steps_to_the_outputs_are_equal_and_land_on_them(dt, t_end):
             if lands:
                 break
         assert t == target
-    assert abs(shortest / dt - 1) < 1e-9 and abs(longest / dt - 1) < 1e-9
+    assert abs(shortest / dt - 1) < 1e-9 and abs(longest / dt - 1) < 1e-9      # 10 s / 1e-4 s: ulp(t)/dt < 2e-11
 
 
 @pytest.mark.parametrize("integrator", ["generalized-alpha", "backward-euler"])
