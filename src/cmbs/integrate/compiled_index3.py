@@ -13,7 +13,8 @@ the tangents by forward differences with the steps 1e-7 max(1, |x_k|) of each co
 velocity x_k (:func:`cmbs.integrate.implicit.forward_difference_tangents`), the inputs evaluated
 at each shifted state (a computed-torque law's dependence on the state is part of the tangent; a
 held law keeps the sample it took at the step's first iterate).  Its records at the outputs
-are λ (Newton's), u, max|Φ|, max|A v + Φ_t| and f_c = -Aᵀλ.  At an iterate where the loop keeps
+are λ (Newton's), u, max|Φ|, max|A v + Φ_t| and f_c = -Aᵀλ.  After each step the branch watch
+(:func:`cmbs.integrate.continuity.left_branch`) sees (t, v, a) with A(q) there.  At an iterate where the loop keeps
 its factored Newton matrix, the residual kernel gives r_dyn and Φ only (:data:`residual_value`:
 one model evaluation instead of the 2n + 1 of the tangents).  The Newton matrix is factored by
 LU with partial pivoting (:func:`cmbs.dynamics.kkt.lu_in_place`).
@@ -28,6 +29,7 @@ import numpy as np
 from cmbs.dynamics.base import OK
 from cmbs.dynamics.kkt import lu_in_place, lu_solve
 from cmbs.integrate.compiled_rk4 import apply_inputs, record_constraints
+from cmbs.integrate.continuity import left_branch
 from cmbs.integrate.implicit import DIVERGED, dynamic_residual, forward_difference_tangents
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
@@ -146,6 +148,15 @@ def _after_step(problem, t, state):
 
 
 @njit(cache=True)
+def _left_branch(problem, watch, t, state):
+    """The branch watch at the accepted state (q, v, a) at t, A(q) evaluated there (one model
+    evaluation a step; the terms stay in the buffer): True when the run left its branch."""
+    q, v, a, lam = state[0], state[1], state[2], state[3]
+    evaluate(problem.model, q, v, t, problem.u, problem.buffer)
+    return left_branch(watch, t, v, a, terms_views(problem.model, q.shape[0], lam.shape[0], problem.buffer)[2])
+
+
+@njit(cache=True)
 def _at_output(problem, t):
     """Go on (a compiled run shows no progress)."""
     return OK
@@ -159,3 +170,4 @@ Index3Problem.newton_back_solve = staticmethod(dense_newton_back_solve)
 Index3Problem.record = staticmethod(_record)
 Index3Problem.after_step = staticmethod(_after_step)
 Index3Problem.at_output = staticmethod(_at_output)
+Index3Problem.left_branch_at = staticmethod(_left_branch)

@@ -17,7 +17,8 @@ After a step the accepted full state is the expansion at the last iterate evalua
 partition is updated there as matrix R's after-step hook in the explicit loops updates it
 (:func:`cmbs.dynamics.matrix_r_kernels.update_partition`: chosen again in place when κ₂ has
 grown by ``condition_growth``), and the integrator's z, ż, z̈ are taken from it in the
-independent coordinates of that partition (their number is fixed).
+independent coordinates of that partition (their number is fixed).  The branch watch
+(:func:`cmbs.integrate.continuity.left_branch`) then sees the accepted full state.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from cmbs.dynamics.matrix_r import singular_partition_message
 from cmbs.dynamics.matrix_r_kernels import (MET, NOT_CONVERGED, MatrixRKernel, dependent_accelerations, recover,
                                             update_partition, velocity_matrix)
 from cmbs.integrate.compiled_index3 import dense_newton_back_solve, dense_newton_factor
+from cmbs.integrate.continuity import left_branch
 from cmbs.integrate.implicit import DIVERGED, STOPPED, forward_difference_tangents
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, terms_views
@@ -253,6 +255,16 @@ def _after_step(problem, t, state):
 
 
 @njit(cache=True)
+def _left_branch(problem, watch, t, state):
+    """The branch watch at the accepted full state (q, q̇, q̈) at t, A(q) evaluated there (the terms
+    stay in the buffer): True when the run left its branch."""
+    q, qd, qdd = problem.full
+    evaluate(problem.model, q, qd, t, problem.u, problem.buffer)
+    return left_branch(watch, t, qd, qdd, terms_views(problem.model, q.shape[0], problem.partition.m,
+                                                      problem.buffer)[2])
+
+
+@njit(cache=True)
 def _at_output(problem, t):
     """STOPPED where the step's partition update found A_d singular (:func:`_after_step`), else OK."""
     return STOPPED if problem.failure[0] == PARTITION_SINGULAR else OK
@@ -265,3 +277,4 @@ ReducedProblem.newton_back_solve = staticmethod(dense_newton_back_solve)
 ReducedProblem.record = staticmethod(_record)
 ReducedProblem.after_step = staticmethod(_after_step)
 ReducedProblem.at_output = staticmethod(_at_output)
+ReducedProblem.left_branch_at = staticmethod(_left_branch)

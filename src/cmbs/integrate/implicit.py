@@ -44,6 +44,7 @@ import numpy as np
 
 from cmbs.dynamics.base import OK
 from cmbs.dynamics.kkt import lu_in_place, lu_solve
+from cmbs.integrate.continuity import LEFT_BRANCH, BranchWatch, jump_message, kept_records, watch_array
 from cmbs.integrate.explicit import Integration
 from cmbs.jit import interpreted, njit, type_dispatch
 
@@ -123,6 +124,11 @@ after_step = type_dispatch("after_step")
 #: ``at_output(problem, t) -> status``: after the outputs of an instant of ``t_out`` are stored
 #: (a progress bar; a check that may stop the run).
 at_output = type_dispatch("at_output")
+#: ``left_branch_at(problem, watch, t, (q, v, a, λ, x)) -> bool``: the branch watch
+#: (:func:`cmbs.integrate.continuity.left_branch`, its state in ``watch``) at the accepted state at
+#: t, in the full coordinates of the problem's model; True when the run left its assembly branch
+#: there.
+left_branch_at = type_dispatch("left_branch_at")
 #: ``differenced(problem, point, t, step, which, shifted, out)``: the function f whose tangents
 #: :func:`forward_difference_tangents` takes, into ``out``, at the iterate ``point`` = (q, v, ...) of
 #: step ``step`` at t with q (``which`` 0) or v (``which`` 1) replaced by ``shifted``.
@@ -235,7 +241,9 @@ class CallbackProblem(NamedTuple):
     the next output instant) as :data:`STOPPED` with its text as the message (kept in
     ``stopped[0]``).  Optional: ``progress(t)`` at each output instant, ``adjust(t, (q, v, a, λ,
     x))`` after each step, ``keep(row, t, (q, v, a, λ))`` at each output kept, ``value(t, q, v,
-    a, λ) -> (r_dyn, Φ)``: the residual without the matrices (else ``function`` serves)."""
+    a, λ) -> (r_dyn, Φ)``: the residual without the matrices (else ``function`` serves),
+    ``branch(t, (q, v, a, λ, x)) -> bool`` after each step and at the start: the branch watch
+    (a :class:`cmbs.integrate.continuity.BranchWatch` on the model's full state; else none)."""
 
     function: Residual
     progress: Callable[[float], None] | None
@@ -244,6 +252,7 @@ class CallbackProblem(NamedTuple):
     adjust: Callable[[float, tuple], None] | None = None
     keep: Callable[[int, float, tuple], None] | None = None
     value: Callable[[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray], tuple] | None = None
+    branch: Callable[[float, tuple], bool] | None = None
 
     def stop_message(self) -> str:
         return self.stopped[0]
@@ -297,6 +306,12 @@ def _callback_after_step(problem: CallbackProblem, t: float, state: tuple) -> No
             problem.stopped[0] = str(error)
 
 
+def _callback_left_branch(problem: CallbackProblem, watch: np.ndarray, t: float, state: tuple) -> bool:
+    """The problem's branch watch at the accepted state (on the array of its
+    :class:`~cmbs.integrate.continuity.BranchWatch`, which the driver gives the loop as ``watch``)."""
+    return problem.branch is not None and problem.branch(t, state)
+
+
 def _callback_at_output(problem: CallbackProblem, t: float) -> int:
     if problem.progress is not None:
         problem.progress(t)
@@ -310,37 +325,46 @@ CallbackProblem.newton_back_solve = staticmethod(_callback_back_solve)
 CallbackProblem.record = staticmethod(_callback_record)
 CallbackProblem.after_step = staticmethod(_callback_after_step)
 CallbackProblem.at_output = staticmethod(_callback_at_output)
+CallbackProblem.left_branch_at = staticmethod(_callback_left_branch)
 
 
 def integrate_index3(residual: Residual, q0: np.ndarray, v0: np.ndarray, a0: np.ndarray, lam0: np.ndarray,
                      t_out: np.ndarray, *, scheme: Scheme, step: float, tolerance: float = 1e-10,
                      max_iterations: int = NEWTON_ITERATIONS, progress: Callable[[float], None] | None = None,
                      stop_on: tuple[type[Exception], ...] = (), keep_every: int = 1,
-                     value: Callable[..., tuple] | None = None, keep_matrix: bool = True) -> Integration:
+                     value: Callable[..., tuple] | None = None, keep_matrix: bool = True,
+                     branch: BranchWatch | None = None) -> Integration:
     """:func:`integrate` with the residual a Python function (:class:`CallbackProblem`, ``value``
     its residual without the matrices): the loop of :func:`newton_steps` runs interpreted, calling
-    ``progress(t)`` at every output instant."""
-    return integrate(CallbackProblem(residual, progress, stop_on, [""], value=value), q0, v0, a0, lam0, t_out,
-                     scheme=scheme, step=step, tolerance=tolerance, max_iterations=max_iterations,
-                     keep_every=keep_every, compiled=False, keep_matrix=keep_matrix)
+    ``progress(t)`` at every output instant and, when given, the branch watch ``branch`` (on the
+    state (q, v), (v, a)) after every step."""
+    watched = None if branch is None else lambda t, state: branch(t, np.concatenate(state[:2]),
+                                                                  np.concatenate(state[1:3])) is not None
+    return integrate(CallbackProblem(residual, progress, stop_on, [""], value=value, branch=watched), q0, v0, a0,
+                     lam0, t_out, scheme=scheme, step=step, tolerance=tolerance, max_iterations=max_iterations,
+                     keep_every=keep_every, compiled=False, keep_matrix=keep_matrix,
+                     watch=None if branch is None else branch.watch)
 
 
 def integrate(problem: NamedTuple, q0: np.ndarray, v0: np.ndarray, a0: np.ndarray, lam0: np.ndarray,
               t_out: np.ndarray, *, scheme: Scheme, step: float, tolerance: float = 1e-10, max_iterations: int = NEWTON_ITERATIONS,
-              keep_every: int = 1, compiled: bool = True, keep_matrix: bool = True) -> Integration:
+              keep_every: int = 1, compiled: bool = True, keep_matrix: bool = True,
+              watch: np.ndarray | None = None) -> Integration:
     """Fixed-step integration of the index-3 DAE of ``problem`` (a kernel tuple whose class carries
     :data:`residual_terms`, :data:`newton_factor`, :data:`newton_back_solve`, :data:`record_output`,
-    :data:`after_step` and :data:`at_output`, and may carry :data:`residual_value`) by
+    :data:`after_step`, :data:`at_output` and :data:`left_branch_at`, and may carry :data:`residual_value`) by
     :func:`newton_steps`, compiled or (``compiled`` False: a problem with Python callables)
     interpreted, keeping its factored Newton matrix while Newton contracts fast (``keep_matrix``;
-    False: Newton's method proper, a matrix at every iterate); output at ``t_out`` (each a
-    multiple of the step or hit exactly by shortening the last step before it), of which only
+    False: Newton's method proper, a matrix at every iterate); output at ``t_out`` (each reached
+    by equal steps of at most the step, the last landing on it exactly: :func:`step_to_output`), of which only
     ``t_out[::keep_every]`` are stored (``keep_every`` must divide the number of intervals, so
-    that the last is kept).
+    that the last is kept).  The problem's branch watch (:data:`left_branch_at`) keeps its state in
+    ``watch`` (:func:`cmbs.integrate.continuity.watch_array` of the sizes of q and λ when not given).
 
     Returns an :class:`~cmbs.integrate.explicit.Integration` whose ``y`` holds (q, v) and ``dy``
     (v, a); ``counters`` include the Newton iterations and factorisations.  A failed run keeps the
-    outputs before the failure.
+    outputs before the failure; one the branch watch ended, those up to the start of the jump
+    (:func:`cmbs.integrate.continuity.kept_records`).
     """
     if keep_every < 1 or (t_out.size - 1) % keep_every:
         raise ValueError(f"keep_every={keep_every} does not divide the {t_out.size - 1} output intervals")
@@ -349,14 +373,24 @@ def integrate(problem: NamedTuple, q0: np.ndarray, v0: np.ndarray, a0: np.ndarra
     out_dy = np.zeros((kept.size, 2 * q0.size))
     counts = newton_counters()
     state = newton_state(q0, v0, a0, lam0)
+    if watch is None:
+        watch = interpreted(watch_array)(q0.size, lam0.size)
     status, next_out, t_stop, change = newton_run(problem, state, t_out, 0, scheme, step, tolerance, max_iterations,
-                                                  keep_every, out_y, out_dy, counts, compiled, keep_matrix)
+                                                  keep_every, out_y, out_dy, counts, compiled, watch, keep_matrix)
     counters = counter_dict(counts)
     if status == OK:
         return Integration(kept, out_y, out_dy, "success", "", counters)
-    stored = -(-next_out // keep_every)          # the kept instants before t_out[next_out]
+    stored = stored_outputs(kept, next_out, keep_every, status, watch)
     return Integration(kept[:stored], out_y[:stored], out_dy[:stored], "failed",
-                       failure_message(problem, status, t_stop, change, max_iterations), counters)
+                       failure_message(problem, status, t_stop, change, max_iterations, watch), counters)
+
+
+def stored_outputs(kept: np.ndarray, next_out: int, keep_every: int, status: int, watch: np.ndarray) -> int:
+    """How many of the ``kept`` output times a run :func:`newton_steps` ended with ``status`` while
+    stepping to output ``next_out`` returns: the kept instants before that output, and of them,
+    when the branch watch ended it, only those up to the start of the jump."""
+    stored = -(-next_out // keep_every)
+    return kept_records(kept, stored, watch) if status == LEFT_BRANCH else stored
 
 
 def newton_state(q: np.ndarray, v: np.ndarray, a: np.ndarray, lam: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -380,11 +414,12 @@ def counter_dict(counts: np.ndarray) -> dict[str, int]:
 
 def newton_run(problem: NamedTuple, state: tuple, t_out: np.ndarray, first: int, scheme: Scheme, step: float,
                tolerance: float, max_iterations: int, keep_every: int, out_y: np.ndarray, out_dy: np.ndarray,
-               counts: np.ndarray, compiled: bool, keep_matrix: bool = False) -> tuple[int, int, float, float]:
+               counts: np.ndarray, compiled: bool, watch: np.ndarray,
+               keep_matrix: bool = False) -> tuple[int, int, float, float]:
     """:func:`newton_steps` from output instant ``first`` of ``t_out`` (with the work arrays it
     needs), compiled or interpreted, keeping its factored matrix only when told (``keep_matrix``:
     the index-3 runs of :func:`integrate`; the trapezoidal rule in matrix R's coordinates runs
-    Newton's method proper); returns what it returns."""
+    Newton's method proper), the branch watch's state in ``watch``; returns what it returns."""
     n, m = state[0].size, state[3].size
     work = (np.empty(n), np.empty(m), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m),
             np.empty((n, n)), np.empty((m, n)), np.empty((n, n)), np.empty((n, n)), np.empty((n + m, n + m)),
@@ -393,11 +428,15 @@ def newton_run(problem: NamedTuple, state: tuple, t_out: np.ndarray, first: int,
     coefficients = (s.b0, s.b1, s.g0, s.g1, s.alpha_m, s.alpha_f, s.b_eff, s.g_eff)
     loop = newton_steps if compiled else interpreted(newton_steps)
     return loop(problem, np.ascontiguousarray(t_out, dtype=float), first, keep_every, coefficients, float(step),
-                float(tolerance), int(max_iterations), bool(keep_matrix), state, work, out_y, out_dy, counts)
+                float(tolerance), int(max_iterations), bool(keep_matrix), state, work, out_y, out_dy, counts, watch)
 
 
-def failure_message(problem: NamedTuple, status: int, t: float, change: float, max_iterations: int) -> str:
-    """Why :func:`newton_steps` stopped with ``status`` at t (``change``: its last scaled correction)."""
+def failure_message(problem: NamedTuple, status: int, t: float, change: float, max_iterations: int,
+                    watch: np.ndarray) -> str:
+    """Why :func:`newton_steps` stopped with ``status`` at t (``change``: its last scaled correction;
+    ``watch``: the branch watch's state)."""
+    if status == LEFT_BRANCH:
+        return jump_message(watch)
     if status == SINGULAR:
         return f"singular Newton matrix at t={t:.6g} (redundant constraints or a singular configuration)"
     if status == DIVERGED:
@@ -408,16 +447,42 @@ def failure_message(problem: NamedTuple, status: int, t: float, change: float, m
     return problem.stop_message()
 
 
+#: The relative excess over the step of an interval still taken as one step by
+#: :func:`step_to_output`: the rounding of output times that are multiples of the step, up to
+#: ulp(t)/step = 2.2e-16 t/step, 2.2e-9 at the 1e7 instants :func:`cmbs.simulate.output_times` allows.
+STEP_SLACK = 1e-6
+
+
+@njit(cache=True)
+def step_to_output(t, target, step):
+    """The next step from t towards the output instant ``target``, and whether it lands there:
+    the remaining interval d = target - t divided into k = ⌈d/step - :data:`STEP_SLACK`⌉ equal
+    steps h = d/k ≤ step (1 + STEP_SLACK), the last of which ends at ``target`` exactly.
+
+    No step is a sliver left by rounding: the time accumulated by t + h drifts from a grid of
+    multiples of the step (at h = 1e-4 s, by 7e-12 s at t = 7.0058 s), and stepping by h =
+    min(step, target - t) until |t - target| ≤ 1e-12 max(1, |t|) then took a step of 7e-12 s.
+    The index-3 equations of such a step are ill-conditioned beyond use: the constraint row,
+    Φ(q_n + h v_n + h² b₁ x) = 0, fixes a to the rounding of Φ divided by h² b' (1e-16 / 1e-23),
+    and the pendulum left the step with λ ~ 1e7 and its energy wrong (generalized-α, backward
+    Euler; :func:`newton_steps`)."""
+    remaining = target - t
+    count = max(1.0, math.ceil(remaining / step - STEP_SLACK))
+    return remaining / count, count == 1.0
+
+
 @njit(cache=True)
 def newton_steps(problem, t_out, first, keep_every, coefficients, step, tolerance, max_iterations, keep_matrix, state,
-                 work, out_y, out_dy, counters):
+                 work, out_y, out_dy, counters, watch):
     """The loop of :func:`integrate`: steps of ``step`` through the output times ``t_out`` from the
     state (q, v, a, λ, x) at ``t_out[first]`` (updated in place), storing (q, v) and (v, a) at
     every ``keep_every``-th output into ``out_y``, ``out_dy`` and calling :data:`record_output`
     there (at ``t_out[0]`` too when ``first`` is 0: a resumed run has its row);
     ``counters`` = (steps, Newton iterations, residual evaluations, factorisations).  After each
-    step the problem may adjust the state (:data:`after_step`), and at each output instant stop
-    the run or hand it back (:data:`at_output`).
+    step the problem may adjust the state (:data:`after_step`), then its branch watch
+    (:data:`left_branch_at`, the state in ``watch``; started at ``t_out[0]`` when ``first`` is 0)
+    may end the run (LEFT_BRANCH), and at each output instant the problem may stop the run or
+    hand it back (:data:`at_output`).
 
     Each step solves for a_{n+1}, λ_{n+1} by Newton's method (module docstring), from the
     previous a and λ, until the scaled correction h² b' max|Δa| is below ``tolerance`` (1 +
@@ -561,15 +626,16 @@ def newton_steps(problem, t_out, first, keep_every, coefficients, step, toleranc
     if first == 0:
         store(0)
         record_output(problem, 0, 0, 0, t, (q, v, a, lam))
+        left_branch_at(problem, watch, t, state)          # the first state starts the watch
     next_out = first + 1
     change = 0.0
     factored = 0.0                          # the step size of the factors in ``matrix`` (0: none)
     while next_out < t_out.shape[0]:
-        h = min(step, t_out[next_out] - t)
+        h, lands = step_to_output(t, t_out[next_out], step)
         if h <= 1e-14 * max(1.0, abs(t)):
             next_out += 1
             continue
-        t_new = t + h
+        t_new = t_out[next_out] if lands else t + h
         status, change, factored = solve_step(h, t_new, factored, not keep_matrix)
         if status != OK and keep_matrix:
             status, change, factored = solve_step(h, t_new, 0.0, True)
@@ -585,7 +651,9 @@ def newton_steps(problem, t_out, first, keep_every, coefficients, step, toleranc
         t = t_new
         counters[0] += 1
         after_step(problem, t, state)
-        if abs(t - t_out[next_out]) <= 1e-12 * max(1.0, abs(t)):
+        if left_branch_at(problem, watch, t, state):
+            return LEFT_BRANCH, next_out, t, change
+        if lands:
             if next_out % keep_every == 0:
                 row = next_out // keep_every
                 store(row)
