@@ -51,7 +51,7 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
-from cmbs.jit import njit
+from cmbs.jit import borrow, njit
 import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
@@ -242,8 +242,10 @@ def _evaluate_kernel(ip, rp, q, qd, t, u, buf):
     """Fill a :class:`~cmbs.model.model.Terms` buffer: Q, Φ, A, γ, Φ_t, M, then the scratch.
 
     Scratch: time-function values (k, 3) [Python ones already written by the caller], the
-    expression stack (depth, 3), then the work arrays (see :func:`_kinematics`).
+    expression stack (depth, 3), then the work arrays (see :func:`_kinematics`).  It borrows its
+    arguments (:func:`cmbs.jit.borrow`): numba counts no reference for what it views or passes on.
     """
+    ip, rp, q, qd, u, buf = borrow((ip, rp, q, qd, u, buf))
     n, nr, nd, nu, ntf = ip[I_N], ip[I_NR], ip[I_ND], ip[I_NU], ip[I_NTF]
     m = nr + nd
     o_phi = n

@@ -59,7 +59,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Mapping, NamedTuple, Sequence
 
-from cmbs.jit import njit
+from cmbs.jit import borrow, njit
 import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
@@ -1021,8 +1021,9 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     v = (q̇, 0), so a call allocates nothing).
 
     The kernel indexes ``ints``, ``reals`` and ``buffer`` by offsets rather than through array
-    views: each view costs numba an atomic reference count, which at a four-bar's size made up
-    most of the call."""
+    views, and borrows its arguments (:func:`cmbs.jit.borrow`; a call from Python passes them
+    as they are): numba counts no reference for what it views or passes on."""
+    q, qd, u, ints, reals, buffer = borrow((q, qd, u, ints, reals, buffer))
     n = q.shape[0]
     real_base, c0, n_ext, m, a0, g0, t0, s0, x0 = layout(ints, n, buffer.shape[0])
     v0 = x0 + n_ext
