@@ -1,8 +1,8 @@
 """The compiled paths free every array they allocate, and the fixed-step loops allocate none
 per step.
 
-The hot kernels (:func:`cmbs.jit.njit_borrowing`) work by design on arrays their caller
-allocated once per run.  A kernel that kept an array or a view it does not own would leak it;
+The hot kernels work by design on arrays their caller allocated once per run, which the loops
+borrow (:func:`cmbs.jit.borrow`).  A kernel that kept an array or a view it does not own would leak it;
 numba's allocation statistics catch that: after each path has run once (compiling and warming
 its caches), running it again and dropping the results must leave as many frees as allocations,
 for the data and for their owners (meminfos).  A fixed-step loop that allocated a work array per

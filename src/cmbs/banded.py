@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from cmbs.jit import njit_borrowing
+from cmbs.jit import njit
 
 
 def jacobian_pattern(model, samples: int = 3, seed: int = 7) -> np.ndarray:
@@ -68,7 +68,7 @@ def band_plan(mass: np.ndarray, pattern: np.ndarray) -> tuple[np.ndarray, int]:
     return order, width
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def band_factor(AB, width, pivots):
     """LU factorisation with partial pivoting of the band matrix in ``AB`` (LAPACK ``gbtf2``,
     unblocked): lower and upper half-width ``width`` = b, element (i, j) of the matrix at
@@ -111,7 +111,7 @@ def band_factor(AB, width, pivots):
     return True
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def band_solve(AB, width, pivots, b):
     """Solve with the factors of :func:`band_factor`, in place in ``b`` (LAPACK ``gbtrs``)."""
     size = AB.shape[0]
@@ -133,7 +133,7 @@ def band_solve(AB, width, pivots, b):
             b[i] -= column[diagonal + i - j] * value
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def inverse_trace(L, start, Z):
     """trace(G⁻¹) from the lower Cholesky factor L of G (profile ``start``: L[i, k] = 0 for
     k < start[i]) by the Takahashi recurrence, for j >= i,

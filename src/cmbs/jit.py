@@ -29,10 +29,6 @@ VERSION = _numba.__version__ if _numba is not None else "none"
 def njit(*args, **options) -> Callable:
     """``numba.njit`` with numba, else a decorator that leaves the function as it is.
 
-    The function keeps numba's reference counting (NRT) even when called from a
-    :func:`njit_borrowing` one, so it may create arrays, provided it returns none to such a
-    caller.
-
     First-use compile time: numba links every compiled callee into its caller's module and
     optimises the whole module again, so each separately compiled function between a loop and a
     formulation's solve adds the solve's optimisation once more (1.5-3.5 s each).  A small
@@ -43,33 +39,56 @@ def njit(*args, **options) -> Callable:
     (``a[:] = b``, ``a[k] = row``) brings numba's formatted shape-mismatch error, about 2 s to
     compile per array rank: the kernels copy element by element."""
     if _numba is not None:
-        return _numba.njit(*args, **{"_nrt": True, **options})
+        return _numba.njit(*args, **options)
     if len(args) == 1 and callable(args[0]) and not options:
         return args[0]
     return lambda function: function
 
 
-def njit_borrowing(*args, **options) -> Callable:
-    """:func:`njit` without numba's reference counting: for the kernels of the hot paths.
+def borrow(value):
+    """``value`` with each of its arrays (itself, or the members of a tuple or named tuple, nested)
+    replaced by a *borrowed* view: the same memory, which numba does not reference-count.
 
     numba counts the references to every array a compiled function receives, slices or reshapes,
-    with an atomic increment and decrement each time; in a four-bar's forward-dynamics
-    evaluation these cost about a third of the time, and the Python call of a kernel pays them
-    on every argument.  A borrowing function works only on arrays its caller owns: it must not
-    create an array (np.empty, .copy(), np.linalg, a slice assignment that needs a temporary:
-    numba then refuses to compile it, "NRT required but not enabled") and must not keep an
-    array returned by a :func:`njit` callee (that would never be freed: tests/test_borrowing.py
-    checks that the compiled paths free everything they allocate).  It returns scalars or tuples
-    of scalars, never an array, not even a view to Python (which would box it without an owner),
-    unless it is ``inline="always"`` and called from compiled code only: it is then compiled
-    into its caller, with the caller's reference counting.  numba's option is ``_nrt=False``: a
-    private one, kept until the hot path holds few array variables (without it the four-bar's
-    compiled RK4 loop takes 2.1 times as long: about 160 reference-count calls per stage, one
-    increment and one decrement for each array a compiled call passes, including each array of
-    a kernel tuple, and for each view; benchmarks/README.md has the measurements)."""
-    if _numba is not None:
-        return _numba.njit(*args, **{**options, "_nrt": False})
-    return njit(*args, **options)
+    with an atomic increment and decrement each time (a call passing a kernel tuple counts each
+    of its arrays); in the four-bar's RK4 loop these made about half of the time.  The loops
+    therefore borrow the arrays of a run once, at their top (the state, the work arrays, the model's
+    and the formulation's kernel tuples), and hand the borrowed views down: every view and call
+    below then counts nothing.  A borrowed view must not outlive the call that made it: it is never
+    returned to Python nor kept in an array or object that is; the arrays it views stay owned by
+    the caller (tests/test_borrowing.py checks that the compiled paths free all they allocate).
+    Compiled, a C-contiguous writeable array becomes ``numba.carray`` over its buffer (cffi's
+    ``from_buffer``, the pointer numba documents for this); any other value is returned as it is.
+    Interpreted, ``value`` itself."""
+    return value
+
+
+if _numba is not None:
+    from cffi import FFI as _FFI
+    from numba.core import types as _types
+    from numba.extending import overload as _overload
+
+    _ffi = _FFI()
+
+    @_overload(borrow)
+    def _borrow_typed(value):
+        if isinstance(value, _types.Array) and value.layout == "C" and value.mutable:
+            return lambda value: _numba.carray(_ffi.from_buffer(value), value.shape)
+        if isinstance(value, _types.BaseNamedTuple):
+            return _rebuilt(value.instance_class, len(value))
+        if isinstance(value, _types.BaseTuple):
+            return _rebuilt(None, len(value))
+        return lambda value: value
+
+
+def _rebuilt(make: type | None, arity: int) -> Callable:
+    """``value -> make(borrow(value[0]), ..., borrow(value[arity - 1]))``, or the plain tuple of
+    those when ``make`` is None, written out for the arity: numba types this one flat call in
+    milliseconds, where a recursion over the items (one overload per tail) took seconds per tuple."""
+    items = "".join(f"borrow(value[{i}]), " for i in range(arity))
+    namespace = {"make": make, "borrow": borrow}
+    exec(f"def rebuilt(value):\n    return {'make' if make is not None else ''}({items})\n", namespace)
+    return namespace["rebuilt"]
 
 
 def interpreted(kernel: Callable) -> Callable:

@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cmbs.dynamics.kkt import lu_in_place, lu_solve, lu_solve_transposed
-from cmbs.jit import njit_borrowing
+from cmbs.jit import njit
 from cmbs.model.compiled import evaluate, model_kernel, terms_views
 from cmbs.model.drivers import evaluate_piecewise
 
@@ -78,7 +78,7 @@ def computed_torque_kernel(law: object, held: bool) -> ComputedTorqueKernel | No
     return ComputedTorqueKernel(kernel, model.new_terms().buffer, model.m, np.zeros(model.n_u), law.data, bool(held))
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _apply(law, step, stage, q, qd, t, u):
     """The law's inputs into ``u`` at a stage: every stage, or when ``held`` at the run's first
     stage and each step's last (at t_n + h, the next sample instant, with that stage's state
@@ -91,7 +91,7 @@ def _apply(law, step, stage, q, qd, t, u):
 ComputedTorqueKernel.apply = staticmethod(_apply)
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def _computed_torque(law, q, qd, t, u):
     """The inputs at (q, q̇, t) into ``u`` (:func:`computed_torque_inputs`) from the terms of the
     model's kernel at zero inputs; NaN where A_d is singular (the Python law raises there).  A
@@ -102,7 +102,7 @@ def _computed_torque(law, q, qd, t, u):
     computed_torque_inputs(law.law, Q, A, gamma, M, q, qd, t, u)
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def computed_torque_inputs(law, Q, A, gamma, M, q, qd, t, u):
     """The inputs of :class:`~cmbs.control.ComputedTorque` at (q, q̇, t) into ``u``, from the
     terms of its model there with zero inputs (Q₀ = ``Q``, A, γ, M); False (and u NaN) when the

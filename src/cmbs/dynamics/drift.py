@@ -29,7 +29,7 @@ import numpy as np
 
 from cmbs.dynamics.base import NON_FINITE, OK
 from cmbs.dynamics.field import after_step, solve, stage_state
-from cmbs.jit import njit, njit_borrowing
+from cmbs.jit import njit
 from cmbs.model.compiled import evaluate
 from cmbs.model.model import Model
 
@@ -159,19 +159,19 @@ def project_drift(kernel, model, q, qd, t, buffer):
 
 
 # The three hooks only forward: compiled into their caller (cmbs.jit.njit's note on compile time).
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _solve(kernel, terms, t, qd, qdd, lam):
     """The wrapped formulation's solve."""
     return solve(kernel.inner, terms, t, qd, qdd, lam)
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _stage_state(kernel, model, q, qd, t, buffer):
     """The wrapped formulation's stage hook."""
     return stage_state(kernel.inner, model, q, qd, t, buffer)
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _after_step(kernel, model, q, qd, t, buffer):
     """The wrapped formulation's after-step hook, then the projection (as the Python loop's
     ``after_step``)."""

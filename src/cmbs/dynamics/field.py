@@ -36,7 +36,7 @@ import numpy as np
 
 from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR, Formulation
 from cmbs.errors import CmbsError, SingularSystemError
-from cmbs.jit import COMPILED, njit, njit_borrowing, type_dispatch
+from cmbs.jit import COMPILED, borrow, njit, type_dispatch
 from cmbs.model.compiled import evaluate, model_kernel, terms_finite, terms_views
 from cmbs.model.model import Model
 
@@ -48,7 +48,7 @@ stage_state = type_dispatch("stage_state")
 after_step = type_dispatch("after_step")
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def unchanged(kernel, model, q, qd, t, buffer):
     """The stage and after-step hook of a formulation that takes every state as it is: OK."""
     return OK
@@ -67,7 +67,7 @@ def formulation_kernel(chosen: Formulation, solver: object, model: Model) -> Nam
     return compiled(solver, model) if compiled is not None else None
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def field(model, formulation, q, qd, t, u, buffer, terms, qdd, lam):
     """q̈ and λ at (q, q̇, t, u) into ``qdd``, ``lam``; returns OK, SINGULAR or NON_FINITE.
 
@@ -87,9 +87,10 @@ def field(model, formulation, q, qd, t, u, buffer, terms, qdd, lam):
     return OK
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def _field_at(model, formulation, buffer, q, qd, t, u, qdd, lam):
     """:func:`field` with the terms' views made here."""
+    model, formulation, buffer, q, qd, u, qdd, lam = borrow((model, formulation, buffer, q, qd, u, qdd, lam))
     terms = terms_views(model, q.shape[0], lam.shape[0], buffer)
     return field(model, formulation, q, qd, t, u, buffer, terms, qdd, lam)
 

@@ -22,7 +22,7 @@ import weakref
 import numpy as np
 
 from cmbs.banded import band_factor, band_plan, band_solve, gram_profile, inverse_trace, jacobian_pattern
-from cmbs.jit import njit, njit_borrowing
+from cmbs.jit import njit
 from cmbs.model.compiled import model_kernel
 from cmbs.model.model import Model
 
@@ -61,17 +61,17 @@ def workspace_views(floats: np.ndarray, integers: np.ndarray, layout: np.ndarray
     return tuple(entries)
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _matrix(values, layout, k):
     return values[layout[k, 1]:layout[k, 1] + layout[k, 2] * layout[k, 3]].reshape((layout[k, 2], layout[k, 3]))
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _vector(values, layout, k):
     return values[layout[k, 1]:layout[k, 1] + layout[k, 2]]
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def unpack_workspace(floats, integers, layout):
     """The :func:`schur_workspace` tuple again from :func:`pack_workspace`'s arrays (views)."""
     return (_matrix(floats, layout, 0), layout[1, 1], _matrix(floats, layout, 2), _matrix(floats, layout, 3),
@@ -85,7 +85,7 @@ def unpack_workspace(floats, integers, layout):
             _vector(floats, layout, 27), _matrix(floats, layout, 28))
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def _gram_extremes(G):
     """Smallest and largest eigenvalue of the small symmetric matrix ``G`` (overwritten) by
     cyclic Jacobi rotations (Golub & Van Loan §8.5): for a few rows this avoids LAPACK's call
@@ -123,7 +123,7 @@ def _gram_extremes(G):
     return smallest, largest
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def cholesky_in_place(L, start):
     """Lower Cholesky factor L Lᵀ = K of the symmetric positive definite K given in ``L``'s lower
     triangle, in place (the upper triangle is not read).  ``start[i]`` is the first column of
@@ -154,13 +154,13 @@ def cholesky_in_place(L, start):
 DENSE = np.zeros(0, dtype=np.int64)
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _first(start, i):
     """The first column of row i in the profile ``start`` (0 for :data:`DENSE`)."""
     return start[i] if start.shape[0] else 0
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def solve_lower(L, start, b):
     """Solve L x = b in place for the lower triangular L with row profile ``start``."""
     for i in range(L.shape[0]):
@@ -170,7 +170,7 @@ def solve_lower(L, start, b):
         b[i] = total / L[i, i]
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def solve_lower_transposed(L, start, b):
     """Solve Lᵀ x = b in place for the lower triangular L with row profile ``start``."""
     for i in range(L.shape[0] - 1, -1, -1):
@@ -179,7 +179,7 @@ def solve_lower_transposed(L, start, b):
             b[k] -= L[i, k] * b[i]
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def _gram(X, scale, gram, rows_of, start):
     """G = (SX)(SX)ᵀ into ``gram`` (S = diag(scale)), column by column over the rows each column
     touches, so a sparse X costs Σ_k nnz(column k)² instead of rows² x columns.
@@ -216,7 +216,7 @@ def _gram(X, scale, gram, rows_of, start):
             gram[j, i] = gram[i, j]
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def has_structure(rows_of, n):
     """True when ``rows_of`` (:func:`column_rows`) lists A's structural rows, False when its
     counts are -1 (no pattern: the columns are scanned)."""
@@ -237,7 +237,7 @@ def column_rows(pattern: np.ndarray | None, m: int, n: int) -> np.ndarray:
     return rows_of
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def gram_bounds(A, row_scale, gram, factor, rows_of, start, Z):
     """Bounds (λ_low, λ_high) on the extreme eigenvalues of the Gram matrix G = (SA)(SA)ᵀ
     (S = diag(row_scale)), left in ``gram``, with λ_low <= λ_min(G) and λ_max(G) <= λ_high:
@@ -276,7 +276,7 @@ def gram_bounds(A, row_scale, gram, factor, rows_of, start, Z):
 BOUNDS_REUSE_SIZE = 1024
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z):
     """(λ_low, λ_high, reused): bounds on the extreme eigenvalues of G = (SA)(SA)ᵀ as
     :func:`gram_bounds` gives them, from a reference A₀ bounded earlier when A is close to it.
@@ -313,7 +313,7 @@ def bounds(A, row_scale, reference, A0, gram, factor, rows_of, start, Z):
     return low, high, False
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def bounds_meeting(A, row_scale, ratio, floor, reference, A0, gram, factor, rows_of, start, Z):
     """(λ_low, λ_high) of :func:`bounds`, computed afresh (G then in ``gram``) when reused ones
     fail the caller's test λ_low >= ratio²·max(λ_high, 1) and λ_low > floor²: a test lost only
@@ -325,7 +325,7 @@ def bounds_meeting(A, row_scale, ratio, floor, reference, A0, gram, factor, rows
     return low, high
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def certify(A, row_scale, tolerance, reference, A0, gram, factor, rows_of, start, Z):
     """(singular, certified, decided) for the constraint Jacobian A: ``singular`` when σ_min/σ_max
     of the row-scaled SA is below ``tolerance`` (as KKTSolver's SVD test, with σ_max replaced by
@@ -333,7 +333,7 @@ def certify(A, row_scale, tolerance, reference, A0, gram, factor, rows_of, start
     Only uncertified cases pay for the eigenvalues: Jacobi rotations for up to 12 rows
     (:func:`_gram_extremes`); beyond, ``decided`` is False, G is left in ``gram`` (the bounds
     that failed were fresh) and the caller decides by :func:`gram_singular` (LAPACK, which
-    creates arrays: not in a borrowing kernel)."""
+    creates its work arrays)."""
     m, n = A.shape
     if m == 0:
         return False, True, True
@@ -361,7 +361,7 @@ def gram_singular(gram, tolerance):
 
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def schur_solve(M, Q, A, c, schur, qdd, lam):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c] by block elimination of the coordinates p that carry
     mass (the range-space method, Golub & Van Loan §4.2; Nocedal & Wright §16.2).  Split
@@ -531,7 +531,7 @@ def _band_workspace(constant_mass: bool, flag: int, mass: np.ndarray, pattern: n
             a_columns.astype(np.int64))
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def band_kkt(Q, A, c, schur, qdd, lam):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c] by band LU in the reverse Cuthill-McKee order of
     :func:`cmbs.banded.band_plan` (M's non-zeros are constant and listed in the workspace, A's
@@ -564,7 +564,7 @@ def band_kkt(Q, A, c, schur, qdd, lam):
     return True
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def solve_in_place(K, rhs):
     """Gaussian elimination with partial pivoting on a small dense system; the solution
     overwrites ``rhs`` and K is destroyed (its diagonal ends holding the pivots' reciprocals:
@@ -601,7 +601,7 @@ def solve_in_place(K, rhs):
     return True
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def assemble_kkt(M, Q, A, K, rhs):
     """K = [M Aᵀ; A 0] and ``rhs[:n]`` = Q (``rhs[n:]``, the constraints' c, left as it is)."""
     n, m = M.shape[0], A.shape[0]
@@ -617,7 +617,7 @@ def assemble_kkt(M, Q, A, K, rhs):
             K[n + r, n + j] = 0.0
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def full_system(M, Q, A, K, rhs, qdd, lam):
     """q̈, λ of the augmented system [M Aᵀ; A 0][q̈; λ] = [Q; c] (c given in ``rhs[n:]``) by
     Gaussian elimination with partial pivoting (:func:`solve_in_place`): the path of
@@ -633,7 +633,7 @@ def full_system(M, Q, A, K, rhs, qdd, lam):
     return True
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def lu_in_place(K, pivots):
     """LU factorisation with partial pivoting of the square ``K`` in place (unit lower factor
     below the diagonal); row swaps in ``pivots``.  Returns False for an exactly singular matrix."""
@@ -660,7 +660,7 @@ def lu_in_place(K, pivots):
     return True
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def lu_solve(K, pivots, b):
     """Solve K x = b in place with the factors of :func:`lu_in_place`."""
     size = K.shape[0]
@@ -676,7 +676,7 @@ def lu_solve(K, pivots, b):
         b[i] /= K[i, i]
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def lu_solve_transposed(K, pivots, b):
     """Solve Kᵀ x = b in place with the factors of :func:`lu_in_place` (K = Pᵀ L U)."""
     size = K.shape[0]

@@ -26,7 +26,7 @@ from cmbs.dynamics.field import unchanged
 from cmbs.dynamics.kkt import assemble_kkt, band_kkt, certify, full_system, gram_singular, packed_workspace, \
     schur_solve, unpack_workspace
 from cmbs.errors import SingularSystemError
-from cmbs.jit import njit, njit_borrowing
+from cmbs.jit import njit
 from cmbs.lazy import on_first_use
 from cmbs.model.model import Model, Terms
 
@@ -158,7 +158,7 @@ def lagrange_kernel(solver: KKTSolver, model: Model) -> LagrangeKernel:
                           *packed_workspace(model), np.empty((n + m, n + m)), np.empty(n + m))
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def _solve(kernel, terms, t, qd, qdd, lam):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c], c = γ (Lagrange) or γ - 2ξωΦ̇ - ω²Φ with
     Φ̇ = Aq̇ + Φ_t (Baumgarte), at the terms (Q, Φ, A, γ, Φ_t, M).
@@ -195,7 +195,7 @@ def _solve(kernel, terms, t, qd, qdd, lam):
     return OK if solved else SINGULAR
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _constraint_rhs(kernel, phi, A, gamma, phi_t, qd):
     """c into ``kernel.rhs[n:]``: γ, or with Baumgarte's ω ≠ 0 γ - 2ξωΦ̇ - ω²Φ, Φ̇ = Aq̇ + Φ_t."""
     n = qd.shape[0]

@@ -37,7 +37,7 @@ from cmbs.dynamics.field import unchanged
 from cmbs.dynamics.kkt import band_kkt, bounds_meeting, packed_workspace, schur_solve, solve_in_place, \
     unpack_workspace
 from cmbs.errors import CmbsError, SingularSystemError
-from cmbs.jit import njit, njit_borrowing
+from cmbs.jit import njit
 from cmbs.model.model import Model, Terms
 
 #: The constraint inertia matrices; a :class:`ProjectionKernel` carries one by its index here.
@@ -166,7 +166,7 @@ class ProjectionKernel(NamedTuple):
     layout: np.ndarray
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def _solve(kernel, terms, t, qd, qdd, lam):
     """Aghili's projection with the kernel's constraint inertia at the terms (Q, Φ, A, γ, Φ_t, M):
     by the augmented system where A is certified regular (:func:`_by_schur`, the same solution
@@ -187,7 +187,7 @@ def _solve(kernel, terms, t, qd, qdd, lam):
 PROJECTION_REGULAR = 1e-4
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     """Aghili's projection solution at a regular configuration, for each of the three inertias,
     by the augmented system [M Aᵀ; A 0][q̈; λ] = [Q; γ].

@@ -36,7 +36,7 @@ from cmbs.dynamics.field import after_step, field, output_state, stage_state
 from cmbs.integrate.compiled_rk4 import record_constraints
 from cmbs.integrate.continuity import LEFT_BRANCH, jump_message, kept_records, left_branch, watch_array
 from cmbs.integrate.tableaus import Tableau
-from cmbs.jit import interpreted, njit
+from cmbs.jit import borrow, interpreted, njit
 from cmbs.model.compiled import terms_views
 
 
@@ -243,6 +243,8 @@ def _steps(model, formulation, y, y_new, k1, stages, counts, where, records, buf
     derivative, and ends the run (LEFT_BRANCH) where the motion left its branch, the outputs
     after the jump's start dropped.  Returns the status and the time it refers to; a failed
     stage's state in ``where``."""
+    model, formulation, y, y_new, k1, stages, counts, where, records, buffer, u, watch = borrow(
+        (model, formulation, y, y_new, k1, stages, counts, where, records, buffer, u, watch))
     d = y.shape[0]
     n = d // 2
     T, Qs, QDs, QDDs, LAMs, PHI, PHID, FORCE = records

@@ -39,7 +39,7 @@ from cmbs.dynamics.lagrange import LagrangeKernel
 from cmbs.dynamics.projection import PROJECTION_REGULAR, ProjectionKernel
 from cmbs.integrate.compiled_rk4 import _rk4_arrays, _rk4_steps, fresh
 from cmbs.integrate.continuity import watch_array
-from cmbs.jit import interpreted, njit, njit_borrowing, prange
+from cmbs.jit import borrow, interpreted, njit, prange
 from cmbs.model.natural import NaturalKernel, layout
 from cmbs.model.natural_lanes import LANES, evaluate_lanes
 
@@ -215,14 +215,16 @@ def _lane_arrays(n, m, n_p, n_a, n_u, buffer_size, n_ext):
     return state, work, np.zeros(W, dtype=np.int64)
 
 
-@njit_borrowing(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, schur, plan, state, work, lanes, exits,
                 base, count, Qs, QDs, PHIs):
     """The RK4 loop of :func:`cmbs.integrate.compiled_rk4._rk4_steps` (constant inputs, the whole run from t = 0)
     for the block's lanes; writes the records of lanes ``0..count-1`` (variants ``base + w``)
     while they run, the lane states in ``lanes``, and for each of those variants that leaves, its
-    step, records and resume state in the per-variant ``exits`` (:func:`_leave`).  Borrowing: the
-    block's arrays come from :func:`_lane_arrays`."""
+    step, records and resume state in the per-variant ``exits`` (:func:`_leave`).  It borrows
+    (:func:`cmbs.jit.borrow`) the block's arrays, which :func:`_lane_arrays` allocated."""
+    parameters, ints, reals, row_scale, schur, plan, state, work, lanes, exits = borrow(
+        (parameters, ints, reals, row_scale, schur, plan, state, work, lanes, exits))
     q, qd, U = state
     (buffer, x, v, sq, sv, kq, kv, terms, X, y, reduced, z, c, lam, qdd, reference, A0, start_reference, start_A0,
      scratch, single_A) = work
@@ -296,7 +298,7 @@ def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, sch
                 qd[w, i] += (h / 6.0) * (kv[0, w, i] + 2.0 * kv[1, w, i] + 2.0 * kv[2, w, i] + kv[3, w, i])
 
 
-@njit_borrowing(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _copy(source, target):
     """target[:, :] = source for 2-D arrays, element by element (a slice assignment may need a
     temporary)."""
@@ -305,7 +307,7 @@ def _copy(source, target):
             target[i, k] = source[i, k]
 
 
-@njit_borrowing(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _certify_lanes(A, row_scale, ratio, floor, projection, reference, A0, schur, lanes, single_A, scratch):
     """The rank certificate per running lane (1 <= m <= n): the bounds of
     :func:`cmbs.dynamics.kkt.bounds_meeting` on σ(SA), reused from the lane's reference while
@@ -359,7 +361,7 @@ def _certify_lanes(A, row_scale, ratio, floor, projection, reference, A0, schur,
             lanes[w] = LEAVING
 
 
-@njit_borrowing(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _baumgarte_lanes(parameters, sv, phi, A, phi_t, c):
     """c -= 2ξωΦ̇ + ω²Φ with Φ̇ = Aq̇ + Φ_t, per lane (Baumgarte's solve in :mod:`cmbs.dynamics.lagrange`)."""
     m, n, _ = A.shape
@@ -371,7 +373,7 @@ def _baumgarte_lanes(parameters, sv, phi, A, phi_t, c):
             c[r, w] -= 2.0 * parameters[0] * parameters[1] * rate + parameters[1] * parameters[1] * phi[r, w]
 
 
-@njit_borrowing(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _schur_lanes(inverse, Q, A, c, massive, massless, plan, X, y, reduced, z, qdd, lam, lanes, pivot):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c] per lane by the block elimination of
     :func:`cmbs.dynamics.kkt.schur_solve` with the constant ``inverse`` = M_pp⁻¹ (its flag 1), the same
@@ -443,7 +445,7 @@ def _schur_lanes(inverse, Q, A, c, massive, massless, plan, X, y, reduced, z, qd
                 qdd[massive[i], w] -= X[a, i, w] * lam[a, w]
 
 
-@njit_borrowing(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _cholesky_lanes(L, b, lanes, pivot):
     """Solve L Lᵀ x = b per lane in place, the dense Cholesky factorisation and the two triangular
     solves of :func:`cmbs.dynamics.kkt.cholesky_in_place`, :func:`cmbs.dynamics.kkt.solve_lower` and
@@ -479,7 +481,7 @@ def _cholesky_lanes(L, b, lanes, pivot):
                 b[k, w] -= L[i, k, w] * b[i, w]
 
 
-@njit_borrowing(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _eliminate_lanes(K, rhs, lanes, largest, chosen, scale):
     """:func:`cmbs.dynamics.kkt.solve_in_place` per lane on the lane-major K (size, size, LANES) and rhs
     (size, LANES): Gaussian elimination with partial pivoting, each lane choosing its own pivot
@@ -523,7 +525,7 @@ def _eliminate_lanes(K, rhs, lanes, largest, chosen, scale):
             rhs[row, w] = total * K[row, row, w]
 
 
-@njit_borrowing(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _finite_lanes(values, lanes, bad):
     """A running lane with a value (rows of the lane-major ``values``) that is not finite leaves:
     the terms, as :func:`cmbs.dynamics.field.field` checks them before any factorisation, and
@@ -538,7 +540,7 @@ def _finite_lanes(values, lanes, bad):
             lanes[w] = LEAVING
 
 
-@njit_borrowing(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _leave(lanes, exits, step, q, qd, start_reference, start_A0, records_before_step, base, count):
     """Lanes LEAVING at a stage of ``step`` become LEFT (computed on, never read); for those of
     the block's ``count`` variants, what their one-variant run resumes from goes into the

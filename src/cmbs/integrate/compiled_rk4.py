@@ -19,7 +19,7 @@ import numpy as np
 from cmbs.dynamics.base import OK
 from cmbs.dynamics.field import after_step, field, stage_state
 from cmbs.integrate.continuity import LEFT_BRANCH, jump_message, kept_records, left_branch, watch_array
-from cmbs.jit import interpreted, njit, njit_borrowing, prange, type_dispatch
+from cmbs.jit import borrow, interpreted, njit, prange, type_dispatch
 from cmbs.model.compiled import terms_views
 
 #: ``apply(inputs, step, stage, q, qd, t, u)``: the inputs at a stage into ``u``.
@@ -30,7 +30,7 @@ class ConstantInputs(NamedTuple):
     """Inputs that keep their initial value: nothing to do at the stages."""
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def _keep(inputs, step, stage, q, qd, t, u):
     """Constant inputs: ``u`` stays as it is."""
 
@@ -75,7 +75,7 @@ def _rk4_arrays(q0, qd0, u0, m, records, buffer_size):
     return state, records, work
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, work, records, start_step, recorded,
                watch):
     """The loop of :func:`rk4` on the arrays :func:`_rk4_arrays` allocated (state q, q̇, u
@@ -85,6 +85,8 @@ def _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, wo
     records up to the jump's start.  Returns (records written, status, time and step of a failed
     stage); where the after-step hook fails at the new state of step k, its status, time and step
     k + 1 (a loop that goes on from there records that state first)."""
+    model, formulation, inputs, q, qd, u, sq, sv, work, records, watch = borrow(
+        (model, formulation, inputs, q, qd, u, sq, sv, work, records, watch))
     n = q.shape[0]
     buffer, kq, kv, lam, stage_lam = work
     T, Qs, QDs, QDDs, LAMs, Us, PHI, PHID, FORCE = records
@@ -142,7 +144,7 @@ def _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, wo
     return recorded, OK, steps * h, steps
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def record_constraints(terms, qd, lam, PHI, PHID, FORCE, k):
     """Row ``k`` of a loop's records from the ``terms`` views (at the state with velocities
     ``qd``) and the multipliers ``lam``: max |Φ|, max |A q̇ + Φ_t| and f_c = -Aᵀλ."""

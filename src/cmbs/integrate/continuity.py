@@ -74,7 +74,7 @@ import math
 
 import numpy as np
 
-from cmbs.jit import interpreted, njit, njit_borrowing
+from cmbs.jit import interpreted, njit
 
 #: The status a compiled loop returns when the watch ends the run (besides the formulations' and
 #: the loops' own codes 0-7).
@@ -107,7 +107,7 @@ def watch_array(n, m):
     return watch
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def keep_row_scale(watch, n, A):
     """The row scale of the watch's Jacobians, 1/‖row i of A‖ at its first state (1 for a row of
     zeros), into the end of ``watch``."""
@@ -119,7 +119,7 @@ def keep_row_scale(watch, n, A):
         watch[start + i] = 1.0 / math.sqrt(total) if total > 0.0 else 1.0
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def velocity_jump(watch, t, qd, qdd):
     """Tests (a) and (b) of the module at the accepted state (t, q̇, q̈), then the state becomes
     the previous one.  True when the velocity jumped: the interval (``JUMP_FROM``, ``JUMP_TO``),
@@ -164,7 +164,7 @@ def velocity_jump(watch, t, qd, qdd):
     return jumped
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def _window_jump(watch, t, qd, speed, reference):
     """Test (b) at a step that changed the velocity by more than BURST a_ref h: the window opens at
     the previous state unless open; True when the change over it exceeds BURST a_ref (t - t_w) by
@@ -185,7 +185,7 @@ def _window_jump(watch, t, qd, speed, reference):
     return False
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _note_jump(watch, start, end, change, speed_before, speed_after, reference):
     """Keep the jump over (start, end), the earlier start of tests (a) and (b) when both found one."""
     if watch[JUMP_TO] == end and watch[JUMP_FROM] <= start:
@@ -287,7 +287,7 @@ def _power(G, x, y):
     return largest
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def left_branch(watch, t, qd, qdd, A):
     """The watch at an accepted state (t, q̇, q̈) with constraint Jacobian ``A`` there (the first
     state's sets the row scale): True when the velocity jumped (:func:`velocity_jump`) at a
@@ -303,7 +303,7 @@ def left_branch(watch, t, qd, qdd, A):
     return watch[SINGULARITY] <= NEAR_SINGULAR
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def kept_records(T, recorded, watch):
     """How many of the ``recorded`` output times T a run the watch ended keeps: those up to the
     start of the jump, ``watch[JUMP_FROM]`` (the outputs inside the jump's interval are not the

@@ -46,7 +46,7 @@ from cmbs.dynamics.base import OK
 from cmbs.dynamics.kkt import lu_in_place, lu_solve
 from cmbs.integrate.continuity import LEFT_BRANCH, BranchWatch, jump_message, kept_records, watch_array
 from cmbs.integrate.explicit import Integration
-from cmbs.jit import interpreted, njit, type_dispatch
+from cmbs.jit import borrow, interpreted, njit, type_dispatch
 
 
 @dataclass(frozen=True)
@@ -502,6 +502,7 @@ def newton_steps(problem, t_out, first, keep_every, coefficients, step, toleranc
     runs interpreted: a run on a Python residual compiles none of the loop (only, once, the small
     :func:`dynamic_residual` of the index-3 residual of :mod:`cmbs.simulate`).
     """
+    problem, state, work = borrow((problem, state, work))
     b0, b1, g0, g1, alpha_m, alpha_f, b_eff, g_eff = coefficients
     q, v, a, lam, x = state
     a_new, lam_new, x_new, q_new, v_new, r, phi, M, A, C, K, matrix, rhs, pivots = work

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from cmbs.jit import njit_borrowing, type_dispatch
+from cmbs.jit import njit, type_dispatch
 from cmbs.model.model import Model
 
 #: ``evaluate(kernel, q, qd, t, u, buffer)``: the terms of the model ``kernel`` describes.
@@ -29,7 +29,7 @@ def model_kernel(model: Model) -> NamedTuple | None:
     return kernel() if kernel is not None else None
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def terms_views(kernel, n, m, buffer):
     """Views (Q, Φ, A, γ, Φ_t, M) of the terms the kernel writes into ``buffer``; M is the
     kernel's constant ``mass`` when it has one (n x n), else the buffer's."""
@@ -43,7 +43,7 @@ def terms_views(kernel, n, m, buffer):
     return Q, phi, A, gamma, phi_t, M
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def terms_finite(kernel, n, m, buffer):
     """True when every term the kernel wrote (Q, Φ, A, γ, Φ_t, and M when not constant) is
     finite: a state that has blown up must not reach a factorisation."""

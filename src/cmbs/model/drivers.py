@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
-from cmbs.jit import njit_borrowing
+from cmbs.jit import njit
 import numpy as np
 
 from cmbs.errors import ModelError
@@ -173,7 +173,7 @@ def as_time_function(value: object) -> TimeFunction:
     raise ModelError(f"expected a number, expression or function of t, got {value!r}")
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def evaluate_piecewise(breaks, coefficients, t):
     """(f, f', f'') of the piecewise cubic ``f = sum_k c_k (t - t_i)^(3-k)`` (scipy PPoly layout,
     flattened rows), as a tuple: the compiled kernels that call it allocate nothing."""
@@ -277,7 +277,7 @@ def _describe(function: TimeFunction) -> str:
     return type(function).__name__.lower()
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def evaluate_time_functions(table, ops, reals, t, stack, out):
     """Fill ``out[k] = (f_k, f_k', f_k'')`` for the compiled kinds (Python and unused ones are
     skipped)."""

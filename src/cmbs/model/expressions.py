@@ -23,7 +23,7 @@ import re
 from dataclasses import dataclass
 from typing import Iterator
 
-from cmbs.jit import njit_borrowing
+from cmbs.jit import njit
 import numpy as np
 
 from cmbs.errors import ExpressionError
@@ -204,7 +204,7 @@ def parse_expression(text: str) -> Program:
     return _Parser(text).parse()
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _taylor_power(a0, a1, a2, b0, b1, b2):
     """(a^b, d/dt, d²/dt²) for Taylor triples a, b; constant exponents avoid log(a)."""
     if b1 == 0.0 and b2 == 0.0:
@@ -229,7 +229,7 @@ def _taylor_power(a0, a1, a2, b0, b1, b2):
     return p0, p0 * e1, p0 * (e2 + e1 * e1)
 
 
-@njit_borrowing(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def evaluate_program(ops, constants, t, stack):
     """Evaluate a stack program at time ``t``: returns the top slot ``(f, f', f'')`` as a tuple.
 

@@ -51,7 +51,7 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
-from cmbs.jit import njit, njit_borrowing
+from cmbs.jit import borrow, njit
 import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
@@ -87,7 +87,7 @@ _WORK_PER_LINK = 10      # work per link: θ, θ̇, (cos θ, sin θ), O (2), a_O
 # Work layout from offset ``wk`` (n links): θ [wk, wk+n), θ̇ [wk+n, wk+2n), (cos θ, sin θ) pairs
 # [wk+2n, wk+4n), O pairs [wk+4n, wk+6n), a_O pairs [wk+6n, wk+8n), Jx, Jz [wk+8n, wk+10n).
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _kinematics(ip, rp, q, qd, W, wk):
     """Absolute angles θ, rates θ̇, (cos θ, sin θ), frame origins O and their bias accelerations."""
     n = ip[I_N]
@@ -130,7 +130,7 @@ def _kinematics(ip, rp, q, qd, W, wk):
         W[o_a + 2 * k + 1] = az
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _column(ip, j, px, pz, W, wk):
     """Column j of the Jacobians of point (px, pz) and of the link angle, for joint j on its path."""
     n = ip[I_N]
@@ -141,7 +141,7 @@ def _column(ip, j, px, pz, W, wk):
     return W[o_cs], W[o_cs + 1], 0.0
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _point(ip, link, lx, lz, W, wk):
     """Position and bias acceleration of a point with local (lx, lz) on ``link`` (-1: ground)."""
     if link < 0:
@@ -155,7 +155,7 @@ def _point(ip, link, lx, lz, W, wk):
     return W[o_O] + rx, W[o_O + 1] + rz, W[o_a] - w2 * rx, W[o_a + 1] - w2 * rz
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _point_velocity(ip, link, px, pz, qd, W, wk):
     """Velocity J_P q̇ of the point (px, pz) on ``link`` (-1: ground, at rest)."""
     vx, vz = 0.0, 0.0
@@ -170,7 +170,7 @@ def _point_velocity(ip, link, px, pz, qd, W, wk):
     return vx, vz
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _add_point_force(ip, link, px, pz, fx, fz, Q, W, wk):
     """Q += J_Pᵀ F for the force (fx, fz) at the point (px, pz) on ``link`` (-1: ground, no work)."""
     if link < 0:
@@ -182,7 +182,7 @@ def _add_point_force(ip, link, px, pz, fx, fz, Q, W, wk):
         Q[j] += cx * fx + cz * fz
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _spring_geometry(ip, rp, e, W, wk):
     """Ends a, b (position x, z and link) and stretch ℓ - ℓ0 of spring ``e``, with e = (r_a - r_b)/ℓ."""
     o_sp, base = ip[I_OSPRING] + _SPRING_INTS * e, ip[R_OSPRING] + _SPRING_REALS * e
@@ -194,7 +194,7 @@ def _spring_geometry(ip, rp, e, W, wk):
     return la, pax, paz, lb, pbx, pbz, dx / length, dz / length, length - rp[base + 6]
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _spring_force(ip, rp, e, qd, W, wk):
     """Ends of spring ``e`` (link and position of a, of b) and the force (fx, fz) = -f e it
     applies to a (b takes the opposite), f = k (ℓ - ℓ0) + c ℓ̇."""
@@ -206,7 +206,7 @@ def _spring_force(ip, rp, e, qd, W, wk):
     return la, pax, paz, lb, pbx, pbz, -tension * ex, -tension * ez
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _applied_force(ip, rp, f, tfv, s0, W, wk):
     """Link, point (x, z) and force (fx, fz) in the ground frame of point force ``f``; the
     time-function values (f, f', f'') of function i are at tfv[s0 + 3 i:]."""
@@ -221,7 +221,7 @@ def _applied_force(ip, rp, f, tfv, s0, W, wk):
     return link, px, pz, fx, fz
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _loads(ip, rp, qd, buf, s0, W, wk):
     """Add the force elements to Q = buf[0:n] (module docstring): springs and dampers, point
     forces and joint torques; the time-function values (f, f', f'') of function f are at buf[s0 + 3 f:]."""
@@ -237,13 +237,15 @@ def _loads(ip, rp, qd, buf, s0, W, wk):
         buf[ip[o_t + 2 * k]] += buf[s0 + 3 * ip[o_t + 2 * k + 1]]
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def _evaluate_kernel(ip, rp, q, qd, t, u, buf):
     """Fill a :class:`~cmbs.model.model.Terms` buffer: Q, Φ, A, γ, Φ_t, M, then the scratch.
 
     Scratch: time-function values (k, 3) [Python ones already written by the caller], the
-    expression stack (depth, 3), then the work arrays (see :func:`_kinematics`).
+    expression stack (depth, 3), then the work arrays (see :func:`_kinematics`).  It borrows its
+    arguments (:func:`cmbs.jit.borrow`): numba counts no reference for what it views or passes on.
     """
+    ip, rp, q, qd, u, buf = borrow((ip, rp, q, qd, u, buf))
     n, nr, nd, nu, ntf = ip[I_N], ip[I_NR], ip[I_ND], ip[I_NU], ip[I_NTF]
     m = nr + nd
     o_phi = n
@@ -344,7 +346,7 @@ def _evaluate_kernel(ip, rp, q, qd, t, u, buf):
         buf[o_gam + r] = buf[s0 + 3 * f + 2]
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def _point_kinematics_kernel(ip, rp, q, qd, link, lx, lz, work, J):
     """Position, bias acceleration J̇q̇ and Jacobian J (2, n) of the point (lx, lz) of ``link``."""
     _kinematics(ip, rp, q, qd, work, 0)
@@ -1185,7 +1187,7 @@ class JointKernel(NamedTuple):
     mass: np.ndarray
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _evaluate_joints(kernel, q, qd, t, u, buffer):
     """:func:`_evaluate_kernel` for a :class:`JointKernel`."""
     _evaluate_kernel(kernel.ints, kernel.reals, q, qd, t, u, buffer)

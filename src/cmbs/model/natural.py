@@ -59,7 +59,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Mapping, NamedTuple, Sequence
 
-from cmbs.jit import njit_borrowing
+from cmbs.jit import borrow, njit
 import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
@@ -977,14 +977,14 @@ class NaturalEquations:
         return self._extended(q)[self.point_xz]
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _add(buffer, a0, row, column, value, n):
     """A[row, column] += value where A is row-major at ``buffer[a0:]`` (constant columns skipped)."""
     if column < n:
         buffer[a0 + row * n + column] += value
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _vector_pair(ints, r, x, v):
     """The vectors u = j - i and w = l - k of an angle or parallel row whose point coordinates
     (x_i, z_i, x_j, z_j, x_k, z_k, x_l, z_l) are ``ints[r:r + 8]``, and their rates."""
@@ -995,7 +995,7 @@ def _vector_pair(ints, r, x, v):
     return ux, uz, wx, wz, dux, duz, dwx, dwz
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def layout(ints, n, size):
     """Where the kernel's data and outputs are, for n coordinates and a terms buffer of ``size``:
     (start of the real-section offsets in ``ints``, first constant in ``reals``, n_ext = n +
@@ -1014,15 +1014,16 @@ def layout(ints, n, size):
     return real_base, c0, n_ext, m, a0, g0, t0, s0, size - 2 * n_ext
 
 
-@njit_borrowing(cache=True)
+@njit(cache=True)
 def _evaluate(q, qd, t, u, ints, reals, buffer):
     """Q, Φ, A, γ, Φ_t of a natural-coordinate model into ``buffer`` (layout of :class:`Terms`;
     its scratch holds the time-function rows, their stack, and the extended x = (q, constants),
     v = (q̇, 0), so a call allocates nothing).
 
     The kernel indexes ``ints``, ``reals`` and ``buffer`` by offsets rather than through array
-    views: each view costs numba an atomic reference count, which at a four-bar's size made up
-    most of the call."""
+    views, and borrows its arguments (:func:`cmbs.jit.borrow`; a call from Python passes them
+    as they are): numba counts no reference for what it views or passes on."""
+    q, qd, u, ints, reals, buffer = borrow((q, qd, u, ints, reals, buffer))
     n = q.shape[0]
     real_base, c0, n_ext, m, a0, g0, t0, s0, x0 = layout(ints, n, buffer.shape[0])
     v0 = x0 + n_ext
@@ -1208,7 +1209,7 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
         buffer[ints[i0 + k]] += reals[r0 + k] * u[k]
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _segment_force(x, xi, zi, xj, zj, first, second, frame):
     """Ground components of a segment force given as (first, second): (fx, fz) in the ground
     frame (frame 0), or (along, across) the segment from i to j (frame 1): F = f_a e + f_b R90 e."""
@@ -1220,7 +1221,7 @@ def _segment_force(x, xi, zi, xj, zj, first, second, frame):
     return first * ex - second * ez, first * ez + second * ex
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _add_force(Q, index, value, n):
     if index < n:
         Q[index] += value
@@ -1235,7 +1236,7 @@ class NaturalKernel(NamedTuple):
     mass: np.ndarray
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def _evaluate_natural(kernel, q, qd, t, u, buffer):
     """:func:`_evaluate` for a :class:`NaturalKernel`."""
     _evaluate(q, qd, t, u, kernel.ints, kernel.reals, buffer)

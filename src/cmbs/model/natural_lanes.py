@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 
-from cmbs.jit import njit_borrowing
+from cmbs.jit import njit
 from cmbs.model.drivers import evaluate_time_functions
 from cmbs.model.natural import (_ACTUATOR, _ACTUATOR_GAIN, _ANGLE, _BODY_POINT, _BODY_POINT_LOCAL, _DISTANCE,
                                 _DRIVER, _LENGTH2, _MOMENT, _PARALLEL, _POINT_FORCE, _Q_CONSTANT, _RIGID,
@@ -26,28 +26,28 @@ from cmbs.model.packing import int_section, real_section
 LANES = 8
 
 
-@njit_borrowing(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _add(terms, a0, row, column, n, w, value):
     """A[row, column] += value in lane ``w`` (columns of constants skipped)."""
     if column < n:
         terms[a0 + row * n + column, w] += value
 
 
-@njit_borrowing(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _add_force(terms, index, w, value, n):
     """Q[index] += value in lane ``w`` (constants skipped)."""
     if index < n:
         terms[index, w] += value
 
 
-@njit_borrowing(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _pair_indices(ints, r):
     """The point coordinates (x_i, z_i, x_j, z_j, x_k, z_k, x_l, z_l) of an angle or parallel row
     at ``ints[r:r + 8]``: the vectors u = j - i and w = l - k."""
     return ints[r], ints[r + 1], ints[r + 2], ints[r + 3], ints[r + 4], ints[r + 5], ints[r + 6], ints[r + 7]
 
 
-@njit_borrowing(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def _pair(x, v, w, indices):
     """u, w of :func:`_pair_indices` in lane ``w`` and their rates, as
     :func:`cmbs.model.natural._vector_pair` computes them."""
@@ -59,7 +59,7 @@ def _pair(x, v, w, indices):
     return ux, uz, wx, wz, dux, duz, dwx, dwz
 
 
-@njit_borrowing(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always")
 def evaluate_lanes(q, qd, t, U, ints, reals, buffer, x, v, terms):
     """Q, Φ, A, γ, Φ_t at the LANES states (q[w], q̇[w]) with inputs U[w] into the lane-major
     ``terms`` (n + 3m + mn, LANES), rows in the order of a :class:`~cmbs.model.model.Terms`

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from cmbs.jit import njit_borrowing
+from cmbs.jit import njit
 import numpy as np
 
 
@@ -29,13 +29,13 @@ def pack(int_sections: Sequence[np.ndarray], real_sections: Sequence[np.ndarray]
     return ints, reals  # left writable: numba's calls are about 0.1 µs cheaper than with read-only arrays
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def int_section(ints, k):
     """Int section ``k`` as a 1-D view."""
     return ints[ints[1 + k]:ints[2 + k]]
 
 
-@njit_borrowing(cache=True, inline="always")
+@njit(cache=True, inline="always")
 def real_section(ints, reals, k):
     """Real section ``k`` as a 1-D view."""
     base = ints[0] + 2
