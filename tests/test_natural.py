@@ -189,6 +189,20 @@ def test_builder_rejects_bad_entries():
         b.build()
 
 
+def test_builder_rejects_a_spring_between_coincident_points():
+    """A pendulum folded back onto its pivot: the spring from the pivot to the tip has no
+    direction at the start (its initial length is rounding, 1.2e-16 m)."""
+    b = NaturalModelBuilder("folded")
+    b.add_point("O", 0.0, 0.0, fixed=True)
+    b.add_point("P", 1.0, 0.0)
+    b.add_point("T", 1.0 + math.cos(math.pi), math.sin(math.pi))
+    b.add_segment("s", "O", "P", mass=1.0, com=(0.5, 0.0), inertia=0.1)
+    b.add_segment("r", "P", "T", mass=1.0, com=(0.5, 0.0), inertia=0.1)
+    b.add_spring("k", "O", "T", stiffness=10.0, rest_length=0.5)
+    with pytest.raises(ModelError, match=r"springs.k: initial length .* \(nearly\) coincident"):
+        b.build()
+
+
 
 @pytest.mark.parametrize("name", ["four-bar", "human", "chain", "kitchen-sink (springs)", "slider-crank-joint"])
 def test_vectorised_energy_history_equals_the_energy_row_by_row(name):

@@ -5,7 +5,7 @@ spring energy ≥ 0, and velocity analysis satisfies A q̇ = -Φ_t."""
 import math
 
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import cmbs
@@ -36,6 +36,10 @@ def build_chain(links, closed: bool, spring: bool):
 @settings(max_examples=40, deadline=None)
 @given(st.lists(link, min_size=1, max_size=6), st.booleans(), st.booleans(), st.integers(0, 2**31 - 1))
 def test_random_chain_assembles_and_energies_are_nonnegative(links, closed, spring, seed):
+    tip = (sum(l[0] * math.cos(l[5]) for l in links), sum(l[0] * math.sin(l[5]) for l in links))
+    # a chain folded back onto its ground point would give the spring coincident end points,
+    # which the builder refuses (a spring needs a direction): outside what this property covers
+    assume(not spring or math.hypot(*tip) > 1e-6)
     model = build_chain(links, closed and len(links) >= 2, spring)
     rng = np.random.default_rng(seed)
     shortest = min(l[0] for l in links)
