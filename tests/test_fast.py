@@ -318,20 +318,27 @@ def test_a_diverging_compiled_run_fails_with_a_message_not_an_exception():
     assert "diverged" in run.info["message"] and np.all(np.isfinite(run.q))
 
 
-def test_runs_on_the_python_loop_say_why():
+@pytest.mark.parametrize("integrator", ["rk4", "rk45", "dop853"])
+def test_runs_on_the_python_loop_say_why(integrator):
     model = cmbs.load("four-bar").without_drivers()
     notes = {
-        "nonideal": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, formulation="udwadia-kalaba",
+        "nonideal": simulate(model, t_end=0.01, integrator=integrator, dt=1e-3, formulation="udwadia-kalaba",
                              formulation_options={"nonideal": lambda t, q, qd: np.zeros(model.n)}).info["note"],
-        "callable": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3,
+        "callable": simulate(model, t_end=0.01, integrator=integrator, dt=1e-3,
                              u=lambda t, q, qd: np.zeros(model.n_u)).info["note"],
-        "off": simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, compiled=False).info["note"],
+        "off": simulate(model, t_end=0.01, integrator=integrator, dt=1e-3, compiled=False).info["note"],
     }
-    assert "'udwadia-kalaba' with these options has no compiled solve" in notes["nonideal"]
-    assert "Python callable" in notes["callable"]
+    assert notes["nonideal"].startswith("Python loop: formulation 'udwadia-kalaba' with these options has no "
+                                        "compiled solve")
+    assert notes["callable"].startswith("Python loop: the inputs are a Python callable")
     assert notes["off"] == "Python loop: compiled=False"
+    with pytest.raises(CmbsError, match="cannot run this simulation of model 'four-bar-undriven': the inputs are a "
+                                        "Python callable"):
+        simulate(model, t_end=0.01, integrator=integrator, dt=1e-3, u=lambda t, q, qd: np.zeros(model.n_u),
+                 compiled=True)
     for formulation, project in (("lagrange", False), ("matrix-r", True)):
-        compiled = simulate(model, t_end=0.01, integrator="rk4", dt=1e-3, formulation=formulation, project=project)
+        compiled = simulate(model, t_end=0.01, integrator=integrator, dt=1e-3, formulation=formulation,
+                            project=project)
         assert compiled.info["compiled"] and "note" not in compiled.info
 
 

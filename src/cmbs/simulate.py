@@ -229,8 +229,10 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
         :data:`COMPILED_FORMULATIONS`, constant inputs or a :class:`~cmbs.control.ComputedTorque`
         law alone or in a :class:`~cmbs.control.ZeroOrderHold` with period ``dt``; with rk4,
         backward-euler or generalized-alpha (:mod:`cmbs.integrate.compiled_index3`) or, constant
-        inputs only, rk45/rk23/dop853 or trapezoidal (:mod:`cmbs.integrate.compiled_reduced`); no
-        projection), True requires it, False keeps the Python loop.
+        inputs only, rk45/rk23/dop853 or trapezoidal (:mod:`cmbs.integrate.compiled_reduced`); drift
+        projection with rk4, rk45, rk23 or dop853), True requires it (else a :class:`CmbsError`
+        says why not), False keeps the Python loop.  A run on the Python loop says why in its
+        note, first (``"Python loop: <reason>"``).
 
     Returns
     -------
@@ -289,33 +291,32 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
             raise CmbsError(f"{label} must have shape ({n},) for model {model.name!r}, got {value.shape}")
     check_start(model, q_start, qd_start)
     steps = whole_steps(t_end, dt)
-    from cmbs.integrate.compiled_plan import compiled_run
+    from cmbs.integrate.compiled_plan import compiled_plan
 
-    plan = compiled_run(model, chosen, solver, integrator, u, project, t_end, dt,
-                        projection_tolerance=projection_tolerance)
-    if compiled and plan is None:
-        raise CmbsError(f"the compiled loop cannot run this simulation of model {model.name!r}: it needs a model, "
-                        f"formulation and inputs without Python callables (formulations {COMPILED_FORMULATIONS}; "
-                        "constant inputs or a ComputedTorque law, alone or in a ZeroOrderHold with period dt), "
-                        "integrator rk4 with t_end a multiple of dt, backward-euler or generalized-alpha or, with "
-                        "constant inputs, rk45, rk23, dop853 or trapezoidal (--project: rk4, rk45, rk23 or dop853)")
+    plan = compiled_plan(model, chosen, solver, integrator, u, project, t_end, dt,
+                         projection_tolerance=projection_tolerance)
+    reason = _python_loop_reason(plan, compiled)
+    if compiled and reason:
+        raise CmbsError(f"the compiled loop cannot run this simulation of model {model.name!r}: {reason}")
+    if reason:
+        plan = None
     run_options = {"integrator": integrator, "dt": dt, "every": every, "rtol": rtol, "atol": atol, "project": project}
-    if plan is not None and compiled is not False and integrator in INDEX3:
+    if plan is not None and integrator in INDEX3:
         trajectory = _run_compiled_index3(model, plan, inputs, q_start, qd_start, grid, INDEX3[integrator],
                                           newton_tolerance, started, run_options)
-    elif plan is not None and compiled is not False and integrator == "trapezoidal":
+    elif plan is not None and integrator == "trapezoidal":
         trajectory = _run_compiled_trapezoidal(model, solver, chosen, plan, inputs, q_start, qd_start, grid,
                                                newton_tolerance, started, run_options)
-    elif plan is not None and compiled is not False and integrator != "rk4":
+    elif plan is not None and integrator != "rk4":
         trajectory = _run_compiled_adaptive(model, solver, chosen, plan, inputs, q_start, qd_start, times, started,
                                             run_options)
-    elif plan is not None and compiled is not False:
+    elif plan is not None:
         trajectory = _run_compiled(model, solver, chosen, plan, inputs, q_start, qd_start, steps, dt, started,
                                    run_options)
     else:
         with small_matrix_loop(model.n):         # one BLAS thread for small matrices (cmbs.blas)
-            trajectory = _run_python(model, solver, chosen, inputs, q_start, qd_start, grid, every, integrator, u,
-                                     dt, rtol, atol, project, projection_tolerance, newton_tolerance, compiled,
+            trajectory = _run_python(model, solver, chosen, inputs, q_start, qd_start, grid, every, integrator,
+                                     dt, rtol, atol, project, projection_tolerance, newton_tolerance, reason,
                                      progress, started)
     solver_note = getattr(solver, "run_note", str)()   # the formulation's own, compiled loop or not
     if solver_note:
@@ -338,8 +339,8 @@ def short_last_step_message(integrator: str, t_end: float, dt: float) -> str:
 
 
 def _run_python(model: Model, solver, chosen: Formulation, inputs: Inputs, q_start: np.ndarray, qd_start: np.ndarray,
-                grid: np.ndarray, every: int, integrator: str, u: object, dt: float, rtol: float, atol: float,
-                project: bool, projection_tolerance: float, newton_tolerance: float, compiled: bool | None,
+                grid: np.ndarray, every: int, integrator: str, dt: float, rtol: float, atol: float,
+                project: bool, projection_tolerance: float, newton_tolerance: float, reason: str,
                 progress: bool, started: float) -> Trajectory:
     """The run on the Python loops (every integrator and formulation): fixed-step ones step
     through the output ``grid`` and keep ``grid[::every]``, adaptive ones output there."""
@@ -361,8 +362,7 @@ def _run_python(model: Model, solver, chosen: Formulation, inputs: Inputs, q_sta
                          else None, {"integrator": integrator, "dt": dt, "every": every, "rtol": rtol, "atol": atol,
                                      "project": project, "loop_wall_time": loop_wall})
     trajectory.info["wall_time"] = time.perf_counter() - started
-    if integrator == "rk4":                 # before the energy note, which the recording may have made
-        _add_note(trajectory.info, _python_loop_note(model, chosen, solver, u, compiled), first=True)
+    _add_note(trajectory.info, f"Python loop: {reason}", first=True)   # before the energy note of the recording
     _note_rounding(trajectory.info, solver)
     return trajectory
 
@@ -402,24 +402,18 @@ def _add_note(info: dict, text: str, *, first: bool = False) -> None:
     info["note"] = "; ".join(part for part in parts if part)
 
 
-def _python_loop_note(model: Model, chosen: Formulation, solver: object, u: object, compiled: bool | None) -> str:
-    """Why an rk4 run took the Python loop (tens of µs per step more than the compiled one)."""
+def _python_loop_reason(plan: tuple | str, compiled: bool | None) -> str:
+    """Why a run takes the Python loop (tens of µs per step more than a compiled one), in a few
+    words, or "" when a compiled loop runs it: ``plan`` is :func:`~cmbs.integrate.compiled_plan.compiled_plan`'s."""
     from cmbs import jit
-    from cmbs.dynamics.field import formulation_kernel
 
     if compiled is False:
-        reason = "compiled=False"
-    elif not jit.COMPILED:
-        reason = "numba is not installed, the kernels run as Python"
-    elif model_kernel(model) is None:
-        reason = f"model {model.name!r} has Python-callable terms or time functions"
-    elif callable(u):
-        reason = "the inputs are a Python callable (only a plain ComputedTorque law is compiled)"
-    elif formulation_kernel(chosen, solver, model) is None:
-        reason = f"formulation {chosen.name!r} with these options has no compiled solve ({COMPILED_FORMULATIONS})"
-    else:
-        reason = "t_end is not a multiple of dt"
-    return f"Python loop: {reason}"
+        return "compiled=False"
+    if not isinstance(plan, str):
+        return ""
+    if not jit.COMPILED:
+        return "numba is not installed, the kernels run as Python"
+    return f"{plan} (compiled: {COMPILED_FORMULATIONS})" if plan.startswith("formulation") else plan
 
 
 def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.ndarray, grid: np.ndarray,

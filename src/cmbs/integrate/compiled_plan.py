@@ -56,29 +56,47 @@ def compiled_run(model: Model, chosen: Formulation, solver: object, integrator: 
                  t_end: float, dt: float, batched: bool = False, projection_tolerance: float = 1e-10
                  ) -> tuple[NamedTuple, NamedTuple | None, NamedTuple] | None:
     """(model, formulation, inputs) kernel tuples when a compiled loop can run the simulation of
-    ``model`` under ``chosen`` (bound as ``solver``) with ``integrator``, else None; the
-    formulation's is None for an index-3 integrator (:data:`INDEX3`) and the trapezoidal rule,
-    which bring their own.  ``batched``: for many runs in one compiled call
+    ``model`` under ``chosen`` (bound as ``solver``) with ``integrator``, else None (why:
+    :func:`compiled_plan`)."""
+    plan = compiled_plan(model, chosen, solver, integrator, u, project, t_end, dt, batched, projection_tolerance)
+    return None if isinstance(plan, str) else plan
+
+
+def compiled_plan(model: Model, chosen: Formulation, solver: object, integrator: str, u: object, project: bool,
+                  t_end: float, dt: float, batched: bool = False, projection_tolerance: float = 1e-10
+                  ) -> tuple[NamedTuple, NamedTuple | None, NamedTuple] | str:
+    """The kernel tuples of :func:`compiled_run`, or the reason in a few words why no compiled loop
+    can run the simulation (the note of a run on the Python loop).  The formulation's tuple is
+    None for an index-3 integrator (:data:`INDEX3`) and the trapezoidal rule, which bring their
+    own.  ``batched``: for many runs in one compiled call
     (:func:`cmbs.integrate.compiled_rk4.rk4_batch`), without drift projection.  ``project``: drift
     projection to ``projection_tolerance`` after each step (explicit integrators only)."""
-    if project and (batched or integrator != "rk4" and integrator not in ADAPTIVE):
-        return None
+    if project and batched:
+        return "drift projection is not batched"
     if integrator not in ("rk4", "trapezoidal") and integrator not in ADAPTIVE and integrator not in INDEX3:
-        return None
+        return f"integrator {integrator!r} has no compiled loop (rk4, {', '.join(ADAPTIVE)}, trapezoidal and " \
+               f"{' and '.join(INDEX3)} have)"
+    if project and integrator != "rk4" and integrator not in ADAPTIVE:
+        return f"drift projection is compiled with rk4 and {', '.join(ADAPTIVE)}, not {integrator}"
     model_part = model_kernel(model)
     if model_part is None:
-        return None
+        return f"model {model.name!r} has Python-callable terms or time functions"
     inputs = inputs_kernel(u, model, dt)
+    if inputs is None:
+        return ("the inputs are a Python callable (a ComputedTorque law alone or held with period dt is "
+                "compiled)")
     exact = whole_steps(t_end, dt) is not None
-    if inputs is None or (integrator not in INDEX3 and integrator != "rk4" and not isinstance(inputs, ConstantInputs)):
-        return None
+    if integrator not in INDEX3 and integrator != "rk4" and not isinstance(inputs, ConstantInputs):
+        return f"inputs that change during the run are compiled with rk4 and {' and '.join(INDEX3)}, not {integrator}"
     if integrator == "trapezoidal":
         return model_part, None, inputs
     if integrator in INDEX3:        # a held law samples at each step's end: the steps must be the periods
-        return None if getattr(inputs, "held", False) and not exact else (model_part, None, inputs)
+        if getattr(inputs, "held", False) and not exact:
+            return "t_end is not a multiple of dt, the period of the held law"
+        return model_part, None, inputs
     if integrator == "rk4" and not exact:
-        return None
+        return "t_end is not a multiple of dt"
     formulation = formulation_kernel(chosen, solver, model)
     if formulation is None:
-        return None
+        return f"formulation {chosen.name!r} with these options has no compiled solve"
     return model_part, drift_projection(formulation, model, projection_tolerance) if project else formulation, inputs
