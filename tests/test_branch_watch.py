@@ -247,6 +247,7 @@ def test_a02_implicit_runs_that_say_success_follow_the_exact_motion_and_failed_o
         assert run.info["status"] == "failed"
         message = run.info["message"]
         assert message.startswith("the velocity jumped by") and "left its assembly branch" in message
+        assert "Try a smaller dt" in message and "project=True" not in message   # no drift projection here
         assert 0.7 < run.t[-1] < 0.716
     else:
         assert run.info["status"] == "success" and run.t[-1] == pytest.approx(4.0)

@@ -314,9 +314,18 @@ def kept_records(T, recorded, watch):
     return recorded
 
 
-def jump_message(watch: np.ndarray) -> str:
-    """Why the watch ended a run: the jump, when and where, and what to try; a divergence (|q̇|
-    grown :data:`DIVERGED` times) is said to be one."""
+#: What to try when an explicit integrator's run left its branch.
+EXPLICIT_ADVICE = ("Try a smaller dt or rtol, drift projection to a tight tolerance (project=True, "
+                   "projection_tolerance=1e-12; the CLI's --project --projection-tolerance 1e-12) or integrator "
+                   "'generalized-alpha' (docs/formulations.md, \"Singular positions\")")
+#: What to try when an implicit integrator's run left its branch (they have no drift projection).
+IMPLICIT_ADVICE = ("Try a smaller dt; of the implicit integrators, generalized-alpha kept the branch at every step "
+                   "tried on the N-four-bar (docs/formulations.md, \"Singular positions\")")
+
+
+def jump_message(watch: np.ndarray, advice: str = EXPLICIT_ADVICE) -> str:
+    """Why the watch ended a run: the jump, when and where, and what to try (``advice``); a
+    divergence (|q̇| grown :data:`DIVERGED` times) is said to be one."""
     start, end, change, speed = watch[JUMP_FROM], watch[JUMP_TO], watch[JUMP_SIZE], watch[JUMP_SPEED]
     where = (f"between t={start:.6g} and t={end:.6g}, far more than the accelerations before explain "
              f"(reference |q̈| {watch[JUMP_REFERENCE]:.3g}), near a singular configuration (σ_min/σ_max of the "
@@ -327,9 +336,7 @@ def jump_message(watch: np.ndarray) -> str:
                 f"{dropped}.  Try a smaller dt or rtol, or integrator 'generalized-alpha'")
     return (f"the velocity jumped by |Δq̇| = {change:.3g} ({change / speed:.2g} times |q̇|) {where}: the motion "
             f"left its assembly branch (a change of branch takes an impulse, which no bounded force gives); "
-            f"{dropped}.  Try a smaller dt or rtol, drift projection to a tight tolerance (project=True, "
-            "projection_tolerance=1e-12; the CLI's --project --projection-tolerance 1e-12) or integrator "
-            "'generalized-alpha' (docs/formulations.md, \"Singular positions\")")
+            f"{dropped}.  {advice}")
 
 
 class BranchWatch:

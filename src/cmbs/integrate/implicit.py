@@ -44,7 +44,8 @@ import numpy as np
 
 from cmbs.dynamics.base import OK
 from cmbs.dynamics.kkt import lu_in_place, lu_solve
-from cmbs.integrate.continuity import LEFT_BRANCH, BranchWatch, jump_message, kept_records, watch_array
+from cmbs.integrate.continuity import (IMPLICIT_ADVICE, LEFT_BRANCH, BranchWatch, jump_message, kept_records,
+                                      watch_array)
 from cmbs.integrate.explicit import Integration
 from cmbs.jit import borrow, interpreted, njit, type_dispatch
 
@@ -436,7 +437,7 @@ def failure_message(problem: NamedTuple, status: int, t: float, change: float, m
     """Why :func:`newton_steps` stopped with ``status`` at t (``change``: its last scaled correction;
     ``watch``: the branch watch's state)."""
     if status == LEFT_BRANCH:
-        return jump_message(watch)
+        return jump_message(watch, IMPLICIT_ADVICE)
     if status == SINGULAR:
         return f"singular Newton matrix at t={t:.6g} (redundant constraints or a singular configuration)"
     if status == DIVERGED:
