@@ -114,7 +114,7 @@ class RunSettings:
     (every ``every``-th multiple of ``dt``)."""
 
     t_end: float
-    formulation: str = "lagrange"
+    formulation: str | None = None          # None with an implicit integrator: its own
     formulation_options: Mapping[str, object] = field(default_factory=dict)
     integrator: str = "rk4"
     dt: float = 1e-3
@@ -215,7 +215,7 @@ class SweepResult:
             raise CmbsError(f"{path}: not a cmbs sweep file ({error})") from None
 
 
-def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, formulation: str = "lagrange",
+def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, formulation: str | None = None,
           formulation_options: Mapping[str, object] | None = None, integrator: str = "rk4", dt: float = 1e-3,
           rtol: float = 1e-6, atol: float = 1e-9, project: bool = False, every: int = 1, workers: int | None = None,
           scheduler: str | None = None, batched: bool | None = None, progress: bool = False,
@@ -235,6 +235,10 @@ def sweep(model: str | Model, variants: Iterable[Variant], *, t_end: float, form
     variants = list(variants)
     if not variants:
         raise CmbsError("sweep: no variants given")
+    from cmbs.integrate.tableaus import NAMES as EXPLICIT
+
+    if formulation is None and integrator in EXPLICIT:
+        formulation = "lagrange"                # an implicit integrator brings its own
     settings = RunSettings(t_end=float(t_end), formulation=formulation,
                            formulation_options=dict(formulation_options or {}), integrator=integrator, dt=float(dt),
                            rtol=rtol, atol=atol, project=project, every=int(every))

@@ -21,7 +21,8 @@ def add_sweep_command(commands, model_command: Callable, dynamics_options: Calla
     """Register ``cmbs sweep`` on the ``commands`` sub-parsers."""
     command = model_command("sweep", "many runs of one model: a grid of parameters, segment masses and initial "
                                      "speeds, batched, in local processes or on a Dask cluster")
-    command.add_argument("--formulation", default="lagrange", help="formulation of every run (default lagrange)")
+    command.add_argument("--formulation", help="formulation of every run (default lagrange; none with an implicit "
+                                               "integrator, which brings its own)")
     dynamics_options(command)
     command.add_argument("--vary", action="append", default=[], metavar="KEY=V1,V2,...",
                          help="library-model parameter values to sweep (repeatable: the grid of all of them)")
@@ -173,7 +174,7 @@ def _sweep(args: argparse.Namespace) -> int:
         raise SweepUsageError(f"--every and --workers must be >= 1 (got {args.every}, {args.workers})")
     from cmbs.dynamics import FORMULATIONS
 
-    if args.formulation not in FORMULATIONS:
+    if args.formulation is not None and args.formulation not in FORMULATIONS:
         hint = did_you_mean(args.formulation, FORMULATIONS)
         raise SweepUsageError(f"--formulation: unknown {args.formulation!r}{hint}; choose one of "
                               f"{', '.join(FORMULATIONS)}")
