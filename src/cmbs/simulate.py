@@ -687,10 +687,8 @@ def _python_reduced_problem(model: Model, solver, inputs: Inputs, full: tuple, l
         y[row] = np.concatenate([full[0], full[1]])
         dy[row] = np.concatenate([full[1], full[2]])
 
-    def left(t: float, state: tuple) -> bool:
-        return branch(t, np.concatenate(full[:2]), np.concatenate(full[1:])) is not None
-
-    return lambda: CallbackProblem(residual, bar, (CmbsError,), [""], adjust, keep, branch=left)
+    return lambda: CallbackProblem(residual, bar, (CmbsError,), [""], adjust, keep,
+                                   branch=lambda t, state: branch.left_at(t, *full))
 
 
 def _record(model: Model, solver, inputs: Inputs, result: Integration, chosen: Formulation | None,

@@ -362,5 +362,10 @@ class BranchWatch:
             return None
         return float(self.watch[JUMP_FROM]), jump_message(self.watch)
 
+    def left_at(self, t: float, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> bool:
+        """The watch at the accepted state (q, q̇, q̈) of an implicit integrator: True when the run
+        left its branch there (the jump's message then from :func:`jump_message`)."""
+        return self(t, np.concatenate((q, qd)), np.concatenate((qd, qdd))) is not None
+
     def _jacobian(self, t: float, y: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(self.model.jacobian(y[:self.model.n], float(t)), dtype=float)

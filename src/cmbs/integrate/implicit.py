@@ -339,8 +339,7 @@ def integrate_index3(residual: Residual, q0: np.ndarray, v0: np.ndarray, a0: np.
     its residual without the matrices): the loop of :func:`newton_steps` runs interpreted, calling
     ``progress(t)`` at every output instant and, when given, the branch watch ``branch`` (on the
     state (q, v), (v, a)) after every step."""
-    watched = None if branch is None else lambda t, state: branch(t, np.concatenate(state[:2]),
-                                                                  np.concatenate(state[1:3])) is not None
+    watched = None if branch is None else lambda t, state: branch.left_at(t, *state[:3])
     return integrate(CallbackProblem(residual, progress, stop_on, [""], value=value, branch=watched), q0, v0, a0,
                      lam0, t_out, scheme=scheme, step=step, tolerance=tolerance, max_iterations=max_iterations,
                      keep_every=keep_every, compiled=False, keep_matrix=keep_matrix,
