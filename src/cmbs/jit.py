@@ -63,6 +63,12 @@ def borrow(value):
     return value
 
 
+def same_kind(value: tuple, items: tuple) -> tuple:
+    """A named tuple of ``value``'s class holding ``items``: a kernel tuple whose class carries its
+    kernels (:func:`type_dispatch`), rebuilt with new members without naming its class."""
+    return type(value)(*items)
+
+
 def _items(values: tuple) -> tuple:
     """The items of tuple ``values``, each borrowed (:func:`borrow`), as a plain tuple."""
     return values
@@ -85,6 +91,11 @@ if _numba is not None:
         if isinstance(value, _types.BaseTuple):
             return lambda value: _items(value)
         return lambda value: value
+
+    @_overload(same_kind)
+    def _same_kind_typed(value, items):
+        make = value.instance_class
+        return lambda value, items: make(*items)
 
     @_overload(_items)
     def _items_typed(values):
@@ -143,7 +154,8 @@ def _forwarding(kernel: Callable, arity: int) -> Callable:
                 5: lambda d, a, b, c, e: kernel(d, a, b, c, e),
                 6: lambda d, a, b, c, e, f: kernel(d, a, b, c, e, f),
                 7: lambda d, a, b, c, e, f, g: kernel(d, a, b, c, e, f, g),
-                8: lambda d, a, b, c, e, f, g, h: kernel(d, a, b, c, e, f, g, h)}
+                8: lambda d, a, b, c, e, f, g, h: kernel(d, a, b, c, e, f, g, h),
+                9: lambda d, a, b, c, e, f, g, h, i: kernel(d, a, b, c, e, f, g, h, i)}
     return forwards[arity]
 
 

@@ -25,10 +25,10 @@ import numpy as np
 from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.dense import all_finite
 from cmbs.dynamics.field import unchanged
-from cmbs.dynamics.kkt import assemble_kkt, band_kkt, certify, full_system, gram_singular, packed_workspace, \
-    schur_solve, unpack_workspace
+from cmbs.dynamics.kkt import assemble_kkt, band_regular, banded, certify, full_system, gram_singular, \
+    packed_workspace, regular_solve, schur_regular, unpack_workspace
 from cmbs.errors import SingularSystemError
-from cmbs.jit import njit
+from cmbs.jit import njit, same_kind
 from cmbs.lazy import on_first_use
 from cmbs.model.model import Model, Terms
 
@@ -153,6 +153,13 @@ class LagrangeKernel(NamedTuple):
     rhs: np.ndarray
 
 
+class BandLagrangeKernel(LagrangeKernel):
+    """A :class:`LagrangeKernel` whose workspace solves regular systems by band LU (large natural
+    models, :func:`cmbs.dynamics.kkt.banded`)."""
+
+    __slots__ = ()
+
+
 class LeastSquaresKernel(NamedTuple):
     """Lagrange's or Baumgarte's equations solved in the least-squares sense
     (:func:`_solve_least_squares`): ξ, ω and the augmented system's work arrays."""
@@ -170,9 +177,10 @@ def lagrange_kernel(solver: KKTSolver, model: Model) -> LagrangeKernel | LeastSq
     xi, omega = float(solver.xi), float(solver.omega)
     if solver.least_squares:
         return LeastSquaresKernel(xi, omega, np.empty((n + m, n + m)), np.empty(n + m))
-    return LagrangeKernel(xi, omega, float(solver.singular_tolerance),
-                          np.ascontiguousarray(solver.row_scale, dtype=float), *packed_workspace(model),
-                          np.empty((n + m, n + m)), np.empty(n + m))
+    workspace = packed_workspace(model)
+    kind = BandLagrangeKernel if banded(*workspace) else LagrangeKernel
+    return kind(xi, omega, float(solver.singular_tolerance), np.ascontiguousarray(solver.row_scale, dtype=float),
+                *workspace, np.empty((n + m, n + m)), np.empty(n + m))
 
 
 @njit(cache=True)
@@ -183,8 +191,9 @@ def _solve(kernel, terms, t, qd, qdd, lam):
     SINGULAR when σ_min/σ_max of the row-scaled A is below the tolerance
     (:func:`~cmbs.dynamics.kkt.certify`, then the Gram matrix's eigenvalues where its bounds are
     inconclusive); :meth:`KKTSolver._singular_message` names the constraints.  Band LU for large
-    natural models (when the workspace chose it), the Schur complement when A is certified regular
-    and M's block positive definite, else the full system.
+    natural models (a :class:`BandLagrangeKernel`), the Schur complement when A is certified
+    regular and M's block positive definite; else, or where band LU meets an exactly zero pivot,
+    the full system by Gaussian elimination with partial pivoting.
     """
     Q, phi, A, gamma, phi_t, M = terms
     schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
@@ -199,11 +208,8 @@ def _solve(kernel, terms, t, qd, qdd, lam):
     rhs = kernel.rhs
     _constraint_rhs(kernel, phi, A, gamma, phi_t, qd)
     c = rhs[n:n + m]
-    if schur[16] == 1:                      # large natural model: band LU of the KKT matrix
-        solved = band_kkt(Q, A, c, schur, qdd, lam)
-    else:
-        solved = (certified and schur_solve(M, Q, A, c, schur, qdd, lam)) or \
-            full_system(M, Q, A, kernel.K, rhs, qdd, lam)
+    solved = regular_solve(kernel, certified, M, Q, A, c, schur, qdd, lam) or \
+        full_system(M, Q, A, kernel.K, rhs, qdd, lam)
     return OK if solved else SINGULAR
 
 
@@ -261,8 +267,9 @@ def _minimum_norm(M, Q, A, K, rhs, qdd, lam):
 @njit(cache=True)
 def _fresh(kernel):
     """A copy of ``kernel`` with work arrays of its own (for runs beside each other)."""
-    return LagrangeKernel(kernel.xi, kernel.omega, kernel.tolerance, kernel.row_scale, kernel.floats.copy(),
-                          kernel.integers.copy(), kernel.layout, np.empty_like(kernel.K), np.empty_like(kernel.rhs))
+    return same_kind(kernel, (kernel.xi, kernel.omega, kernel.tolerance, kernel.row_scale, kernel.floats.copy(),
+                              kernel.integers.copy(), kernel.layout, np.empty_like(kernel.K),
+                              np.empty_like(kernel.rhs)))
 
 
 @njit(cache=True)
@@ -274,6 +281,8 @@ def _fresh_least_squares(kernel):
 LagrangeKernel.solve = staticmethod(_solve)
 LagrangeKernel.stage_state = LagrangeKernel.after_step = staticmethod(unchanged)
 LagrangeKernel.fresh = staticmethod(_fresh)
+LagrangeKernel.solve_regular = staticmethod(schur_regular)
+BandLagrangeKernel.solve_regular = staticmethod(band_regular)
 LeastSquaresKernel.solve = staticmethod(_solve_least_squares)
 LeastSquaresKernel.stage_state = LeastSquaresKernel.after_step = staticmethod(unchanged)
 LeastSquaresKernel.fresh = staticmethod(_fresh_least_squares)
