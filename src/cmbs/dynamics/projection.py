@@ -251,10 +251,12 @@ def _by_svd(M, Q, A, gamma, row_scale, threshold, inertia, mu, scale, semi_defin
         scaled = A * row_scale.reshape((m, 1))
         U, sigma, Vt = np.linalg.svd(scaled, full_matrices=False)
         for k in range(sigma.shape[0]):
-            if sigma[k] > threshold:
-                v = Vt[k]
-                P -= np.outer(v, v)
-                pinv += np.outer(v / sigma[k], U[:, k] * row_scale)
+            if sigma[k] > threshold:            # P -= v vᵀ, A⁺ += (v/σ)(u ∘ row_scale)ᵀ, element by element
+                for i in range(n):
+                    for j in range(n):
+                        P[i, j] -= Vt[k, i] * Vt[k, j]
+                    for j in range(m):
+                        pinv[i, j] += (Vt[k, i] / sigma[k]) * (U[j, k] * row_scale[j])
     I_P = np.eye(n) - P
     M_hat = M + scale * I_P if semi_definite else M.copy()
     constrained = pinv @ gamma                      # A⁺γ
@@ -269,9 +271,12 @@ def _by_svd(M, Q, A, gamma, row_scale, threshold, inertia, mu, scale, semi_defin
         solution = P @ Q + mu * constrained
     if not solve_in_place(matrix, solution):
         return False
-    qdd[:] = solution
+    for i in range(n):
+        qdd[i] = solution[i]
     force = I_P @ (M @ qdd - Q)
-    lam[:] = -(pinv.T @ force)
+    multipliers = pinv.T @ force
+    for r in range(m):
+        lam[r] = -multipliers[r]
     return True
 
 
