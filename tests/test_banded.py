@@ -8,6 +8,10 @@ import cmbs
 from cmbs.banded import band_factor, band_plan, band_solve, gram_profile, inverse_trace, jacobian_pattern
 from cmbs.dynamics.field import CompiledDynamics
 from cmbs.dynamics.kkt import cholesky_in_place, packed_workspace, workspace_views
+from cmbs.dynamics.lagrange import BandLagrangeKernel
+from cmbs.dynamics.projection import BandProjectionKernel
+from cmbs.dynamics.udwadia_kalaba import BandUdwadiaKalabaKernel
+from cmbs.integrate.compiled_rk4 import fresh
 
 
 def _band_storage(K, order, width):
@@ -79,19 +83,27 @@ def test_profile_cholesky_and_takahashi_trace_match_numpy():
 
 @pytest.mark.parametrize("closed", [False, True])
 def test_large_chains_take_the_band_path_with_the_python_solver_results(closed):
-    """200 links (n = 400): the compiled evaluation uses the band KKT solve and agrees with the
-    Python solver (dense LAPACK) to 1e-9; Lagrange and projection alike."""
+    """200 links (n = 400): the compiled evaluation uses the band KKT solve (a kernel of the band
+    class, which a copy for a sweep keeps) and gives the solution of [M Aᵀ; A 0][q̈; λ] = [Q; γ] by
+    numpy's dense LU to 1e-9; Lagrange, projection and Udwadia-Kalaba alike (at a regular state
+    the three coincide)."""
     model = cmbs.load("chain", links=200, closed=closed)
     rng = np.random.default_rng(9)
     q = cmbs.assemble(model, model.q0 + 1e-3 * rng.normal(size=model.n), tolerance=1e-13)
     qd = cmbs.velocities(model, q, qd=rng.normal(size=model.n))
-    for name in ("lagrange", "projection"):
+    terms = model.evaluate(q, qd, 0.0)
+    n, m = model.n, model.m
+    kkt = np.block([[terms.M, terms.A.T], [terms.A, np.zeros((m, m))]])
+    solution = np.linalg.solve(kkt, np.concatenate([terms.Q, terms.gamma]))     # numpy's dense LU
+    expected_qdd, expected_lam = solution[:n], solution[n:]
+    for name, kind in (("lagrange", BandLagrangeKernel), ("projection", BandProjectionKernel),
+                       ("udwadia-kalaba", BandUdwadiaKalabaKernel)):
         compiled = CompiledDynamics(model, name)
         assert workspace_views(*packed_workspace(model))[16] == 1      # the band KKT plan is used
+        assert type(compiled.solver.kernel) is kind and type(fresh(compiled.solver.kernel)) is kind
         qdd, lam = compiled.accelerations(q, qd)
-        expected = compiled.solver.accelerations(model.evaluate(q, qd, 0.0), q, qd, 0.0)
-        np.testing.assert_allclose(qdd, expected.qdd, rtol=0, atol=1e-9 * np.abs(expected.qdd).max())
-        np.testing.assert_allclose(lam, expected.lam, rtol=0, atol=1e-9 * np.abs(expected.lam).max())
+        np.testing.assert_allclose(qdd, expected_qdd, rtol=0, atol=1e-9 * np.abs(expected_qdd).max())
+        np.testing.assert_allclose(lam, expected_lam, rtol=0, atol=1e-9 * np.abs(expected_lam).max())
 
 
 def test_a_200_link_closed_chain_runs_and_conserves_energy():

@@ -242,7 +242,6 @@ def test_projection_takes_the_svd_at_a_singular_position_and_the_schur_path_else
     model = cmbs.load("slider-crank")
     compiled = CompiledDynamics(model, "projection")
     schur = _schur_tuple(model)
-    row_scale = np.ascontiguousarray(compiled.solver.row_scale, dtype=float)
     values = dict(zip(model.coordinate_names, model.q0))
     values.update({"A.x": 0.0, "A.z": 1.0, "C.x": 0.0, "theta1": np.pi / 2, "theta2": -np.pi})
     singular = np.array([values[name] for name in model.coordinate_names])
@@ -251,8 +250,7 @@ def test_projection_takes_the_svd_at_a_singular_position_and_the_schur_path_else
         qd = cmbs.velocities(model, q, qd=np.ones(model.n))
         terms = model.evaluate(q, qd, 0.0)
         qdd, lam = np.empty(model.n), np.empty(model.m)
-        taken = _by_schur(terms.M, terms.Q, terms.A, terms.gamma, row_scale, compiled.formulation.threshold, schur,
-                          qdd, lam)
+        taken = _by_schur(compiled.solver.kernel, terms.M, terms.Q, terms.A, terms.gamma, schur, qdd, lam)
         assert taken == schur_expected
         expected = compiled.solver.accelerations(terms, q, qd, 0.0)
         got_qdd, got_lam = compiled.accelerations(q, qd, 0.0)

@@ -64,3 +64,27 @@ def test_a_borrowed_tuple_has_the_type_of_the_tuple():
 def test_interpreted_borrow_returns_the_value_itself():
     outer = _outer()
     assert jit.interpreted(jit.borrow)(outer) is outer
+
+
+class Wider(Inner):
+    """A kernel class that differs from its base only in the kernels it carries."""
+
+    __slots__ = ()
+
+
+@jit.njit
+def _renewed(value):
+    return jit.same_kind(value, (value.values.copy(), 2.0 * value.scale))
+
+
+@pytest.mark.parametrize("kind", [Inner, Wider])
+def test_same_kind_rebuilds_a_named_tuple_in_its_own_class(kind):
+    """A kernel tuple copied by a compiled ``fresh`` keeps its class (the class chooses its
+    kernels: a copy of a band-LU kernel must not come back as the Schur-complement one), with the
+    new members; interpreted, the same."""
+    value = kind(np.arange(3.0), 0.5)
+    for renew in (_renewed, jit.interpreted(_renewed)):
+        renewed = renew(value)
+        assert type(renewed) is kind
+        np.testing.assert_array_equal(renewed.values, value.values)
+        assert renewed.values is not value.values and renewed.scale == 1.0

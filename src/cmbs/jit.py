@@ -63,6 +63,12 @@ def borrow(value):
     return value
 
 
+def same_kind(value: tuple, items: tuple) -> tuple:
+    """A named tuple of ``value``'s class holding ``items``: a kernel tuple whose class carries its
+    kernels (:func:`type_dispatch`), rebuilt with new members without naming its class."""
+    return type(value)(*items)
+
+
 def _items(values: tuple) -> tuple:
     """The items of tuple ``values``, each borrowed (:func:`borrow`), as a plain tuple."""
     return values
@@ -85,6 +91,11 @@ if _numba is not None:
         if isinstance(value, _types.BaseTuple):
             return lambda value: _items(value)
         return lambda value: value
+
+    @_overload(same_kind)
+    def _same_kind_typed(value, items):
+        make = value.instance_class
+        return lambda value, items: make(*items)
 
     @_overload(_items)
     def _items_typed(values):
@@ -111,40 +122,54 @@ def type_dispatch(attribute: str, default: Callable | None = None) -> Callable:
 
     ``data`` is a :class:`typing.NamedTuple` whose class carries the kernel as a static attribute
     (a model's terms kernel, a formulation's solve, an input law).  Compiled, the choice is made
-    by numba when the caller is compiled (``numba.extending.overload`` on the tuple's class), so
-    a loop taking ``data`` compiles only the kernel of that class and its specialisation is
-    cached like any other; interpreted, it is a plain attribute lookup.  Adding a kind of model
-    or a formulation is adding a class and its kernel: no code of the loops changes.  The
-    overload's implementation is a forwarding function compiled into its caller (numba's
-    inlining), so the dispatch costs nothing beside the kernel's call.  (Inlining the kernel's
-    own body instead saves about 2 s of a first compilation but changed the results of a
-    kernel with problem hooks, the compiled trapezoidal rule: the kernels stay calls.)"""
+    by numba when the caller is compiled, so a loop taking ``data`` compiles only the kernel of
+    that class and its specialisation is cached like any other; interpreted, it is a plain
+    attribute lookup.  Adding a kind of model or a formulation is adding a class and its kernel:
+    no code of the loops changes.  The call compiles to a direct call of the kernel (numba's
+    low-level typing and lowering API, :func:`_compile_as_direct_call`): no function between the
+    caller and the kernel, which a compiled forwarding function would be, and which would make
+    numba optimise the kernel's code once more on a first compilation."""
 
     def dispatch(data, *args):
         return getattr(type(data), attribute, default)(data, *args)
 
     dispatch.__name__ = dispatch.__qualname__ = f"dispatch_{attribute}"
     if _numba is not None:
-        from numba.extending import overload
-
-        @overload(dispatch, inline="always", strict=False)
-        def _resolved(data, *args):
-            return _forwarding(getattr(data.instance_class, attribute, default), 1 + len(args))
+        _compile_as_direct_call(dispatch, attribute, default)
     return dispatch
 
 
-def _forwarding(kernel: Callable, arity: int) -> Callable:
-    """``lambda data, a, b, ...: kernel(data, a, b, ...)`` with ``arity`` parameters (numba inlines
-    only functions with named parameters)."""
-    forwards = {1: lambda d: kernel(d),
-                2: lambda d, a: kernel(d, a),
-                3: lambda d, a, b: kernel(d, a, b),
-                4: lambda d, a, b, c: kernel(d, a, b, c),
-                5: lambda d, a, b, c, e: kernel(d, a, b, c, e),
-                6: lambda d, a, b, c, e, f: kernel(d, a, b, c, e, f),
-                7: lambda d, a, b, c, e, f, g: kernel(d, a, b, c, e, f, g),
-                8: lambda d, a, b, c, e, f, g, h: kernel(d, a, b, c, e, f, g, h)}
-    return forwards[arity]
+def _compile_as_direct_call(dispatch: Callable, attribute: str, default: Callable | None) -> None:
+    """Type a compiled call ``dispatch(data, *args)`` as the call of ``data``'s class kernel
+    (``numba.core.typing.templates.AbstractTemplate`` registered by ``infer_global``) and lower it
+    as that call (``numba.core.imputils.lower_builtin``), the arguments cast to the kernel's
+    compiled signature."""
+    from numba.core import types
+    from numba.core.imputils import lower_builtin
+    from numba.core.typing.templates import AbstractTemplate, infer_global, signature
+
+    def target(data: types.Type) -> types.Dispatcher | None:
+        kernel = getattr(getattr(data, "instance_class", None), attribute, default)
+        return types.Dispatcher(kernel) if kernel is not None else None
+
+    key = object()          # the typing and lowering key (``dispatch`` is not a module attribute)
+
+    @infer_global(dispatch, typing_key=key)
+    class _Typed(AbstractTemplate):
+        def generic(self, args, kws):
+            kernel = target(args[0]) if args and not kws else None
+            if kernel is None:
+                return None
+            call = self.context.resolve_function_type(kernel, args, {})
+            return None if call is None else signature(call.return_type, *args)
+
+    @lower_builtin(key, types.VarArg(types.Any))
+    def _lowered(context, builder, sig, args):
+        kernel = target(sig.args[0])
+        call = kernel.get_call_type(context.typing_context, sig.args, {})
+        values = [context.cast(builder, value, given, wanted) for value, given, wanted in zip(args, sig.args, call.args)]
+        result = context.get_function(kernel, call)(builder, values)
+        return context.cast(builder, result, call.return_type, sig.return_type)
 
 
 #: ``numba.prange`` (parallel loop over independent iterations) with numba, else ``range``.

@@ -51,6 +51,22 @@ def multiply_transposed(A: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
             out[j] += A[i, j] * x[i]
 
 
+@njit(cache=True, inline="always")
+def copy_vector(source: np.ndarray, target: np.ndarray) -> None:
+    """``target[:] = source`` element by element (a slice assignment compiles numba's formatted
+    shape-mismatch error, about 2 s of a first compilation per array rank)."""
+    for i in range(target.shape[0]):
+        target[i] = source[i]
+
+
+@njit(cache=True, inline="always")
+def copy_matrix(source: np.ndarray, target: np.ndarray) -> None:
+    """``target[:, :] = source`` element by element (see :func:`copy_vector`)."""
+    for i in range(target.shape[0]):
+        for j in range(target.shape[1]):
+            target[i, j] = source[i, j]
+
+
 @njit(cache=True)
 def max_abs(x: np.ndarray) -> float:
     """max |x| over all entries (0 for an empty array; NaN when one is NaN)."""

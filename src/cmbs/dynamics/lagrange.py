@@ -9,8 +9,10 @@ Index-1 augmented system (García de Jalón & Bayo 1994, eq. 5.4)::
 A rank-deficient A (redundant constraints or a singular configuration) makes the matrix
 singular: the solver raises :class:`~cmbs.errors.SingularSystemError` naming the dependent
 constraints, unless ``least_squares`` asks for the minimum-norm least-squares solution (LAPACK's
-SVD-based gelsd, numpy's ``np.linalg.lstsq`` with its default cut-off).  Both options are one
-compiled solve (:func:`_solve`), the one the compiled integration loops run.
+SVD-based gelsd, numpy's ``np.linalg.lstsq`` with its default cut-off).  Each option is one
+compiled solve (:func:`_solve` on a :class:`LagrangeKernel`, :func:`_solve_least_squares` on a
+:class:`LeastSquaresKernel`), the one the compiled integration loops run; a run compiles only
+the one it uses.
 """
 
 from __future__ import annotations
@@ -23,10 +25,10 @@ import numpy as np
 from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.dense import all_finite
 from cmbs.dynamics.field import unchanged
-from cmbs.dynamics.kkt import assemble_kkt, band_kkt, certify, full_system, gram_singular, packed_workspace, \
-    schur_solve, unpack_workspace
+from cmbs.dynamics.kkt import assemble_kkt, band_regular, banded, certify, full_system, gram_singular, \
+    packed_workspace, regular_solve, schur_regular, unpack_workspace
 from cmbs.errors import SingularSystemError
-from cmbs.jit import njit
+from cmbs.jit import njit, same_kind
 from cmbs.lazy import on_first_use
 from cmbs.model.model import Model, Terms
 
@@ -58,7 +60,7 @@ class Lagrange:
     def bind(self, model: Model) -> "KKTSolver":
         return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=0.0, omega=0.0)
 
-    def compiled(self, solver: "KKTSolver", model: Model) -> "LagrangeKernel":
+    def compiled(self, solver: "KKTSolver", model: Model) -> "LagrangeKernel | LeastSquaresKernel":
         """The solve of the compiled loops: the bound solver's own."""
         return solver.kernel
 
@@ -83,7 +85,7 @@ class Baumgarte:
     def bind(self, model: Model) -> "KKTSolver":
         return KKTSolver(model, self.least_squares, self.singular_tolerance, xi=self.xi, omega=self.omega)
 
-    def compiled(self, solver: "KKTSolver", model: Model) -> "LagrangeKernel":
+    def compiled(self, solver: "KKTSolver", model: Model) -> "LagrangeKernel | LeastSquaresKernel":
         """The solve of the compiled loops: the bound solver's own."""
         return solver.kernel
 
@@ -91,7 +93,8 @@ class Baumgarte:
 class KKTSolver(StatelessSolver):
     """Solves the augmented (KKT) system with an optional Baumgarte right-hand side, or with
     ``least_squares`` its minimum-norm least-squares solution: one call of the compiled
-    :func:`_solve` on the :class:`LagrangeKernel` made here (the compiled loops call the same)."""
+    :func:`_solve` on the :class:`LagrangeKernel` made here, or :func:`_solve_least_squares` on a
+    :class:`LeastSquaresKernel` (the compiled loops call the same)."""
 
     def __init__(self, model: Model, least_squares: bool, singular_tolerance: float, *, xi: float, omega: float):
         super().__init__(model)
@@ -108,7 +111,9 @@ class KKTSolver(StatelessSolver):
         ``least_squares``).  With ``least_squares``, non-finite terms give NaN accelerations (the
         integrator reports the non-finite state)."""
         qdd, lam = np.empty(self.model.n), np.empty(self.model.m)
-        status = _solve(self.kernel, (terms.Q, terms.phi, terms.A, terms.gamma, terms.phi_t, terms.M), t, qd, qdd, lam)
+        kernel = self.kernel
+        status = type(kernel).solve(kernel, (terms.Q, terms.phi, terms.A, terms.gamma, terms.phi_t, terms.M), t, qd,
+                                    qdd, lam)
         if status == SINGULAR:
             raise SingularSystemError(self._singular_message(terms, t))
         return Accelerations(qdd, lam, -terms.A.T @ lam)
@@ -134,14 +139,12 @@ class KKTSolver(StatelessSolver):
 
 class LagrangeKernel(NamedTuple):
     """Lagrange's or Baumgarte's equations as the compiled loops take them (ξ = ω = 0: Lagrange):
-    the singularity tolerance on σ_min/σ_max of the row-scaled A, whether to solve by least
-    squares instead, the row scale, the packed :func:`cmbs.dynamics.kkt.schur_workspace` and the
-    augmented system's work arrays."""
+    the singularity tolerance on σ_min/σ_max of the row-scaled A, the row scale, the packed
+    :func:`cmbs.dynamics.kkt.schur_workspace` and the augmented system's work arrays."""
 
     xi: float
     omega: float
     tolerance: float
-    least_squares: bool
     row_scale: np.ndarray
     floats: np.ndarray
     integers: np.ndarray
@@ -150,12 +153,34 @@ class LagrangeKernel(NamedTuple):
     rhs: np.ndarray
 
 
-def lagrange_kernel(solver: KKTSolver, model: Model) -> LagrangeKernel:
-    """The :class:`LagrangeKernel` of a bound solver, with work arrays of its own."""
+class BandLagrangeKernel(LagrangeKernel):
+    """A :class:`LagrangeKernel` whose workspace solves regular systems by band LU (large natural
+    models, :func:`cmbs.dynamics.kkt.banded`)."""
+
+    __slots__ = ()
+
+
+class LeastSquaresKernel(NamedTuple):
+    """Lagrange's or Baumgarte's equations solved in the least-squares sense
+    (:func:`_solve_least_squares`): ξ, ω and the augmented system's work arrays."""
+
+    xi: float
+    omega: float
+    K: np.ndarray
+    rhs: np.ndarray
+
+
+def lagrange_kernel(solver: KKTSolver, model: Model) -> LagrangeKernel | LeastSquaresKernel:
+    """The kernel of a bound solver (:class:`LeastSquaresKernel` with ``least_squares``), with work
+    arrays of its own."""
     n, m = model.n, model.m
-    return LagrangeKernel(float(solver.xi), float(solver.omega), float(solver.singular_tolerance),
-                          bool(solver.least_squares), np.ascontiguousarray(solver.row_scale, dtype=float),
-                          *packed_workspace(model), np.empty((n + m, n + m)), np.empty(n + m))
+    xi, omega = float(solver.xi), float(solver.omega)
+    if solver.least_squares:
+        return LeastSquaresKernel(xi, omega, np.empty((n + m, n + m)), np.empty(n + m))
+    workspace = packed_workspace(model)
+    kind = BandLagrangeKernel if banded(*workspace) else LagrangeKernel
+    return kind(xi, omega, float(solver.singular_tolerance), np.ascontiguousarray(solver.row_scale, dtype=float),
+                *workspace, np.empty((n + m, n + m)), np.empty(n + m))
 
 
 @njit(cache=True)
@@ -163,18 +188,14 @@ def _solve(kernel, terms, t, qd, qdd, lam):
     """q̈, λ of [M Aᵀ; A 0][q̈; λ] = [Q; c], c = γ (Lagrange) or γ - 2ξωΦ̇ - ω²Φ with
     Φ̇ = Aq̇ + Φ_t (Baumgarte), at the terms (Q, Φ, A, γ, Φ_t, M).
 
-    With the kernel's ``least_squares``: the minimum-norm least-squares solution
-    (:func:`_minimum_norm`), for any rank of A; OK, or NON_FINITE for non-finite terms.
-    Otherwise SINGULAR when σ_min/σ_max of the row-scaled A is below the tolerance
+    SINGULAR when σ_min/σ_max of the row-scaled A is below the tolerance
     (:func:`~cmbs.dynamics.kkt.certify`, then the Gram matrix's eigenvalues where its bounds are
     inconclusive); :meth:`KKTSolver._singular_message` names the constraints.  Band LU for large
-    natural models (when the workspace chose it), the Schur complement when A is certified regular
-    and M's block positive definite, else the full system.
+    natural models (a :class:`BandLagrangeKernel`), the Schur complement when A is certified
+    regular and M's block positive definite; else, or where band LU meets an exactly zero pivot,
+    the full system by Gaussian elimination with partial pivoting.
     """
     Q, phi, A, gamma, phi_t, M = terms
-    if kernel.least_squares:
-        _constraint_rhs(kernel, phi, A, gamma, phi_t, qd)
-        return _minimum_norm(M, Q, A, kernel.K, kernel.rhs, qdd, lam)
     schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
     singular, certified, decided = certify(A, kernel.row_scale, kernel.tolerance, schur[27], schur[28], schur[7],
                                            schur[8], schur[13], schur[14], schur[15])
@@ -187,12 +208,18 @@ def _solve(kernel, terms, t, qd, qdd, lam):
     rhs = kernel.rhs
     _constraint_rhs(kernel, phi, A, gamma, phi_t, qd)
     c = rhs[n:n + m]
-    if schur[16] == 1:                      # large natural model: band LU of the KKT matrix
-        solved = band_kkt(Q, A, c, schur, qdd, lam)
-    else:
-        solved = (certified and schur_solve(M, Q, A, c, schur, qdd, lam)) or \
-            full_system(M, Q, A, kernel.K, rhs, qdd, lam)
+    solved = regular_solve(kernel, certified, M, Q, A, c, schur, qdd, lam) or \
+        full_system(M, Q, A, kernel.K, rhs, qdd, lam)
     return OK if solved else SINGULAR
+
+
+@njit(cache=True)
+def _solve_least_squares(kernel, terms, t, qd, qdd, lam):
+    """:func:`_solve`'s system solved in the least-squares sense: the minimum-norm solution
+    (:func:`_minimum_norm`), for any rank of A; OK, or NON_FINITE for non-finite terms."""
+    Q, phi, A, gamma, phi_t, M = terms
+    _constraint_rhs(kernel, phi, A, gamma, phi_t, qd)
+    return _minimum_norm(M, Q, A, kernel.K, kernel.rhs, qdd, lam)
 
 
 @njit(cache=True, inline="always")
@@ -240,11 +267,22 @@ def _minimum_norm(M, Q, A, K, rhs, qdd, lam):
 @njit(cache=True)
 def _fresh(kernel):
     """A copy of ``kernel`` with work arrays of its own (for runs beside each other)."""
-    return LagrangeKernel(kernel.xi, kernel.omega, kernel.tolerance, kernel.least_squares, kernel.row_scale,
-                          kernel.floats.copy(),
-                          kernel.integers.copy(), kernel.layout, np.empty_like(kernel.K), np.empty_like(kernel.rhs))
+    return same_kind(kernel, (kernel.xi, kernel.omega, kernel.tolerance, kernel.row_scale, kernel.floats.copy(),
+                              kernel.integers.copy(), kernel.layout, np.empty_like(kernel.K),
+                              np.empty_like(kernel.rhs)))
+
+
+@njit(cache=True)
+def _fresh_least_squares(kernel):
+    """A copy of ``kernel`` with work arrays of its own (for runs beside each other)."""
+    return LeastSquaresKernel(kernel.xi, kernel.omega, np.empty_like(kernel.K), np.empty_like(kernel.rhs))
 
 
 LagrangeKernel.solve = staticmethod(_solve)
 LagrangeKernel.stage_state = LagrangeKernel.after_step = staticmethod(unchanged)
 LagrangeKernel.fresh = staticmethod(_fresh)
+LagrangeKernel.solve_regular = staticmethod(schur_regular)
+BandLagrangeKernel.solve_regular = staticmethod(band_regular)
+LeastSquaresKernel.solve = staticmethod(_solve_least_squares)
+LeastSquaresKernel.stage_state = LeastSquaresKernel.after_step = staticmethod(unchanged)
+LeastSquaresKernel.fresh = staticmethod(_fresh_least_squares)

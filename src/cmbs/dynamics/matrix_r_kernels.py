@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
+from cmbs.dynamics.dense import copy_vector
 from cmbs.dynamics.kkt import lu_in_place, lu_solve, lu_solve_transposed, solve_in_place
 from cmbs.jit import njit
 from cmbs.model.compiled import evaluate
@@ -260,7 +261,7 @@ def choose_partition(A, automatic, rows, dependent, independent):
     r, n = rows.shape[0], A.shape[1]
     chosen = np.empty(r, dtype=np.int64)
     pivot_columns(row_scaled(A).T.copy(), r, chosen)
-    rows[:] = np.sort(chosen)
+    copy_vector(np.sort(chosen), rows)
     if not automatic:
         return
     block = np.empty((n, r))
@@ -268,7 +269,7 @@ def choose_partition(A, automatic, rows, dependent, independent):
         for a in range(r):
             block[j, a] = A[rows[a], j]
     pivot_rows(block, r, chosen)
-    dependent[:] = np.sort(chosen)
+    copy_vector(np.sort(chosen), dependent)
     is_dependent = np.zeros(n, dtype=np.bool_)
     for j in range(r):
         is_dependent[dependent[j]] = True

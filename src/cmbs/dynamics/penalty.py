@@ -41,8 +41,8 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import OK, Accelerations, StatelessSolver, check_parameters
-from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, add_scaled_gram, all_finite, fill_nan, max_abs, multiply,
-                                 multiply_transposed)
+from cmbs.dynamics.dense import (NOT_POSITIVE_DEFINITE, add_scaled_gram, all_finite, copy_vector, fill_nan, max_abs,
+                                 multiply, multiply_transposed)
 from cmbs.dynamics.field import unchanged
 from cmbs.dynamics.kkt import DENSE, cholesky_in_place, solve_lower, solve_lower_transposed
 from cmbs.errors import SingularSystemError
@@ -202,9 +202,9 @@ def penalty_solve(M: np.ndarray, Q: np.ndarray, A: np.ndarray, gamma: np.ndarray
                                             trial_residual)
         if trial_relative > 0.5 * relative:     # no longer contracting: the best this state allows
             break
-        lam_star[:] = trial_lam_star
-        qdd[:] = trial
-        residual[:] = trial_residual
+        copy_vector(trial_lam_star, lam_star)
+        copy_vector(trial, qdd)
+        copy_vector(trial_residual, residual)
         relative = trial_relative
     for i in range(lam.size):
         lam[i] = lam_star[i] + alpha * residual[i]

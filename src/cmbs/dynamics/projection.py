@@ -34,10 +34,10 @@ import numpy as np
 
 from cmbs.dynamics.base import OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.field import unchanged
-from cmbs.dynamics.kkt import band_kkt, bounds_meeting, packed_workspace, schur_solve, solve_in_place, \
-    unpack_workspace
+from cmbs.dynamics.kkt import band_regular, banded, bounds_meeting, packed_workspace, regular_solve, schur_regular, \
+    solve_in_place, unpack_workspace
 from cmbs.errors import CmbsError, SingularSystemError
-from cmbs.jit import njit
+from cmbs.jit import njit, same_kind
 from cmbs.model.model import Model, Terms
 
 #: The constraint inertia matrices; a :class:`ProjectionKernel` carries one by its index here.
@@ -123,10 +123,11 @@ class ProjectionSolver(StatelessSolver):
         self.semi_definite = bool(np.linalg.eigvalsh(M0)[0] <= 1e-12 * max(np.abs(M0).max(), 1.0))
         self.scale = float(np.trace(M0)) / model.n
         self.row_scale = reference_row_scale(model)
-        self.kernel = ProjectionKernel(INERTIAS.index(parameters.inertia),
-                                       float(self.scale if parameters.mu is None else parameters.mu),
-                                       float(parameters.threshold), self.scale, self.semi_definite,
-                                       np.ascontiguousarray(self.row_scale, dtype=float), *packed_workspace(model))
+        workspace = packed_workspace(model)
+        kind = BandProjectionKernel if banded(*workspace) else ProjectionKernel
+        mu = self.scale if parameters.mu is None else parameters.mu
+        self.kernel = kind(INERTIAS.index(parameters.inertia), float(mu), float(parameters.threshold), self.scale,
+                           self.semi_definite, np.ascontiguousarray(self.row_scale, dtype=float), *workspace)
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
         """Accelerations, multipliers and f_c = -Aᵀλ at one state; raises
@@ -166,6 +167,13 @@ class ProjectionKernel(NamedTuple):
     layout: np.ndarray
 
 
+class BandProjectionKernel(ProjectionKernel):
+    """A :class:`ProjectionKernel` whose workspace solves regular systems by band LU (large natural
+    models, :func:`cmbs.dynamics.kkt.banded`)."""
+
+    __slots__ = ()
+
+
 @njit(cache=True)
 def _solve(kernel, terms, t, qd, qdd, lam):
     """Aghili's projection with the kernel's constraint inertia at the terms (Q, Φ, A, γ, Φ_t, M):
@@ -174,7 +182,7 @@ def _solve(kernel, terms, t, qd, qdd, lam):
     constraint inertia matrix is exactly singular."""
     Q, phi, A, gamma, phi_t, M = terms
     schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
-    if _by_schur(M, Q, A, gamma, kernel.row_scale, kernel.threshold, schur, qdd, lam):
+    if _by_schur(kernel, M, Q, A, gamma, schur, qdd, lam):
         return OK
     if _by_svd(M, Q, A, gamma, kernel.row_scale, kernel.threshold, kernel.inertia, kernel.mu, kernel.scale,
                kernel.semi_definite, qdd, lam):
@@ -188,7 +196,7 @@ PROJECTION_REGULAR = 1e-4
 
 
 @njit(cache=True, inline="always")
-def _by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
+def _by_schur(kernel, M, Q, A, gamma, schur, qdd, lam):
     """Aghili's projection solution at a regular configuration, for each of the three inertias,
     by the augmented system [M Aᵀ; A 0][q̈; λ] = [Q; γ].
 
@@ -216,17 +224,16 @@ def _by_schur(M, Q, A, gamma, row_scale, threshold, schur, qdd, lam):
     Taken only when the Gram-matrix bounds of :func:`~cmbs.dynamics.kkt.bounds` certify σ_min(DA) >=
     PROJECTION_REGULAR·max(σ_max, 1) and σ_min > ``threshold``; returns False otherwise (near
     singular positions, redundant constraints), and the caller takes the SVD path.  Solved by
-    band LU when the workspace chose it (schur[16] == 1), else by the Schur complement."""
+    band LU for a :class:`BandProjectionKernel`, else by the Schur complement."""
     m = A.shape[0]
     if m == 0 or m > A.shape[1]:
         return False
+    row_scale, threshold = kernel.row_scale, kernel.threshold
     low, high = bounds_meeting(A, row_scale, PROJECTION_REGULAR, threshold, schur[27], schur[28], schur[7], schur[8],
                                 schur[13], schur[14], schur[15])
     if low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold:
         return False
-    if schur[16] == 1:
-        return band_kkt(Q, A, gamma, schur, qdd, lam)
-    return schur_solve(M, Q, A, gamma, schur, qdd, lam)
+    return regular_solve(kernel, True, M, Q, A, gamma, schur, qdd, lam)
 
 
 @njit(cache=True)
@@ -244,10 +251,12 @@ def _by_svd(M, Q, A, gamma, row_scale, threshold, inertia, mu, scale, semi_defin
         scaled = A * row_scale.reshape((m, 1))
         U, sigma, Vt = np.linalg.svd(scaled, full_matrices=False)
         for k in range(sigma.shape[0]):
-            if sigma[k] > threshold:
-                v = Vt[k]
-                P -= np.outer(v, v)
-                pinv += np.outer(v / sigma[k], U[:, k] * row_scale)
+            if sigma[k] > threshold:            # P -= v vᵀ, A⁺ += (v/σ)(u ∘ row_scale)ᵀ, element by element
+                for i in range(n):
+                    for j in range(n):
+                        P[i, j] -= Vt[k, i] * Vt[k, j]
+                    for j in range(m):
+                        pinv[i, j] += (Vt[k, i] / sigma[k]) * (U[j, k] * row_scale[j])
     I_P = np.eye(n) - P
     M_hat = M + scale * I_P if semi_definite else M.copy()
     constrained = pinv @ gamma                      # A⁺γ
@@ -262,19 +271,24 @@ def _by_svd(M, Q, A, gamma, row_scale, threshold, inertia, mu, scale, semi_defin
         solution = P @ Q + mu * constrained
     if not solve_in_place(matrix, solution):
         return False
-    qdd[:] = solution
+    for i in range(n):
+        qdd[i] = solution[i]
     force = I_P @ (M @ qdd - Q)
-    lam[:] = -(pinv.T @ force)
+    multipliers = pinv.T @ force
+    for r in range(m):
+        lam[r] = -multipliers[r]
     return True
 
 
 @njit(cache=True)
 def _fresh(kernel):
     """A copy of ``kernel`` with work arrays of its own (for runs beside each other)."""
-    return ProjectionKernel(kernel.inertia, kernel.mu, kernel.threshold, kernel.scale, kernel.semi_definite,
-                            kernel.row_scale, kernel.floats.copy(), kernel.integers.copy(), kernel.layout)
+    return same_kind(kernel, (kernel.inertia, kernel.mu, kernel.threshold, kernel.scale, kernel.semi_definite,
+                              kernel.row_scale, kernel.floats.copy(), kernel.integers.copy(), kernel.layout))
 
 
 ProjectionKernel.solve = staticmethod(_solve)
 ProjectionKernel.stage_state = ProjectionKernel.after_step = staticmethod(unchanged)
 ProjectionKernel.fresh = staticmethod(_fresh)
+ProjectionKernel.solve_regular = staticmethod(schur_regular)
+BandProjectionKernel.solve_regular = staticmethod(band_regular)

@@ -36,11 +36,11 @@ from cmbs.dynamics.base import OK, Accelerations, StatelessSolver, check_paramet
 from cmbs.dynamics.dense import NOT_POSITIVE_DEFINITE, add_scaled_gram, all_finite, fill_nan, multiply, \
     multiply_transposed
 from cmbs.dynamics.field import unchanged
-from cmbs.dynamics.kkt import DENSE, band_kkt, bounds_meeting, cholesky_in_place, packed_workspace, schur_solve, \
-    solve_lower, solve_lower_transposed, unpack_workspace
+from cmbs.dynamics.kkt import DENSE, band_regular, banded, bounds_meeting, cholesky_in_place, packed_workspace, \
+    regular_solve, schur_regular, solve_lower, solve_lower_transposed, unpack_workspace
 from cmbs.dynamics.projection import PROJECTION_REGULAR, reference_row_scale
 from cmbs.errors import CmbsError, SingularSystemError
-from cmbs.jit import njit
+from cmbs.jit import njit, same_kind
 from cmbs.model.compiled import model_kernel
 from cmbs.model.model import Model, Terms
 
@@ -89,7 +89,8 @@ class UdwadiaKalabaSolver(StatelessSolver):
         self.vectors_m = np.zeros((2, model.m))
         self.no_nonideal = np.zeros(0)
         workspace = packed_workspace(model) if model_kernel(model) is not None else None
-        self.kernel = UdwadiaKalabaKernel(
+        kind = BandUdwadiaKalabaKernel if workspace is not None and banded(*workspace) else UdwadiaKalabaKernel
+        self.kernel = kind(
             self.augmentation, self.factored, self.threshold, self.row_scale, float(self.mass_scale), self.factor,
             self.work_matrix, self.vectors_n, self.vectors_m, np.zeros(model.n), self.no_nonideal,
             workspace is not None, *(workspace or (np.zeros(0), np.zeros(0, dtype=np.int64), NO_WORKSPACE)))
@@ -282,6 +283,13 @@ class UdwadiaKalabaKernel(NamedTuple):
     layout: np.ndarray
 
 
+class BandUdwadiaKalabaKernel(UdwadiaKalabaKernel):
+    """An :class:`UdwadiaKalabaKernel` whose workspace solves regular systems by band LU (large
+    natural models, :func:`cmbs.dynamics.kkt.banded`)."""
+
+    __slots__ = ()
+
+
 #: The layout of an empty workspace (a model without a compiled kernel has no regular path).
 NO_WORKSPACE = np.zeros((29, 5), dtype=np.int64)
 
@@ -311,7 +319,8 @@ def _regular(kernel, M, Q, A, gamma, qdd, lam):
     row-scaled A keeps everything), and for B = AL⁻ᵀ scaled by D = mass_scale·S,
     σ_min(DB)² ≥ mass_scale² low / λ_max(M̂) ≥ mass_scale² low / trace M̂ > threshold² (the q̈
     pseudo-inverse keeps everything).  Solved as the projection's regular path
-    (:func:`cmbs.dynamics.projection._by_schur`): band LU or the Schur complement."""
+    (:func:`cmbs.dynamics.projection._by_schur`): band LU (:class:`BandUdwadiaKalabaKernel`) or
+    the Schur complement."""
     m, n = A.shape
     if not kernel.regular_path or m == 0 or m > n:
         return False
@@ -328,9 +337,7 @@ def _regular(kernel, M, Q, A, gamma, qdd, lam):
             trace += kernel.augmentation * A[i, j] * A[i, j]
     if not kernel.mass_scale * kernel.mass_scale * low > threshold * threshold * trace:
         return False
-    solved = band_kkt(Q, A, gamma, schur, qdd, lam) if schur[16] == 1 else schur_solve(M, Q, A, gamma, schur, qdd,
-                                                                                        lam)
-    if not solved:
+    if not regular_solve(kernel, True, M, Q, A, gamma, schur, qdd, lam):
         return False
     force = kernel.force
     multiply(M, qdd, force)
@@ -349,13 +356,15 @@ def _kernel_solve(kernel, terms, t, qd, qdd, lam):
 @njit(cache=True)
 def _fresh(kernel):
     """A copy of ``kernel`` with work arrays of its own (the constant factor copied too)."""
-    return UdwadiaKalabaKernel(kernel.augmentation, kernel.factored, kernel.threshold, kernel.row_scale,
-                               kernel.mass_scale, kernel.factor.copy(), kernel.work_matrix.copy(),
-                               kernel.vectors_n.copy(), kernel.vectors_m.copy(), kernel.force.copy(),
-                               kernel.no_nonideal, kernel.regular_path, kernel.floats.copy(), kernel.integers.copy(),
-                               kernel.layout)
+    return same_kind(kernel, (kernel.augmentation, kernel.factored, kernel.threshold, kernel.row_scale,
+                              kernel.mass_scale, kernel.factor.copy(), kernel.work_matrix.copy(),
+                              kernel.vectors_n.copy(), kernel.vectors_m.copy(), kernel.force.copy(),
+                              kernel.no_nonideal, kernel.regular_path, kernel.floats.copy(), kernel.integers.copy(),
+                              kernel.layout))
 
 
 UdwadiaKalabaKernel.solve = staticmethod(_kernel_solve)
 UdwadiaKalabaKernel.stage_state = UdwadiaKalabaKernel.after_step = staticmethod(unchanged)
 UdwadiaKalabaKernel.fresh = staticmethod(_fresh)
+UdwadiaKalabaKernel.solve_regular = staticmethod(schur_regular)
+BandUdwadiaKalabaKernel.solve_regular = staticmethod(band_regular)

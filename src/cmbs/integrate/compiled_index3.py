@@ -27,6 +27,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import OK
+from cmbs.dynamics.dense import copy_matrix, copy_vector
 from cmbs.dynamics.kkt import lu_in_place, lu_solve
 from cmbs.integrate.compiled_rk4 import apply_inputs, record_constraints
 from cmbs.integrate.continuity import left_branch
@@ -94,9 +95,9 @@ def _residual(problem, step, stage, t, state, out):
     n, m = q.shape[0], lam.shape[0]
     _dynamic_residual(problem, q, v, a, lam, t, step, stage, r)
     _, phi_now, A_now, _, _, M_now = terms_views(problem.model, n, m, problem.buffer)
-    M[:, :] = M_now
-    A[:, :] = A_now
-    phi[:] = phi_now
+    copy_matrix(M_now, M)
+    copy_matrix(A_now, A)
+    copy_vector(phi_now, phi)
     if not forward_difference_tangents(problem, state, t, step, r, problem.shifted, problem.base, (K, C)):
         return DIVERGED
     return OK
@@ -111,7 +112,7 @@ def _residual_value(problem, step, stage, t, state, out):
     n, m = q.shape[0], lam.shape[0]
     _dynamic_residual(problem, q, v, a, lam, t, step, stage, r)
     _, phi_now, _, _, _, _ = terms_views(problem.model, n, m, problem.buffer)
-    phi[:] = phi_now
+    copy_vector(phi_now, phi)
     return OK
 
 

@@ -57,7 +57,7 @@ def lane_setup(model: NamedTuple, formulation: NamedTuple, m: int, n: int) -> tu
     flag); ``schur`` the formulation's unpacked workspace), with :func:`lane_plan`."""
     if not isinstance(model, NaturalKernel):
         return None
-    if isinstance(formulation, LagrangeKernel) and not formulation.least_squares:
+    if isinstance(formulation, LagrangeKernel):
         method = BAUMGARTE if formulation.omega != 0.0 else LAGRANGE
         parameters = np.array([formulation.xi, formulation.omega, formulation.tolerance, 0.0, 0.0])
     elif isinstance(formulation, ProjectionKernel):
