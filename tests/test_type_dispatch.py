@@ -89,3 +89,25 @@ def test_a_class_without_the_kernel_and_no_default_is_a_typing_error():
             strict(Plain(1.0))
     with pytest.raises(TypeError):                  # getattr gives None: not callable
         jit.interpreted(strict)(Plain(1.0))
+
+
+class Wrapper(NamedTuple):
+    inner: Doubling
+    offset: float
+
+
+class WrapperOfWrapper(NamedTuple):
+    label: int
+    wrapped: Wrapper
+
+
+Wrapper.apply = jit.Delegated("inner")
+WrapperOfWrapper.apply = jit.Delegated("wrapped")
+
+
+@pytest.mark.parametrize("data", [Wrapper(Doubling(1.5), 9.0), WrapperOfWrapper(7, Wrapper(Doubling(1.5), 9.0))])
+def test_a_delegated_kernel_is_the_members_own(data):
+    """A wrapper's forwarding hook (drift projection's solve) calls its member's kernel with the
+    member: the wrapper's own fields do not reach it."""
+    for loop in (_loop, jit.interpreted(_loop)):
+        assert loop(data, 2.5) == (1, 2 * 1.5 * 2.5)

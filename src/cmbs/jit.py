@@ -116,9 +116,19 @@ def interpreted(kernel: Callable) -> Callable:
     return getattr(kernel, "py_func", kernel)
 
 
+class Delegated:
+    """A kernel attribute of a named tuple class meaning "the same kernel of my member ``field``":
+    :func:`type_dispatch` then calls the member's class kernel with the member in place of the
+    tuple (a wrapper whose hook only forwards, e.g. drift projection's solve, adds no call)."""
+
+    def __init__(self, field: str):
+        self.field = field
+
+
 def type_dispatch(attribute: str, default: Callable | None = None) -> Callable:
     """A function ``f(data, *args)`` that calls ``type(data).<attribute>(data, *args)``, or
-    ``default(data, *args)`` for a class without that attribute (when ``default`` is given).
+    ``default(data, *args)`` for a class without that attribute (when ``default`` is given); where
+    the attribute is :class:`Delegated`, the same for ``data``'s member it names.
 
     ``data`` is a :class:`typing.NamedTuple` whose class carries the kernel as a static attribute
     (a model's terms kernel, a formulation's solve, an input law).  Compiled, the choice is made
@@ -131,7 +141,11 @@ def type_dispatch(attribute: str, default: Callable | None = None) -> Callable:
     numba optimise the kernel's code once more on a first compilation."""
 
     def dispatch(data, *args):
-        return getattr(type(data), attribute, default)(data, *args)
+        kernel = getattr(type(data), attribute, default)
+        while isinstance(kernel, Delegated):
+            data = getattr(data, kernel.field)
+            kernel = getattr(type(data), attribute, default)
+        return kernel(data, *args)
 
     dispatch.__name__ = dispatch.__qualname__ = f"dispatch_{attribute}"
     if _numba is not None:
@@ -142,32 +156,47 @@ def type_dispatch(attribute: str, default: Callable | None = None) -> Callable:
 def _compile_as_direct_call(dispatch: Callable, attribute: str, default: Callable | None) -> None:
     """Type a compiled call ``dispatch(data, *args)`` as the call of ``data``'s class kernel
     (``numba.core.typing.templates.AbstractTemplate`` registered by ``infer_global``) and lower it
-    as that call (``numba.core.imputils.lower_builtin``), the arguments cast to the kernel's
-    compiled signature."""
+    as that call (``numba.extending.lower_builtin``), the arguments cast to the kernel's
+    compiled signature; a :class:`Delegated` kernel is followed to the member it names."""
     from numba.core import types
-    from numba.core.imputils import lower_builtin
     from numba.core.typing.templates import AbstractTemplate, infer_global, signature
+    from numba.extending import lower_builtin
 
-    def target(data: types.Type) -> types.Dispatcher | None:
+    def target(data: types.Type) -> tuple[types.Dispatcher | None, types.Type, list[int]]:
+        """The kernel's dispatcher type, the type of the tuple it takes, and the member indices
+        that lead from ``data`` to that tuple."""
+        path = []
         kernel = getattr(getattr(data, "instance_class", None), attribute, default)
-        return types.Dispatcher(kernel) if kernel is not None else None
+        while isinstance(kernel, Delegated):
+            index = data.instance_class._fields.index(kernel.field)
+            path.append(index)
+            data = data.types[index]
+            kernel = getattr(getattr(data, "instance_class", None), attribute, default)
+        return (types.Dispatcher(kernel) if kernel is not None else None), data, path
 
     key = object()          # the typing and lowering key (``dispatch`` is not a module attribute)
 
     @infer_global(dispatch, typing_key=key)
     class _Typed(AbstractTemplate):
         def generic(self, args, kws):
-            kernel = target(args[0]) if args and not kws else None
+            if not args or kws:
+                return None
+            kernel, data, _ = target(args[0])
             if kernel is None:
                 return None
-            call = self.context.resolve_function_type(kernel, args, {})
+            call = self.context.resolve_function_type(kernel, (data, *args[1:]), {})
             return None if call is None else signature(call.return_type, *args)
 
     @lower_builtin(key, types.VarArg(types.Any))
     def _lowered(context, builder, sig, args):
-        kernel = target(sig.args[0])
-        call = kernel.get_call_type(context.typing_context, sig.args, {})
-        values = [context.cast(builder, value, given, wanted) for value, given, wanted in zip(args, sig.args, call.args)]
+        kernel, data, path = target(sig.args[0])
+        value = args[0]
+        for index in path:
+            value = builder.extract_value(value, index)
+        given = (data, *sig.args[1:])
+        call = kernel.get_call_type(context.typing_context, given, {})
+        values = [context.cast(builder, value, source, wanted)
+                  for value, source, wanted in zip((value, *args[1:]), given, call.args)]
         result = context.get_function(kernel, call)(builder, values)
         return context.cast(builder, result, call.return_type, sig.return_type)
 

@@ -28,8 +28,8 @@ from typing import NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import NON_FINITE, OK
-from cmbs.dynamics.field import after_step, solve, stage_state
-from cmbs.jit import njit
+from cmbs.dynamics.field import after_step
+from cmbs.jit import Delegated, njit
 from cmbs.model.compiled import evaluate
 from cmbs.model.model import Model
 
@@ -158,19 +158,6 @@ def project_drift(kernel, model, q, qd, t, buffer):
                    kernel.iterations, kernel.threshold)
 
 
-# The three hooks only forward: compiled into their caller (cmbs.jit.njit's note on compile time).
-@njit(cache=True, inline="always")
-def _solve(kernel, terms, t, qd, qdd, lam):
-    """The wrapped formulation's solve."""
-    return solve(kernel.inner, terms, t, qd, qdd, lam)
-
-
-@njit(cache=True, inline="always")
-def _stage_state(kernel, model, q, qd, t, buffer):
-    """The wrapped formulation's stage hook."""
-    return stage_state(kernel.inner, model, q, qd, t, buffer)
-
-
 @njit(cache=True, inline="always")
 def _after_step(kernel, model, q, qd, t, buffer):
     """The wrapped formulation's after-step hook, then the projection (as the Python loop's
@@ -181,7 +168,7 @@ def _after_step(kernel, model, q, qd, t, buffer):
     return project_drift(kernel, model, q, qd, t, buffer)
 
 
-DriftProjection.solve = staticmethod(_solve)
-DriftProjection.stage_state = staticmethod(_stage_state)
+# The solve and the stage hook are the wrapped formulation's own, called without a function between.
+DriftProjection.solve = DriftProjection.stage_state = Delegated("inner")
 DriftProjection.after_step = staticmethod(_after_step)
 DriftProjection.output_state = staticmethod(project_drift)

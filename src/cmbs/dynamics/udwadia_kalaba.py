@@ -294,7 +294,7 @@ class BandUdwadiaKalabaKernel(UdwadiaKalabaKernel):
 NO_WORKSPACE = np.zeros((29, 5), dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _solve_with(kernel, M, Q, A, gamma, c, qdd, lam):
     """Udwadia-Kalaba's q̈, λ and constraint force (into ``kernel.force``) with the non-ideal
     vector ``c`` (empty for none): :func:`_regular` where it applies, else
@@ -306,7 +306,7 @@ def _solve_with(kernel, M, Q, A, gamma, c, qdd, lam):
                                 kernel.vectors_n, kernel.vectors_m, qdd, lam, kernel.force)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _regular(kernel, M, Q, A, gamma, qdd, lam):
     """Udwadia-Kalaba's ideal solution where nothing is discarded, by the augmented system; False
     where that is not proven (the caller then takes the SVDs).
