@@ -213,7 +213,7 @@ def threads() -> int:
 def announce_compilation(write: Callable[[str], object]) -> None:
     """Call ``write`` with one line the first time this process compiles a kernel (numba's
     ``numba:compile`` event, which a kernel loaded from the disk cache does not raise): the first
-    run after an install compiles for one to two minutes and would otherwise look stuck."""
+    run after an install compiles for 20 s to a minute and would otherwise look stuck."""
     if _numba is None:
         return
     from numba.core import event
@@ -224,7 +224,7 @@ def announce_compilation(write: Callable[[str], object]) -> None:
         def on_start(self, event: object) -> None:
             if not self.done:
                 self.done = True
-                write("cmbs: compiling the kernels this run needs (first use after an install: 1-2 minutes; "
+                write("cmbs: compiling the kernels this run needs (first use after an install: 20 s to a minute; "
                       "cached for later runs)")
 
         def on_end(self, event: object) -> None:

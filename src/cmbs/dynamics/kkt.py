@@ -581,9 +581,12 @@ def band_regular(kernel, certified, M, Q, A, c, schur, qdd, lam):
 #: ``regular_solve(kernel, certified, M, Q, A, c, schur, qdd, lam) -> bool``: the solve of a
 #: regular augmented system that a formulation kernel's class carries as ``solve_regular``:
 #: :func:`schur_regular`, or :func:`band_regular` in the class of kernels whose workspace planned
-#: band LU (:func:`banded`; e.g. :class:`cmbs.dynamics.lagrange.BandLagrangeKernel`).  The
+#: band LU (:func:`banded`; :class:`cmbs.dynamics.udwadia_kalaba.BandUdwadiaKalabaKernel`).  The
 #: choice is a class, not a flag, so that a run compiles only the linear algebra its model uses
-#: (band LU adds about 5 s to a first compilation).
+#: (band LU adds about 5 s to a first compilation).  Lagrange and the projection, whose regular
+#: path is the one nearly every evaluation takes, choose the same way by their solve
+#: (``_solve``, ``_solve_band``) and call :func:`schur_solve` or :func:`band_kkt` inside it: a
+#: call between passes the workspace's views at every evaluation (20 % of a four-bar RK4 run).
 regular_solve = type_dispatch("solve_regular")
 
 

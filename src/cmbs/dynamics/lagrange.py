@@ -25,8 +25,8 @@ import numpy as np
 from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.dense import all_finite
 from cmbs.dynamics.field import unchanged
-from cmbs.dynamics.kkt import assemble_kkt, band_regular, banded, certify, full_system, gram_singular, \
-    packed_workspace, regular_solve, schur_regular, unpack_workspace
+from cmbs.dynamics.kkt import assemble_kkt, band_kkt, banded, certify, full_system, gram_singular, packed_workspace, \
+    schur_solve, unpack_workspace
 from cmbs.errors import SingularSystemError
 from cmbs.jit import njit, same_kind
 from cmbs.lazy import on_first_use
@@ -196,21 +196,44 @@ def _solve(kernel, terms, t, qd, qdd, lam):
     the full system by Gaussian elimination with partial pivoting.
     """
     Q, phi, A, gamma, phi_t, M = terms
+    schur, certified, singular = _checked(kernel, terms, qd)
+    if singular:
+        return SINGULAR
+    c = kernel.rhs[Q.shape[0]:]
+    solved = (certified and schur_solve(M, Q, A, c, schur, qdd, lam)) or \
+        full_system(M, Q, A, kernel.K, kernel.rhs, qdd, lam)
+    return OK if solved else SINGULAR
+
+
+@njit(cache=True)
+def _solve_band(kernel, terms, t, qd, qdd, lam):
+    """:func:`_solve` of a :class:`BandLagrangeKernel`: band LU of the augmented system where A
+    is not singular (pivoting: A need not be certified)."""
+    Q, phi, A, gamma, phi_t, M = terms
+    schur, certified, singular = _checked(kernel, terms, qd)
+    if singular:
+        return SINGULAR
+    c = kernel.rhs[Q.shape[0]:]
+    solved = band_kkt(Q, A, c, schur, qdd, lam) or full_system(M, Q, A, kernel.K, kernel.rhs, qdd, lam)
+    return OK if solved else SINGULAR
+
+
+@njit(cache=True, inline="always")
+def _checked(kernel, terms, qd):
+    """(workspace, certified, singular) for :func:`_solve`: the workspace's views, whether the
+    bounds certify A regular, and whether σ_min/σ_max of the row-scaled A is below the tolerance;
+    where it is not, c into ``kernel.rhs[n:]``.  The regular system's solve is the caller's (a
+    call between would pass the workspace's views at every evaluation: 20 % of a four-bar's RK4
+    run)."""
+    Q, phi, A, gamma, phi_t, M = terms
     schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
     singular, certified, decided = certify(A, kernel.row_scale, kernel.tolerance, schur[27], schur[28], schur[7],
                                            schur[8], schur[13], schur[14], schur[15])
     if not decided:
         singular = gram_singular(schur[7], kernel.tolerance)
-    if singular:
-        return SINGULAR
-    n = Q.shape[0]
-    m = gamma.shape[0]
-    rhs = kernel.rhs
-    _constraint_rhs(kernel, phi, A, gamma, phi_t, qd)
-    c = rhs[n:n + m]
-    solved = regular_solve(kernel, certified, M, Q, A, c, schur, qdd, lam) or \
-        full_system(M, Q, A, kernel.K, rhs, qdd, lam)
-    return OK if solved else SINGULAR
+    if not singular:
+        _constraint_rhs(kernel, phi, A, gamma, phi_t, qd)
+    return schur, certified, singular
 
 
 @njit(cache=True)
@@ -281,8 +304,7 @@ def _fresh_least_squares(kernel):
 LagrangeKernel.solve = staticmethod(_solve)
 LagrangeKernel.stage_state = LagrangeKernel.after_step = staticmethod(unchanged)
 LagrangeKernel.fresh = staticmethod(_fresh)
-LagrangeKernel.solve_regular = staticmethod(schur_regular)
-BandLagrangeKernel.solve_regular = staticmethod(band_regular)
+BandLagrangeKernel.solve = staticmethod(_solve_band)
 LeastSquaresKernel.solve = staticmethod(_solve_least_squares)
 LeastSquaresKernel.stage_state = LeastSquaresKernel.after_step = staticmethod(unchanged)
 LeastSquaresKernel.fresh = staticmethod(_fresh_least_squares)

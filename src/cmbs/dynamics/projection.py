@@ -34,8 +34,8 @@ import numpy as np
 
 from cmbs.dynamics.base import OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.field import unchanged
-from cmbs.dynamics.kkt import band_regular, banded, bounds_meeting, packed_workspace, regular_solve, schur_regular, \
-    solve_in_place, unpack_workspace
+from cmbs.dynamics.kkt import band_kkt, banded, bounds_meeting, packed_workspace, schur_solve, solve_in_place, \
+    unpack_workspace
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.jit import njit, same_kind
 from cmbs.model.model import Model, Terms
@@ -184,6 +184,24 @@ def _solve(kernel, terms, t, qd, qdd, lam):
     schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
     if _by_schur(kernel, M, Q, A, gamma, schur, qdd, lam):
         return OK
+    return _svd_status(kernel, M, Q, A, gamma, qdd, lam)
+
+
+@njit(cache=True)
+def _solve_band(kernel, terms, t, qd, qdd, lam):
+    """:func:`_solve` of a :class:`BandProjectionKernel`: band LU of the augmented system where A
+    is certified regular, else the SVD."""
+    Q, phi, A, gamma, phi_t, M = terms
+    schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
+    if _certified_regular(kernel, A, schur) and band_kkt(Q, A, gamma, schur, qdd, lam):
+        return OK
+    return _svd_status(kernel, M, Q, A, gamma, qdd, lam)
+
+
+@njit(cache=True, inline="always")
+def _svd_status(kernel, M, Q, A, gamma, qdd, lam):
+    """:func:`_by_svd` with the kernel's settings: OK, or SINGULAR when the constraint inertia
+    matrix is exactly singular."""
     if _by_svd(M, Q, A, gamma, kernel.row_scale, kernel.threshold, kernel.inertia, kernel.mu, kernel.scale,
                kernel.semi_definite, qdd, lam):
         return OK
@@ -224,16 +242,22 @@ def _by_schur(kernel, M, Q, A, gamma, schur, qdd, lam):
     Taken only when the Gram-matrix bounds of :func:`~cmbs.dynamics.kkt.bounds` certify σ_min(DA) >=
     PROJECTION_REGULAR·max(σ_max, 1) and σ_min > ``threshold``; returns False otherwise (near
     singular positions, redundant constraints), and the caller takes the SVD path.  Solved by
-    band LU for a :class:`BandProjectionKernel`, else by the Schur complement."""
+    the Schur complement (a :class:`BandProjectionKernel` solves by band LU,
+    :func:`_solve_band`)."""
+    return _certified_regular(kernel, A, schur) and schur_solve(M, Q, A, gamma, schur, qdd, lam)
+
+
+@njit(cache=True, inline="always")
+def _certified_regular(kernel, A, schur):
+    """Whether the Gram bounds certify the row-scaled A regular enough for the augmented system
+    (:func:`_by_schur`)."""
     m = A.shape[0]
     if m == 0 or m > A.shape[1]:
         return False
     row_scale, threshold = kernel.row_scale, kernel.threshold
     low, high = bounds_meeting(A, row_scale, PROJECTION_REGULAR, threshold, schur[27], schur[28], schur[7], schur[8],
                                 schur[13], schur[14], schur[15])
-    if low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold:
-        return False
-    return regular_solve(kernel, True, M, Q, A, gamma, schur, qdd, lam)
+    return not (low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold)
 
 
 @njit(cache=True)
@@ -290,5 +314,4 @@ def _fresh(kernel):
 ProjectionKernel.solve = staticmethod(_solve)
 ProjectionKernel.stage_state = ProjectionKernel.after_step = staticmethod(unchanged)
 ProjectionKernel.fresh = staticmethod(_fresh)
-ProjectionKernel.solve_regular = staticmethod(schur_regular)
-BandProjectionKernel.solve_regular = staticmethod(band_regular)
+BandProjectionKernel.solve = staticmethod(_solve_band)
