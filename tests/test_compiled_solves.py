@@ -353,7 +353,7 @@ def test_udwadia_kalaba_regular_path_gives_the_svd_formulas_solution(name, param
     """Where A is certified regular, Udwadia-Kalaba's solve takes the augmented system
     (``_regular``): q̈, λ and the constraint force are those of its SVD formulas
     (``udwadia_kalaba_solve``, called directly) to rounding."""
-    from cmbs.dynamics.udwadia_kalaba import _regular, udwadia_kalaba_solve
+    from cmbs.dynamics.udwadia_kalaba import _regular, _solve_with, udwadia_kalaba_solve
 
     model = cmbs.load(name, **parameters)
     solver = UdwadiaKalaba().bind(model)
@@ -362,7 +362,8 @@ def test_udwadia_kalaba_regular_path_gives_the_svd_formulas_solution(name, param
         q, qd = state_off_the_constraints(model, seed)
         terms = terms_copy(model, q, qd, 0.3)
         qdd, lam = np.empty(model.n), np.empty(model.m)
-        assert _regular(kernel, terms.M, terms.Q, terms.A, terms.gamma, qdd, lam)
+        assert _regular(kernel, terms.M, terms.A, kernel.no_nonideal)[0]          # proven: _solve_with takes it
+        assert _solve_with(kernel, terms.M, terms.Q, terms.A, terms.gamma, kernel.no_nonideal, qdd, lam) == 0
         force = kernel.force.copy()
         expected = np.empty(model.n), np.empty(model.m), np.empty(model.n)
         work = (np.array(kernel.factor), np.zeros((model.m, model.n)), np.zeros((3, model.n)), np.zeros((2, model.m)))
@@ -382,4 +383,4 @@ def test_udwadia_kalaba_regular_path_declines_redundant_constraints():
     model = redundant_four_bar()
     kernel = UdwadiaKalaba().bind(model).kernel
     terms = terms_copy(model, model.q0, np.zeros(model.n))
-    assert not _regular(kernel, terms.M, terms.Q, terms.A, terms.gamma, np.empty(model.n), np.empty(model.m))
+    assert not _regular(kernel, terms.M, terms.A, kernel.no_nonideal)[0]

@@ -22,7 +22,7 @@ import weakref
 import numpy as np
 
 from cmbs.banded import band_factor, band_plan, band_solve, gram_profile, inverse_trace, jacobian_pattern
-from cmbs.jit import njit, type_dispatch
+from cmbs.jit import njit
 from cmbs.model.compiled import model_kernel
 from cmbs.model.model import Model
 
@@ -564,34 +564,15 @@ def band_kkt(Q, A, c, schur, qdd, lam):
     return True
 
 
-@njit(cache=True)
-def schur_regular(kernel, certified, M, Q, A, c, schur, qdd, lam):
-    """q̈, λ of a regular augmented system [M Aᵀ; A 0][q̈; λ] = [Q; c] by the Schur complement
-    (:func:`schur_solve`) where A is ``certified`` regular; else False."""
-    return certified and schur_solve(M, Q, A, c, schur, qdd, lam)
-
-
-@njit(cache=True)
-def band_regular(kernel, certified, M, Q, A, c, schur, qdd, lam):
-    """q̈, λ of a regular augmented system [M Aᵀ; A 0][q̈; λ] = [Q; c] by band LU with partial
-    pivoting (:func:`band_kkt`; A need not be certified); False where a pivot is exactly zero."""
-    return band_kkt(Q, A, c, schur, qdd, lam)
-
-
-#: ``regular_solve(kernel, certified, M, Q, A, c, schur, qdd, lam) -> bool``: the solve of a
-#: regular augmented system that a formulation kernel's class carries as ``solve_regular``:
-#: :func:`schur_regular`, or :func:`band_regular` in the class of kernels whose workspace planned
-#: band LU (:func:`banded`; :class:`cmbs.dynamics.udwadia_kalaba.BandUdwadiaKalabaKernel`).  The
-#: choice is a class, not a flag, so that a run compiles only the linear algebra its model uses
-#: (band LU adds about 5 s to a first compilation).  Lagrange and the projection, whose regular
-#: path is the one nearly every evaluation takes, choose the same way by their solve
-#: (``_solve``, ``_solve_band``) and call :func:`schur_solve` or :func:`band_kkt` inside it: a
-#: call between passes the workspace's views at every evaluation (20 % of a four-bar RK4 run).
-regular_solve = type_dispatch("solve_regular")
-
-
 def banded(floats: np.ndarray, integers: np.ndarray, layout: np.ndarray) -> bool:
-    """Whether :func:`packed_workspace`'s arrays planned band LU (:func:`_band_workspace`'s flag)."""
+    """Whether :func:`packed_workspace`'s arrays planned band LU (:func:`_band_workspace`'s flag).
+
+    A formulation then makes its kernel of a class of its own whose solve calls :func:`band_kkt`
+    (e.g. :class:`cmbs.dynamics.lagrange.BandLagrangeKernel`), not a flag tested at every
+    evaluation: a run compiles only the linear algebra its model uses (band LU adds about 5 s to
+    a first compilation), and the solve calls :func:`schur_solve` or :func:`band_kkt` itself (a
+    call between would pass the workspace's views at every evaluation: 20 % of a four-bar RK4
+    run)."""
     return bool(workspace_views(floats, integers, layout)[16] == 1)
 
 

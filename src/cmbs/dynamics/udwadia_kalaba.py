@@ -36,8 +36,8 @@ from cmbs.dynamics.base import OK, Accelerations, StatelessSolver, check_paramet
 from cmbs.dynamics.dense import NOT_POSITIVE_DEFINITE, add_scaled_gram, all_finite, fill_nan, multiply, \
     multiply_transposed
 from cmbs.dynamics.field import unchanged
-from cmbs.dynamics.kkt import DENSE, band_regular, banded, bounds_meeting, cholesky_in_place, packed_workspace, \
-    regular_solve, schur_regular, solve_lower, solve_lower_transposed, unpack_workspace
+from cmbs.dynamics.kkt import DENSE, band_kkt, banded, bounds_meeting, cholesky_in_place, packed_workspace, \
+    schur_solve, solve_lower, solve_lower_transposed, unpack_workspace
 from cmbs.dynamics.projection import PROJECTION_REGULAR, reference_row_scale
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.jit import njit, same_kind
@@ -108,7 +108,8 @@ class UdwadiaKalabaSolver(StatelessSolver):
                              f"(m = {self.model.m}, n = {self.model.n})")
         c = self.no_nonideal if self.p.nonideal is None else self._nonideal(t, q, qd)
         qdd, lam = np.empty(n), np.empty(m)
-        status = _solve_with(self.kernel, terms.M, terms.Q, terms.A, terms.gamma, c, qdd, lam)
+        kernel = self.kernel
+        status = type(kernel).solve_with(kernel, terms.M, terms.Q, terms.A, terms.gamma, c, qdd, lam)
         force = self.kernel.force.copy()
         if status == NOT_POSITIVE_DEFINITE:
             matrix = f"M + s AᵀA (s = {self.scale:.3g})" if self.semi_definite else "the mass matrix M"
@@ -297,19 +298,36 @@ NO_WORKSPACE = np.zeros((29, 5), dtype=np.int64)
 @njit(cache=True, inline="always")
 def _solve_with(kernel, M, Q, A, gamma, c, qdd, lam):
     """Udwadia-Kalaba's q̈, λ and constraint force (into ``kernel.force``) with the non-ideal
-    vector ``c`` (empty for none): :func:`_regular` where it applies, else
-    :func:`udwadia_kalaba_solve`.  Returns OK, NOT_POSITIVE_DEFINITE or NON_FINITE."""
-    if c.size == 0 and _regular(kernel, M, Q, A, gamma, qdd, lam):
+    vector ``c`` (empty for none): the Schur complement where :func:`_regular` proves it applies,
+    else :func:`udwadia_kalaba_solve`.  Returns OK, NOT_POSITIVE_DEFINITE or NON_FINITE."""
+    proven, schur = _regular(kernel, M, A, c)
+    if proven and schur_solve(M, Q, A, gamma, schur, qdd, lam) and _regular_force(kernel, M, Q, qdd, lam):
         return OK
+    return _by_svds(kernel, M, Q, A, gamma, c, qdd, lam)
+
+
+@njit(cache=True, inline="always")
+def _solve_with_band(kernel, M, Q, A, gamma, c, qdd, lam):
+    """:func:`_solve_with` of a :class:`BandUdwadiaKalabaKernel`: band LU where :func:`_regular`
+    proves it applies."""
+    proven, schur = _regular(kernel, M, A, c)
+    if proven and band_kkt(Q, A, gamma, schur, qdd, lam) and _regular_force(kernel, M, Q, qdd, lam):
+        return OK
+    return _by_svds(kernel, M, Q, A, gamma, c, qdd, lam)
+
+
+@njit(cache=True, inline="always")
+def _by_svds(kernel, M, Q, A, gamma, c, qdd, lam):
+    """:func:`udwadia_kalaba_solve` with the kernel's settings and work arrays."""
     return udwadia_kalaba_solve(M, Q, A, gamma, c, kernel.augmentation, kernel.factored, kernel.threshold,
                                 kernel.row_scale, kernel.mass_scale, kernel.factor, kernel.work_matrix,
                                 kernel.vectors_n, kernel.vectors_m, qdd, lam, kernel.force)
 
 
 @njit(cache=True, inline="always")
-def _regular(kernel, M, Q, A, gamma, qdd, lam):
-    """Udwadia-Kalaba's ideal solution where nothing is discarded, by the augmented system; False
-    where that is not proven (the caller then takes the SVDs).
+def _regular(kernel, M, A, c):
+    """(proven, workspace): whether Udwadia-Kalaba's ideal solution, nothing discarded, is the
+    augmented system's (False: the caller takes the SVDs), and the workspace's views.
 
     When A has full row rank and the pseudo-inverses discard no singular value, Gauss's principle
     gives q̈ = a + M̂⁻¹Aᵀ(AM̂⁻¹Aᵀ)⁻¹(γ - Aa): the solution of [M Aᵀ; A 0][q̈; λ] = [Q; γ] (with M̂
@@ -318,30 +336,33 @@ def _regular(kernel, M, Q, A, gamma, qdd, lam):
     σ_min(SA)² ≥ low ≥ (1e-4)² max(σ_max², 1) and low > threshold² (the λ pseudo-inverse of the
     row-scaled A keeps everything), and for B = AL⁻ᵀ scaled by D = mass_scale·S,
     σ_min(DB)² ≥ mass_scale² low / λ_max(M̂) ≥ mass_scale² low / trace M̂ > threshold² (the q̈
-    pseudo-inverse keeps everything).  Solved as the projection's regular path
-    (:func:`cmbs.dynamics.projection._by_schur`): band LU (:class:`BandUdwadiaKalabaKernel`) or
-    the Schur complement."""
-    m, n = A.shape
-    if not kernel.regular_path or m == 0 or m > n:
-        return False
+    pseudo-inverse keeps everything).  The caller solves it as the projection's regular path
+    (:func:`cmbs.dynamics.projection._by_schur`): the Schur complement, or band LU for a
+    :class:`BandUdwadiaKalabaKernel`."""
     schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
+    m, n = A.shape
+    if c.size != 0 or not kernel.regular_path or m == 0 or m > n:
+        return False, schur
     low, high = bounds_meeting(A, kernel.row_scale, PROJECTION_REGULAR, kernel.threshold, schur[27], schur[28],
                                schur[7], schur[8], schur[13], schur[14], schur[15])
     threshold = kernel.threshold
     if low < PROJECTION_REGULAR * PROJECTION_REGULAR * max(high, 1.0) or low <= threshold * threshold:
-        return False
+        return False, schur
     trace = 0.0
     for j in range(n):
         trace += M[j, j]
         for i in range(m):
             trace += kernel.augmentation * A[i, j] * A[i, j]
-    if not kernel.mass_scale * kernel.mass_scale * low > threshold * threshold * trace:
-        return False
-    if not regular_solve(kernel, True, M, Q, A, gamma, schur, qdd, lam):
-        return False
+    return kernel.mass_scale * kernel.mass_scale * low > threshold * threshold * trace, schur
+
+
+@njit(cache=True, inline="always")
+def _regular_force(kernel, M, Q, qdd, lam):
+    """The constraint force Q_c = M q̈ - Q of the augmented system's solution into ``kernel.force``;
+    whether q̈ and λ are finite."""
     force = kernel.force
     multiply(M, qdd, force)
-    force -= Q                                              # Q_c = M q̈ - Q
+    force -= Q
     return all_finite(qdd) and all_finite(lam)
 
 
@@ -351,6 +372,13 @@ def _kernel_solve(kernel, terms, t, qd, qdd, lam):
     SINGULAR (the mass matrix to factor is not positive definite) or NON_FINITE."""
     Q, phi, A, gamma, phi_t, M = terms
     return _solve_with(kernel, M, Q, A, gamma, kernel.no_nonideal, qdd, lam)
+
+
+@njit(cache=True, inline="always")
+def _kernel_solve_band(kernel, terms, t, qd, qdd, lam):
+    """:func:`_kernel_solve` of a :class:`BandUdwadiaKalabaKernel`."""
+    Q, phi, A, gamma, phi_t, M = terms
+    return _solve_with_band(kernel, M, Q, A, gamma, kernel.no_nonideal, qdd, lam)
 
 
 @njit(cache=True)
@@ -366,5 +394,6 @@ def _fresh(kernel):
 UdwadiaKalabaKernel.solve = staticmethod(_kernel_solve)
 UdwadiaKalabaKernel.stage_state = UdwadiaKalabaKernel.after_step = staticmethod(unchanged)
 UdwadiaKalabaKernel.fresh = staticmethod(_fresh)
-UdwadiaKalabaKernel.solve_regular = staticmethod(schur_regular)
-BandUdwadiaKalabaKernel.solve_regular = staticmethod(band_regular)
+UdwadiaKalabaKernel.solve_with = staticmethod(_solve_with)
+BandUdwadiaKalabaKernel.solve = staticmethod(_kernel_solve_band)
+BandUdwadiaKalabaKernel.solve_with = staticmethod(_solve_with_band)
