@@ -73,9 +73,11 @@ ANCHORS_QUOTED = {
 def time_call(fn: Callable[[], object], repeat: int = 7, target: float = 0.2) -> dict:
     """µs per call of ``fn``: median, min, max over ``repeat`` batches of about ``target`` s.
 
-    The batch size is found by growing it fourfold until one batch takes > target/4 (this is
+    ``fn`` is called once first (a compiled function's first call loads or compiles its code);
+    the batch size is then found by growing it fourfold until one batch takes > target/4 (this is
     also the warm-up), then scaled to ``target``.
     """
+    fn()
     timer = timeit.Timer(fn)
     number = 1
     while True:
@@ -95,6 +97,7 @@ def time_interleaved(fns: dict[str, Callable[[], object]], repeat: int, target: 
     matter)."""
     timers, numbers = {}, {}
     for name, fn in fns.items():
+        fn()
         timers[name] = timeit.Timer(fn)
         number = 1
         while True:
