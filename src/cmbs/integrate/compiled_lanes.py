@@ -3,11 +3,11 @@
 The batched sweep (:func:`cmbs.sweep`) runs thousands of variants of one small mechanism, and a
 four-bar stage costs a single run more in bookkeeping (reading the model's index arrays, finding
 A's non-zeros, passing the workspace, branching on the formulation) than in arithmetic.  Here a
-block of LANES variants shares that bookkeeping: at every stage the model terms of the block
-(:func:`cmbs.model.natural_lanes.evaluate_lanes`), the rank certificate, the Baumgarte
-right-hand side and the Schur-complement solve run once for the block with the lane index
-innermost, on lane-major arrays (..., LANES), over the structural non-zeros of A known in
-advance.
+block of LANES variants shares that bookkeeping: at every stage the model terms of each lane (the
+one-state kernel :func:`cmbs.model.natural._evaluate`, copied lane-major), then the rank
+certificate, the Baumgarte right-hand side and the Schur-complement solve run once for the block
+with the lane index innermost, on lane-major arrays (..., LANES), over the structural non-zeros
+of A known in advance.
 
 Every lane performs the operations :func:`cmbs.integrate.compiled_rk4.rk4` performs for its
 variant (Lagrange, Baumgarte or the projection), in the same order: the results are bit
@@ -40,8 +40,10 @@ from cmbs.dynamics.projection import PROJECTION_REGULAR, ProjectionKernel
 from cmbs.integrate.compiled_rk4 import _rk4_arrays, _rk4_steps, fresh
 from cmbs.integrate.continuity import watch_array
 from cmbs.jit import borrow, interpreted, njit, prange
-from cmbs.model.natural import NaturalKernel, layout
-from cmbs.model.natural_lanes import LANES, evaluate_lanes
+from cmbs.model.natural import NaturalKernel, _evaluate
+
+#: States per block (eight float64 fill an AVX-512 register).
+LANES = 8
 
 #: Lane states.
 RUNNING, LEAVING, LEFT = 0, 1, 2
@@ -182,7 +184,7 @@ def _run_blocks(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, b
         base = block * LANES
         count = min(LANES, N - base)
         state, work, block_lanes = _lane_arrays(n, m, schur[9].shape[0], schur[10].shape[0], U0.shape[1],
-                                                buffer_size, layout(ints, n, buffer_size)[2])
+                                                buffer_size)
         q, qd, U = state
         for w in range(LANES):
             v = base + (w if w < count else 0)
@@ -196,10 +198,9 @@ def _run_blocks(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, b
 
 
 @njit(cache=True)
-def _lane_arrays(n, m, n_p, n_a, n_u, buffer_size, n_ext):
+def _lane_arrays(n, m, n_p, n_a, n_u, buffer_size):
     """The arrays of a block: two groups and the lane states.  State, per lane (rows): q, q̇ and
-    the inputs.  Work: a one-state terms buffer (its scratch holds the time functions), the extended
-    coordinates and velocities (n_ext, LANES), per lane the stage state and the slopes of the four
+    the inputs.  Work: a one-state terms buffer, per lane the stage state and the slopes of the four
     stages, lane-major (lanes last) the terms (Q, Φ, A, γ, Φ_t in a terms buffer's order), the
     Schur workspace (X, y, the reduced matrix and right-hand side), c of Aq̈ = c, λ, q̈, the
     certificate's reference (valid, √λ_low, √λ_high) and A₀ with their values at the step's
@@ -207,7 +208,7 @@ def _lane_arrays(n, m, n_p, n_a, n_u, buffer_size, n_ext):
     size = m + n_a
     W = LANES
     state = (np.zeros((W, n)), np.zeros((W, n)), np.zeros((W, n_u)))
-    work = (np.zeros(buffer_size), np.zeros((n_ext, W)), np.zeros((n_ext, W)), np.zeros((W, n)), np.zeros((W, n)),
+    work = (np.zeros(buffer_size), np.zeros((W, n)), np.zeros((W, n)),
             np.zeros((4, W, n)), np.zeros((4, W, n)), np.zeros((n + 3 * m + m * n, W)), np.zeros((m, n_p, W)),
             np.zeros((n_p, W)), np.zeros((size, size, W)), np.zeros((size, W)), np.zeros((m, W)), np.zeros((m, W)),
             np.zeros((n, W)), np.zeros((3, W)), np.zeros((m, n, W)), np.zeros((3, W)), np.zeros((m, n, W)),
@@ -226,10 +227,11 @@ def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, sch
     parameters, ints, reals, row_scale, schur, plan, state, work, lanes, exits = borrow(
         (parameters, ints, reals, row_scale, schur, plan, state, work, lanes, exits))
     q, qd, U = state
-    (buffer, x, v, sq, sv, kq, kv, terms, X, y, reduced, z, c, lam, qdd, reference, A0, start_reference, start_A0,
+    (buffer, sq, sv, kq, kv, terms, X, y, reduced, z, c, lam, qdd, reference, A0, start_reference, start_A0,
      scratch, single_A) = work
     n = q.shape[1]
     m = lam.shape[0]
+    rows = terms.shape[0]
     a0 = n + m
     Q = terms[:n]
     phi = terms[n:a0]
@@ -255,7 +257,10 @@ def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, sch
                         sv[w, i] = qd[w, i] + a * kv[stage - 1, w, i]
                 st = t + a
             _copy(sv, kq[stage])
-            evaluate_lanes(sq, sv, st, U, ints, reals, buffer, x, v, terms)
+            for w in range(LANES):          # the one-state kernel, lane by lane, then lane-major
+                _evaluate(sq[w], sv[w], st, U[w], ints, reals, buffer)
+                for r in range(rows):
+                    terms[r, w] = buffer[r]
             _finite_lanes(terms, lanes, scratch[0])
             if method == PROJECTION:
                 _certify_lanes(A, row_scale, PROJECTION_REGULAR, parameters[2], True, reference, A0, schur, lanes,
