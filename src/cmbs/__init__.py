@@ -20,6 +20,7 @@ from cmbs.kinematics import (ConstraintReport, accelerations, assemble, constrai
 from cmbs.model.drivers import Constant, Expression, PythonFunction, Table
 from cmbs.model.model import Model, Terms
 from cmbs.model.natural import NaturalModelBuilder
+from cmbs.model.spatial import SpatialModelBuilder
 from cmbs.simulate import simulate
 from cmbs.sweep import SweepResult, Variant, grid, sweep
 from cmbs.trajectory import Trajectory
@@ -67,7 +68,7 @@ __all__ = [
     "CmbsError", "ConvergenceError", "ExpressionError", "ModelError", "SingularSystemError",
     "ConstraintReport", "accelerations", "assemble", "constraint_report", "kinematic_analysis",
     "singular_configurations", "velocities", "Constant", "Expression", "PythonFunction", "Table",
-    "Model", "Terms", "NaturalModelBuilder", "Trajectory", "load", "simulate", "SampledInput", "formulation",
+    "Model", "Terms", "NaturalModelBuilder", "SpatialModelBuilder", "Trajectory", "load", "simulate", "SampledInput", "formulation",
     "Lagrange", "Baumgarte", "Penalty", "MatrixR", "Projection", "UdwadiaKalaba", "InverseDynamics",
     "inverse_dynamics", "sweep", "Variant", "grid", "SweepResult",
 ]

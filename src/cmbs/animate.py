@@ -21,6 +21,7 @@ from PIL import Image  # noqa: E402  (a dependency of matplotlib)
 
 from cmbs.errors import CmbsError, did_you_mean  # noqa: E402
 from cmbs.files_io import atomic_path, checked_output  # noqa: E402
+from cmbs.kinematics import point_array  # noqa: E402
 from cmbs.model.model import Model  # noqa: E402
 from cmbs.trajectory import Trajectory  # noqa: E402
 
@@ -76,6 +77,13 @@ def checked_animation_path(path: str | Path, option: str = "animation") -> Path:
     return path
 
 
+def check_planar(model: Model) -> None:
+    """CmbsError for a spatial model (points in 3-D): the animation draws the plane (x, z)."""
+    if point_array(model, model.q0).shape[1] == 3:
+        raise CmbsError(f"model {model.name!r} is spatial: this animation draws planar mechanisms (x, z) only; "
+                        "plot the run instead (its figure shows the mechanism in 3-D)")
+
+
 def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fps: float = 30,
             speed: float = 1.0, trail: str | None = None, dpi: float = 100,
             reference: Trajectory | None = None) -> Path:
@@ -126,6 +134,7 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
     """
     path = checked_animation_path(path)
     _check_positive(fps=fps, speed=speed, dpi=dpi)
+    check_planar(model)
     mp4 = path.suffix.lower() == ".mp4"
     q = _coordinates_of(model, trajectory, "trajectory")
     reference_q = _coordinates_of(model, reference, "reference") if reference is not None else None

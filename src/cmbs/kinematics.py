@@ -83,15 +83,24 @@ def _free_mask(model: Model, fixed: Sequence[str | int]) -> np.ndarray:
 
 #: Coordinate kinds measured in metres; the others (angles, joint and generic coordinates) are
 #: scaled by 1 (radians, or the model's own units).
-LENGTH_KINDS = frozenset({"x", "z", "distance"})
+LENGTH_KINDS = frozenset({"x", "y", "z", "distance"})
+
+
+def point_array(model: Model, q: np.ndarray) -> np.ndarray:
+    """The positions of the model's named points at ``q`` as rows: (n_points, 2) in the plane
+    (x, z), (n_points, 3) in space; (0, 2) for a model without points."""
+    if not model.point_names:
+        return np.zeros((0, 2))
+    points = np.asarray(model.point_positions(q), dtype=float)
+    return points if points.ndim == 2 else points.reshape(len(model.point_names), -1)
 
 
 def model_size(model: Model, q: np.ndarray) -> float:
     """The model's characteristic length L at ``q``: the diagonal of the box around its named
     points (fixed points included), else the largest length coordinate; 1 for a model with
     neither (user equations in their own units)."""
-    points = np.asarray(model.point_positions(q), dtype=float).reshape(-1, 2) if model.point_names else np.zeros((0, 2))
-    size = float(np.hypot(*np.ptp(points, axis=0))) if len(points) > 1 else 0.0
+    points = point_array(model, q)
+    size = float(np.linalg.norm(np.ptp(points, axis=0))) if len(points) > 1 else 0.0
     if not size > 0.0:
         lengths = [abs(value) for value, kind in zip(q, model.coordinate_kinds) if kind in LENGTH_KINDS]
         size = max(lengths, default=0.0)

@@ -14,6 +14,7 @@ import numpy as np  # noqa: E402
 
 from cmbs.errors import CmbsError  # noqa: E402
 from cmbs.files_io import atomic_path, checked_output  # noqa: E402
+from cmbs.kinematics import point_array  # noqa: E402
 from cmbs.model.model import Model  # noqa: E402
 from cmbs.trajectory import Trajectory  # noqa: E402
 
@@ -278,10 +279,14 @@ def _draw_constraint_errors(axis: plt.Axes, trajectory: Trajectory, errors: list
 
 
 def draw_snapshots(axis: plt.Axes, model: Model, trajectory: Trajectory, count: int) -> None:
-    """The model's segments at ``count`` evenly spaced samples of the trajectory."""
+    """The model's segments at ``count`` evenly spaced samples of the trajectory: in the plane
+    (x, z), or for a spatial model in a 3-D panel that takes the place of ``axis``."""
     samples = np.linspace(0, len(trajectory.t) - 1, max(count, 1)).round().astype(int)
-    for shade, k in zip(np.linspace(0.25, 1.0, len(samples)), samples):
-        points = model.point_positions(trajectory.q[k])
+    poses = [point_array(model, trajectory.q[k]) for k in samples]
+    if poses and poses[0].shape[1] == 3:
+        _draw_snapshots_3d(axis, model, poses)
+        return
+    for shade, points in zip(np.linspace(0.25, 1.0, len(samples)), poses):
         for i, j in model.lines:
             axis.plot(points[[i, j], 0], points[[i, j], 1], "-o", color=plt.cm.Blues(shade), markersize=3)
     axis.set_aspect("equal", adjustable="datalim")
@@ -289,6 +294,26 @@ def draw_snapshots(axis: plt.Axes, model: Model, trajectory: Trajectory, count: 
     axis.set(xlabel="x [m]" if metres else "x", ylabel="z [m]" if metres else "z")
     axis.set_title("mechanism (x, z)")
     axis.grid(alpha=0.3)
+
+
+def _draw_snapshots_3d(axis: plt.Axes, model: Model, poses: list[np.ndarray]) -> None:
+    """:func:`draw_snapshots` of a spatial model: a 3-D panel in ``axis``'s place, equal scales."""
+    figure = axis.figure
+    spec = axis.get_subplotspec()
+    axis.remove()
+    axis = figure.add_subplot(spec, projection="3d")
+    for shade, points in zip(np.linspace(0.25, 1.0, len(poses)), poses):
+        for i, j in model.lines:
+            axis.plot(points[[i, j], 0], points[[i, j], 1], points[[i, j], 2], "-o", color=plt.cm.Blues(shade),
+                      markersize=3)
+    every = np.concatenate(poses)
+    low, high = every.min(axis=0), every.max(axis=0)
+    half = 0.5 * max(float(np.max(high - low)), 1e-9)
+    for centre, limits in zip(0.5 * (low + high), (axis.set_xlim, axis.set_ylim, axis.set_zlim)):
+        limits(centre - half, centre + half)
+    axis.set_box_aspect((1.0, 1.0, 1.0))
+    axis.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]")
+    axis.set_title("mechanism (x, y, z)")
 
 
 def save_figure(figure: plt.Figure, path: str | os.PathLike) -> Path:

@@ -2,7 +2,8 @@
 
 A generalized force τ on coordinate q does the virtual work τ δq [J], so its unit is J divided
 by the coordinate's: N m on an angle (rad), N on a length (m).  Natural coordinates say what each
-coordinate is (:attr:`~cmbs.model.model.Model.coordinate_kinds`: x, z, distance, angle), joint
+coordinate is (:attr:`~cmbs.model.model.Model.coordinate_kinds`: x, y, z, distance, angle; the components of a
+spatial unit vector, kind ``direction``, have no unit), joint
 coordinates by their joint (revolute or prismatic); a model from the user's own equations
 (kind ``generic``) does not say, and the unit is then ``""``.
 """
@@ -14,7 +15,7 @@ from cmbs.model.model import Model
 ANGLE, LENGTH = "rad", "m"
 #: the unit of the generalized force on a coordinate of each unit
 FORCE = {ANGLE: "N m", LENGTH: "N"}
-_KINDS = {"angle": ANGLE, "x": LENGTH, "z": LENGTH, "distance": LENGTH}
+_KINDS = {"angle": ANGLE, "x": LENGTH, "y": LENGTH, "z": LENGTH, "distance": LENGTH}
 
 
 def coordinate_unit(model: Model, name: str) -> str:

@@ -84,6 +84,13 @@ _BUILDERS = [
      "Andrews' squeezing mechanism (Hairer & Wanner's seven-body benchmark), relative angles, 1 DOF"),
     ("n-four-bar", "n_four_bar", "n_four_bar",
      "IFToMM A02 N-four-bar: N loops of 1 m, 1 kg bars, 1 DOF, N+1 DOF at its singular positions"),
+    ("spherical-pendulum", "spatial", "spherical_pendulum",
+     "spatial: point mass on a rod from a fixed pivot, 2 DOF"),
+    ("heavy-top", "spatial", "heavy_top", "spatial: heavy symmetric top on a fixed point, 3 DOF"),
+    ("four-bar-3d", "spatial", "four_bar_3d",
+     "spatial: the thesis four-bar built in 3-D (plane y = 0), undriven, 1 DOF"),
+    ("bricard", "spatial", "bricard",
+     "spatial: IFToMM A04 Bricard's mechanism, five rods and six revolute joints, 1 DOF, redundant constraints"),
 ]
 
 

@@ -139,7 +139,8 @@ class Model:
     coordinate_names
         Names of the n coordinates, e.g. ``("B.x", "B.z", "C.x", "C.z", "alpha")``.
     coordinate_kinds
-        One of ``"x"``, ``"z"``, ``"angle"``, ``"distance"``, ``"joint"``, ``"generic"`` each.
+        One of ``"x"``, ``"y"``, ``"z"``, ``"angle"``, ``"distance"``, ``"direction"`` (a component
+        of a spatial unit vector), ``"joint"``, ``"generic"`` each.
     constraint_names
         Names of the m constraints (rows of Φ, or of A q̇ + Φ_t = 0 for nonholonomic rows).
     drivers
@@ -355,7 +356,8 @@ class Model:
         return tuple(f"driver {name!r}" for name in self.driver_names if name not in steady) + tuple(sources)
 
     def point_positions(self, q: np.ndarray) -> np.ndarray:
-        """(n_points, 2) positions (x, z) of :attr:`point_names`."""
+        """(n_points, 2) positions (x, z) of :attr:`point_names` in the plane, (n_points, 3) in
+        space."""
         return self.equations.point_positions(np.asarray(q, dtype=float))
 
 

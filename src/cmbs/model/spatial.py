@@ -1,0 +1,613 @@
+"""Spatial models in natural coordinates (García de Jalón & Bayo, *Kinematic and Dynamic Simulation
+of Multibody Systems*, Springer 1994, ch. 3 and 5).
+
+Coordinates are the Cartesian components of the moving basic points (x, y, z each) and of unit
+vectors (three components each).  Fixed points and vectors are constants, not coordinates.  There
+are no rotation parameters: the constraints are at most quadratic and the mass matrix is constant.
+
+**Bodies.**  A body is located by an origin point O and three independent basis elements
+b₁, b₂, b₃, each either the difference P - O of a further basic point P, or a unit vector V.  A
+material point of the body is at
+
+    r = r_O + c₁ b₁ + c₂ b₂ + c₃ b₃,   c = X₀⁻¹ (r₀ - r_O,0),   X₀ = [b₁ b₂ b₃] at the start,
+
+with constant coefficients c: r is linear in the body's coordinates, r = (aᵀ ⊗ I₃) q_e with
+a = e₀ + B c over the slots (O, head of b₁, head of b₂, head of b₃), where B has a 1 for each
+basis element in its slot and a -1 in O's slot for each point difference.  Hence the constant
+element mass matrix and the gravity force (book eq. 5.20-5.27 in this notation)::
+
+    M_e = (∫ a aᵀ dm) ⊗ I₃ = (m e₀e₀ᵀ + m (e₀ c̄ᵀBᵀ + B c̄ e₀ᵀ) + B J_c Bᵀ) ⊗ I₃,
+    Q_e = (∫ a dm) ⊗ g = m (e₀ + B c̄) ⊗ g,
+
+with c̄ = X₀⁻¹ (r_G - r_O) at the start and J_c = ∫ c cᵀ dm = X₀⁻¹ (S_G + m d dᵀ) X₀⁻ᵀ,
+d = r_G - r_O, S_G = ∫ s sᵀ dm = ½ tr(I_G) I₃ - I_G from the inertia tensor I_G about the centre
+of mass (all in ground axes at the start).  The six rigid-body constraints keep the basis's
+scalar products: bₖ·bₗ = (bₖ·bₗ)₀ for k ≤ l.  Further body-fixed points and vectors E are linear
+rows E - T - Σ cₖ bₖ = 0 (T = O for a point, nothing for a vector); like the planar bodies, the
+body then adds μ |Ė - Σ cₖ ḃₖ|² (μ = its mass) to the kinetic energy, which vanishes on every
+rigid motion and keeps M positive definite.  A body may use fixed elements (a ground axis for a
+revolute joint to the ground); its products of two fixed elements are identities, not rows.
+
+A **rod** is a slender body between two points i and j (its rotation about its own axis is no
+coordinate): r = (1 - c) r_i + c r_j, M_e = ∫ [(1-c)²  c(1-c); c(1-c)  c²] dm ⊗ I₃ with
+∫ c dm = m c̄ and ∫ c² dm = (I_⊥ + m c̄² L²)/L² (I_⊥ about the centre of mass, perpendicular to
+the axis), and one rigid row |r_j - r_i|² = L².  A **point mass** adds m I₃ to its point.
+
+**Joints by shared elements:** two bodies that share a point are joined by a spherical joint,
+sharing a point and a unit vector (their common axis) by a revolute joint.  Further rows: a
+distance |P - Q|² = s², and a scalar product a·b = value of two elements (vectors or point
+differences), e.g. u₁·u₂ = 0 for a universal joint or (P - O)·n = 0 for a point in a plane.
+
+Each constraint is one of two kinds, evaluated for all its rows by one compiled kernel:
+
+===========  =====================================  ==========================================
+kind         Φ                                      γ = -(Ȧ q̇)
+===========  =====================================  ==========================================
+dot          a·b - value,  a = x_aₕ - x_aₜ, ...       -2 ȧ·ḃ
+linear       E - T - Σ cₖ (x_hₖ - x_tₖ)  (3 rows)     0   (constant A)
+===========  =====================================  ==========================================
+
+(rigid-body rows, rods and distances are dot rows; a unit vector is the difference of its
+coordinates and a constant zero vector.)  Loads: gravity, constant forces at points, linear
+spring-dampers between points.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple, Sequence
+
+import numpy as np
+
+from cmbs.errors import ModelError, did_you_mean
+from cmbs.jit import borrow, njit
+from cmbs.model.model import Model, Terms
+from cmbs.model.packing import pack
+
+# int sections of the kernel
+_DOT, _LINEAR, _SPRING, _POINT_FORCE = 0, 1, 2, 3
+# real sections
+_DOT_VALUE, _LINEAR_COEFFICIENTS, _Q_CONSTANT, _SPRING_PARAMETERS, _POINT_FORCE_VALUE, _CONSTANTS = 0, 1, 2, 3, 4, 5
+
+
+@dataclass
+class _Element:
+    name: str
+    kind: str               # "point" or "vector"
+    value: np.ndarray
+    fixed: bool
+    mass: float = 0.0
+
+
+@dataclass
+class _Body:
+    name: str
+    origin: str
+    basis: tuple[str, str, str]
+    mass: float
+    com: np.ndarray
+    inertia: np.ndarray
+    points: tuple[str, ...]
+    vectors: tuple[str, ...]
+
+
+@dataclass
+class _Rod:
+    name: str
+    i: str
+    j: str
+    mass: float
+    com: float
+    inertia: float | None
+
+
+@dataclass
+class SpatialModelBuilder:
+    """Builds a spatial natural-coordinate :class:`~cmbs.model.model.Model` (module docstring).
+
+    Positions are in metres in ground axes, masses in kg, inertia tensors in kg m² about the
+    centre of mass in ground axes at the initial configuration; ``gravity`` in m/s²."""
+
+    name: str
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    description: str = ""
+    source: str = ""
+    _elements: dict[str, _Element] = field(default_factory=dict)
+    _bodies: dict[str, _Body] = field(default_factory=dict)
+    _rods: dict[str, _Rod] = field(default_factory=dict)
+    _distances: dict[str, tuple[str, str, float | None]] = field(default_factory=dict)
+    _dots: dict[str, tuple[object, object, float | None]] = field(default_factory=dict)
+    _springs: dict[str, tuple[str, str, float, float, float | None]] = field(default_factory=dict)
+    _forces: dict[str, tuple[str, np.ndarray]] = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ elements
+    def add_point(self, name: str, position: Sequence[float], *, fixed: bool = False, mass: float = 0.0) -> None:
+        """A basic point at ``position`` (x, y, z); fixed points are constants; ``mass`` a point
+        mass at it."""
+        value = _vector3(position, f"point {name!r}", "position")
+        if not (math.isfinite(mass) and mass >= 0.0):
+            raise ModelError(f"model {self.name!r}: point {name!r}: mass must be a finite number >= 0, got {mass!r}")
+        if mass > 0.0 and fixed:
+            raise ModelError(f"model {self.name!r}: point {name!r}: a fixed point cannot carry mass")
+        self._new_element(_Element(name, "point", value, fixed, float(mass)))
+
+    def add_vector(self, name: str, direction: Sequence[float], *, fixed: bool = False) -> None:
+        """A unit vector along ``direction`` (normalised here: a zero vector is refused)."""
+        value = _vector3(direction, f"vector {name!r}", "direction")
+        norm = float(np.linalg.norm(value))
+        if norm == 0.0:
+            raise ModelError(f"model {self.name!r}: vector {name!r}: direction must not be zero")
+        self._new_element(_Element(name, "vector", value / norm, fixed))
+
+    def _new_element(self, element: _Element) -> None:
+        if element.name in self._elements:
+            raise ModelError(f"model {self.name!r}: {element.kind} {element.name!r} is defined twice")
+        self._elements[element.name] = element
+
+    # ------------------------------------------------------------------ bodies
+    def add_body(self, name: str, *, origin: str, basis: Sequence[str], mass: float, com: Sequence[float],
+                 inertia: Sequence[Sequence[float]], points: Sequence[str] = (), vectors: Sequence[str] = ()) -> None:
+        """A rigid body located by point ``origin`` and three basis elements (names of points,
+        meaning point - origin, or of unit vectors), with centre of mass ``com`` and inertia
+        tensor ``inertia`` about it (ground axes, initial configuration); ``points`` and
+        ``vectors`` are further elements fixed to it."""
+        entry = f"body {name!r}"
+        self._check_new(self._bodies, name, "body")
+        if len(basis) != 3:
+            raise ModelError(f"model {self.name!r}: {entry}: basis must name three elements, got {list(basis)}")
+        if not (math.isfinite(mass) and mass > 0.0):
+            raise ModelError(f"model {self.name!r}: {entry}: mass must be a finite number > 0, got {mass!r}")
+        tensor = np.array(inertia, dtype=float)
+        if tensor.shape != (3, 3) or not np.all(np.isfinite(tensor)):
+            raise ModelError(f"model {self.name!r}: {entry}: inertia must be a finite 3x3 tensor, got {inertia!r}")
+        if not np.allclose(tensor, tensor.T, rtol=1e-12, atol=1e-12 * max(1.0, np.abs(tensor).max())):
+            raise ModelError(f"model {self.name!r}: {entry}: inertia tensor must be symmetric")
+        moments = np.linalg.eigvalsh(tensor)
+        slack = 1e-12 * max(1.0, moments.max())
+        if moments[0] < -slack or moments[0] + moments[1] < moments[2] - slack:
+            raise ModelError(f"model {self.name!r}: {entry}: inertia tensor is not that of a body (principal moments "
+                             f"{', '.join(f'{value:.6g}' for value in moments)}: each must be >= 0 and at most the "
+                             "sum of the other two)")
+        self._bodies[name] = _Body(name, origin, tuple(basis), float(mass), _vector3(com, entry, "com"), tensor,
+                                   tuple(points), tuple(vectors))
+
+    def add_rod(self, name: str, i: str, j: str, *, mass: float, com: float = 0.5,
+                inertia: float | None = None) -> None:
+        """A slender rigid rod from point ``i`` to point ``j``: mass, centre of mass at ``com``
+        (fraction of the length from i) and moment of inertia about it perpendicular to the axis
+        (default m L²/12, a uniform rod centred)."""
+        entry = f"rod {name!r}"
+        self._check_new(self._rods, name, "rod")
+        if not (math.isfinite(mass) and mass > 0.0):
+            raise ModelError(f"model {self.name!r}: {entry}: mass must be a finite number > 0, got {mass!r}")
+        if not math.isfinite(com):
+            raise ModelError(f"model {self.name!r}: {entry}: com must be finite, got {com!r}")
+        if inertia is not None and not (math.isfinite(inertia) and inertia >= 0.0):
+            raise ModelError(f"model {self.name!r}: {entry}: inertia must be a finite number >= 0, got {inertia!r}")
+        self._rods[name] = _Rod(name, i, j, float(mass), float(com), None if inertia is None else float(inertia))
+
+    # ------------------------------------------------------------------ constraints and loads
+    def add_distance(self, name: str, i: str, j: str, *, length: float | None = None) -> None:
+        """|r_j - r_i| = length (default: the initial distance)."""
+        self._check_new(self._distances, name, "distance")
+        self._distances[name] = (i, j, length)
+
+    def add_dot(self, name: str, a: str | tuple[str, str], b: str | tuple[str, str], *,
+                value: float | None = None) -> None:
+        """a·b = value (default: the initial product) for elements a, b: a unit vector's name or
+        a pair of points (head, tail) meaning head - tail."""
+        self._check_new(self._dots, name, "dot")
+        self._dots[name] = (a, b, value)
+
+    def add_spring(self, name: str, i: str, j: str, *, stiffness: float, damping: float = 0.0,
+                   rest_length: float | None = None) -> None:
+        """A linear spring-damper between points i and j: tension k (ℓ - ℓ₀) + c ℓ̇."""
+        self._check_new(self._springs, name, "spring")
+        for label, value in (("stiffness", stiffness), ("damping", damping)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ModelError(f"model {self.name!r}: spring {name!r}: {label} must be a finite number >= 0, "
+                                 f"got {value!r}")
+        self._springs[name] = (i, j, float(stiffness), float(damping), rest_length)
+
+    def add_force(self, name: str, *, point: str, force: Sequence[float]) -> None:
+        """A constant force (fx, fy, fz) in N at a point."""
+        self._check_new(self._forces, name, "force")
+        self._forces[name] = (point, _vector3(force, f"force {name!r}", "force"))
+
+    def _check_new(self, table: dict, name: str, kind: str) -> None:
+        if name in table:
+            raise ModelError(f"model {self.name!r}: {kind} {name!r} is defined twice")
+
+    def build(self) -> Model:
+        return _Assembler(self).model()
+
+
+def _vector3(value: object, entry: str, label: str) -> np.ndarray:
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        array = None
+    if array is None or array.shape != (3,) or not np.all(np.isfinite(array)):
+        raise ModelError(f"{entry}: {label} must be three finite numbers, got {value!r}")
+    return array
+
+
+class _Assembler:
+    """Coordinates, constant extended coordinates, rows, mass matrix and gravity of a builder."""
+
+    def __init__(self, builder: SpatialModelBuilder):
+        self.b = builder
+        self.gravity = _vector3(builder.gravity, f"model {builder.name!r}", "gravity")
+        self.index: dict[str, int] = {}
+        names, kinds, q0, constants = [], [], [], []
+        free = [e for e in builder._elements.values() if not e.fixed]
+        n = 3 * len(free)
+        for element in free:
+            self.index[element.name] = len(q0)
+            axes = ("x", "y", "z")
+            names += [f"{element.name}.{axis}" for axis in axes]
+            kinds += list(axes) if element.kind == "point" else ["direction"] * 3
+            q0 += list(element.value)
+        for element in builder._elements.values():
+            if element.fixed:
+                self.index[element.name] = n + len(constants)
+                constants += list(element.value)
+        self.zero = n + len(constants)
+        constants += [0.0, 0.0, 0.0]
+        self.n, self.names, self.kinds = n, names, kinds
+        self.q0, self.constants = np.array(q0), np.array(constants)
+        self.x0 = np.concatenate([self.q0, self.constants])
+        self.mass_ext = np.zeros((self.x0.size, self.x0.size))
+        self.gravity_ext = np.zeros(self.x0.size)
+
+    # ------------------------------------------------------------ lookups
+    def _element(self, name: object, entry: str, kind: str | None = None) -> _Element:
+        elements = self.b._elements
+        if not isinstance(name, str) or name not in elements:
+            raise ModelError(f"model {self.b.name!r}: {entry}: no {kind or 'point or vector'} {name!r}"
+                             f"{did_you_mean(str(name), elements)}")
+        element = elements[name]
+        if kind is not None and element.kind != kind:
+            raise ModelError(f"model {self.b.name!r}: {entry}: {name!r} is a {element.kind}, not a {kind}")
+        return element
+
+    def _pair(self, spec: object, entry: str) -> tuple[int, int]:
+        """(head, tail) extended indices of an element spec: a vector (tail: the zero constant) or
+        a pair of points."""
+        if isinstance(spec, str):
+            vector = self._element(spec, entry, "vector")
+            return self.index[vector.name], self.zero
+        if isinstance(spec, (tuple, list)) and len(spec) == 2:
+            head, tail = (self._element(name, entry, "point") for name in spec)
+            return self.index[head.name], self.index[tail.name]
+        raise ModelError(f"model {self.b.name!r}: {entry}: an element is a vector's name or a pair of point names, "
+                         f"got {spec!r}")
+
+    def _value(self, pair: tuple[int, int]) -> np.ndarray:
+        return self.x0[pair[0]:pair[0] + 3] - self.x0[pair[1]:pair[1] + 3]
+
+    # ------------------------------------------------------------ assembly
+    def model(self) -> Model:
+        b = self.b
+        dots, dot_values, dot_names = [], [], []
+        linear, coefficients, linear_names = [], [], []
+        lines: list[tuple[str, str]] = []
+        for body in b._bodies.values():
+            entry = f"body {body.name!r}"
+            origin = self._element(body.origin, entry, "point")
+            o = self.index[origin.name]
+            basis, labels = [], []
+            for spec in body.basis:
+                element = self._element(spec, entry)
+                basis.append((self.index[element.name], o if element.kind == "point" else self.zero))
+                labels.append(f"({element.name}-{origin.name})" if element.kind == "point" else element.name)
+                if element.kind == "point":
+                    lines.append((origin.name, element.name))
+            if len({pair[0] for pair in basis}) != 3 or o in {pair[0] for pair in basis}:
+                raise ModelError(f"model {b.name!r}: {entry}: origin and basis must be four different elements")
+            X0 = np.column_stack([self._value(pair) for pair in basis])
+            scale = np.prod(np.linalg.norm(X0, axis=0))
+            if not abs(np.linalg.det(X0)) > 1e-9 * scale:
+                raise ModelError(f"model {b.name!r}: {entry}: the basis elements {list(body.basis)} are coplanar at "
+                                 "the start: they do not locate the body")
+            for k in range(3):
+                for l in range(k, 3):
+                    if min(*basis[k], *basis[l]) >= self.n:
+                        continue            # between fixed elements only: an identity, no row
+                    dots.append((*basis[k], *basis[l]))
+                    dot_values.append(float(self._value(basis[k]) @ self._value(basis[l])))
+                    dot_names.append(f"rigid {body.name}: {labels[k]}·{labels[l]}")
+            self._body_mass(body, o, basis, X0)
+            for spec in body.points + body.vectors:
+                element = self._element(spec, entry, "point" if spec in body.points else "vector")
+                target = (self.index[element.name], o if element.kind == "point" else self.zero)
+                c = np.linalg.solve(X0, self._value(target))
+                for axis in range(3):
+                    linear_names.append(f"body {body.name}: {element.name}.{'xyz'[axis]}")
+                linear.append((*target, *[index for pair in basis for index in pair]))
+                coefficients.append(c)
+                self._rigidity_mass(body.mass, target, basis, c)
+                if element.kind == "point":
+                    lines.append((origin.name, element.name))
+        for rod in b._rods.values():
+            entry = f"rod {rod.name!r}"
+            i, j = (self._element(name, entry, "point") for name in (rod.i, rod.j))
+            pair = (self.index[j.name], self.index[i.name])
+            length = float(np.linalg.norm(self._value(pair)))
+            if not length > 0.0:
+                raise ModelError(f"model {b.name!r}: {entry}: points {rod.i!r} and {rod.j!r} coincide")
+            dots.append((*pair, *pair))
+            dot_values.append(length * length)
+            dot_names.append(f"rigid {rod.name}")
+            self._rod_mass(rod, self.index[i.name], self.index[j.name], length)
+            lines.append((i.name, j.name))
+        for element in b._elements.values():
+            if element.mass > 0.0:
+                p = self.index[element.name]
+                self.mass_ext[p:p + 3, p:p + 3] += element.mass * np.eye(3)
+                self.gravity_ext[p:p + 3] += element.mass * self.gravity
+        for name, (i, j, length) in b._distances.items():
+            entry = f"distance {name!r}"
+            pair = tuple(self.index[self._element(p, entry, "point").name] for p in (j, i))
+            value = float(self._value(pair) @ self._value(pair)) if length is None else float(length) ** 2
+            dots.append((*pair, *pair))
+            dot_values.append(value)
+            dot_names.append(f"distance {name}")
+        for name, (a, bb, value) in b._dots.items():
+            entry = f"dot {name!r}"
+            first, second = self._pair(a, entry), self._pair(bb, entry)
+            dots.append((*first, *second))
+            dot_values.append(float(self._value(first) @ self._value(second)) if value is None else float(value))
+            dot_names.append(f"dot {name}")
+        springs, spring_parameters = [], []
+        for name, (i, j, stiffness, damping, rest) in b._springs.items():
+            entry = f"spring {name!r}"
+            pair = tuple(self.index[self._element(p, entry, "point").name] for p in (i, j))
+            length = float(np.linalg.norm(self.x0[pair[1]:pair[1] + 3] - self.x0[pair[0]:pair[0] + 3]))
+            springs.append(pair)
+            spring_parameters.append((stiffness, damping, length if rest is None else float(rest)))
+        forces, force_values = [], []
+        for name, (point, value) in b._forces.items():
+            forces.append(self.index[self._element(point, f"force {name!r}", "point").name])
+            force_values.append(value)
+
+        n = self.n
+        mass = self.mass_ext[:n, :n].copy()
+        q_constant = self.gravity_ext[:n].copy()
+        int_sections = [np.array(dots, dtype=np.int64).reshape(-1, 4), np.array(linear, dtype=np.int64).reshape(-1, 8),
+                        np.array(springs, dtype=np.int64).reshape(-1, 2), np.array(forces, dtype=np.int64)]
+        real_sections = [np.array(dot_values), np.array(coefficients).reshape(-1, 3), q_constant,
+                         np.array(spring_parameters).reshape(-1, 3), np.array(force_values).reshape(-1, 3),
+                         self.constants]
+        ints, reals = pack(int_sections, real_sections)
+        mass.setflags(write=False)
+        point_names = [e.name for e in b._elements.values() if e.kind == "point"]
+        equations = SpatialEquations(n=n, m=len(dots) + 3 * len(linear), ints=ints, reals=reals, mass=mass,
+                                     constants=self.constants, gravity_ext=self.gravity_ext.copy(),
+                                     springs=(np.array(springs, dtype=np.int64).reshape(-1, 2),
+                                              np.array(spring_parameters).reshape(-1, 3)),
+                                     point_indices=np.array([self.index[p] for p in point_names], dtype=np.int64),
+                                     work_sources=tuple(f"force {name!r}" for name in b._forces)
+                                     + tuple(f"spring {name!r}" for name, s in b._springs.items() if s[3] > 0.0))
+        constraint_names = dot_names + linear_names
+        return Model(name=b.name, coordinate_names=tuple(self.names), coordinate_kinds=tuple(self.kinds),
+                     constraint_names=tuple(constraint_names), drivers=np.zeros(len(constraint_names), dtype=bool),
+                     actuator_names=(), q0=self.q0.copy(), qd0=np.zeros(n), point_names=tuple(point_names),
+                     lines=tuple((point_names.index(i), point_names.index(j)) for i, j in lines),
+                     equations=equations, description=b.description, source=b.source,
+                     parameters={"gravity": tuple(float(g) for g in self.gravity), "dimension": 3},
+                     constant_mass=True)
+
+    def _add_element_matrix(self, slots: Sequence[int], matrix: np.ndarray, weights: np.ndarray) -> None:
+        """M_ext += matrix ⊗ I₃ over the 3-vectors at ``slots``; gravity += weights ⊗ g."""
+        for a, p in enumerate(slots):
+            self.gravity_ext[p:p + 3] += weights[a] * self.gravity
+            for b, r in enumerate(slots):
+                self.mass_ext[p:p + 3, r:r + 3] += matrix[a, b] * np.eye(3)
+
+    def _body_mass(self, body: _Body, o: int, basis: list[tuple[int, int]], X0: np.ndarray) -> None:
+        """The body's element mass matrix and gravity (module docstring)."""
+        B = np.zeros((4, 3))
+        for k, (head, tail) in enumerate(basis):
+            B[k + 1, k] = 1.0
+            if tail == o:
+                B[0, k] = -1.0
+        X0_inverse = np.linalg.inv(X0)
+        d = body.com - self.x0[o:o + 3]
+        c_bar = X0_inverse @ d
+        second = 0.5 * np.trace(body.inertia) * np.eye(3) - body.inertia + body.mass * np.outer(d, d)
+        J_c = X0_inverse @ second @ X0_inverse.T
+        e0 = np.array([1.0, 0.0, 0.0, 0.0])
+        first = body.mass * (B @ c_bar)
+        matrix = body.mass * np.outer(e0, e0) + np.outer(e0, first) + np.outer(first, e0) + B @ J_c @ B.T
+        self._add_element_matrix([o] + [head for head, _ in basis], matrix, body.mass * e0 + first)
+
+    def _rigidity_mass(self, mass: float, target: tuple[int, int], basis: list[tuple[int, int]],
+                       c: np.ndarray) -> None:
+        """μ Bᵀ B for the linear rows of a further element (module docstring): B the rows' Jacobian
+        over the extended coordinates."""
+        weights: dict[int, float] = {}
+        for index, weight in ((target[0], 1.0), (target[1], -1.0)):
+            weights[index] = weights.get(index, 0.0) + weight
+        for k, (head, tail) in enumerate(basis):
+            for index, weight in ((head, -c[k]), (tail, c[k])):
+                weights[index] = weights.get(index, 0.0) + weight
+        slots = [index for index, weight in weights.items() if index != self.zero and weight != 0.0]
+        row = np.array([weights[index] for index in slots])
+        self._add_element_matrix(slots, mass * np.outer(row, row), np.zeros(len(slots)))
+
+    def _rod_mass(self, rod: _Rod, i: int, j: int, length: float) -> None:
+        inertia = rod.mass * length * length / 12.0 if rod.inertia is None else rod.inertia
+        first = rod.mass * rod.com
+        second = (inertia + rod.mass * (rod.com * length) ** 2) / (length * length)
+        matrix = np.array([[rod.mass - 2.0 * first + second, first - second], [first - second, second]])
+        self._add_element_matrix([i, j], matrix, np.array([rod.mass - first, first]))
+
+
+@dataclass(frozen=True)
+class SpatialEquations:
+    """Compiled evaluator of a spatial natural-coordinate model (see the module docstring)."""
+
+    n: int
+    m: int
+    ints: np.ndarray
+    reals: np.ndarray
+    mass: np.ndarray
+    constants: np.ndarray
+    gravity_ext: np.ndarray
+    springs: tuple[np.ndarray, np.ndarray]
+    point_indices: np.ndarray
+    #: the forces and dampers, by name (see :attr:`cmbs.model.model.Model.work_sources`)
+    work_sources: tuple[str, ...] = ()
+
+    def new_terms(self) -> Terms:
+        return Terms(self.n, self.m, constant_mass=self.mass, scratch=2 * (self.n + self.constants.size))
+
+    def compiled_kernel(self) -> "SpatialKernel":
+        return SpatialKernel(self.ints, self.reals, np.ascontiguousarray(self.mass, dtype=float))
+
+    def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
+        _evaluate(q, qd, t, u, self.ints, self.reals, terms.buffer)
+
+    def _extended(self, q: np.ndarray) -> np.ndarray:
+        return np.concatenate([q, np.broadcast_to(self.constants, (*q.shape[:-1], self.constants.size))], axis=-1)
+
+    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        return 0.5 * float(qd @ self.mass @ qd)
+
+    def energy_parts(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """T = ½ q̇ᵀ M q̇ and V = -Q_gravityᵀ x + Σ ½ k (ℓ - ℓ₀)² at every row of q, q̇ (k, n)."""
+        x = self._extended(q)
+        potential = -(x @ self.gravity_ext)
+        rows, parameters = self.springs
+        for (i, j), (stiffness, _, rest) in zip(rows, parameters):
+            length = np.linalg.norm(x[:, j:j + 3] - x[:, i:i + 3], axis=1)
+            potential = potential + 0.5 * stiffness * (length - rest) ** 2
+        return 0.5 * np.sum((qd @ self.mass) * qd, axis=1), potential
+
+    def potential_energy(self, q: np.ndarray) -> float:
+        return float(self.energy_parts(np.atleast_2d(q), np.zeros((1, self.n)))[1][0])
+
+    def point_positions(self, q: np.ndarray) -> np.ndarray:
+        """(n_points, 3) positions of the model's points."""
+        x = self._extended(np.asarray(q, dtype=float))
+        return np.stack([x[i:i + 3] for i in self.point_indices]) if self.point_indices.size else np.zeros((0, 3))
+
+
+@njit(cache=True, inline="always")
+def _add(buffer, a0, row, column, value, n):
+    """A[row, column] += value where A is row-major at ``buffer[a0:]`` (constant columns skipped)."""
+    if column < n:
+        buffer[a0 + row * n + column] += value
+
+
+@njit(cache=True, error_model="numpy")
+def _evaluate(q, qd, t, u, ints, reals, buffer):
+    """Q, Φ, A, γ, Φ_t of a spatial natural-coordinate model into ``buffer`` (layout of
+    :class:`Terms`; its scratch holds the extended x = (q, constants) and v = (q̇, 0)): the dot
+    and linear rows of the module docstring, gravity, point forces and spring-dampers."""
+    q, qd, u, ints, reals, buffer = borrow((q, qd, u, ints, reals, buffer))
+    n = q.shape[0]
+    real_base = ints[0] + 2
+    c0, c1 = ints[real_base + 1 + _CONSTANTS], ints[real_base + 2 + _CONSTANTS]
+    n_ext = n + c1 - c0
+    i_dot, n_dot = ints[1 + _DOT], (ints[2 + _DOT] - ints[1 + _DOT]) // 4
+    i_linear, n_linear = ints[1 + _LINEAR], (ints[2 + _LINEAR] - ints[1 + _LINEAR]) // 8
+    m = n_dot + 3 * n_linear
+    a0 = n + m
+    g0 = a0 + m * n
+    t0 = g0 + m
+    x0 = t0 + m
+    v0 = x0 + n_ext
+    for k in range(n):
+        buffer[x0 + k] = q[k]
+        buffer[v0 + k] = qd[k]
+    for k in range(n, n_ext):
+        buffer[x0 + k] = reals[c0 + k - n]
+        buffer[v0 + k] = 0.0
+    buffer[a0:g0] = 0.0
+    buffer[t0:x0] = 0.0
+    row = 0
+    r0 = ints[real_base + 1 + _DOT_VALUE]
+    for k in range(n_dot):
+        ah, at, bh, bt = ints[i_dot + 4 * k], ints[i_dot + 4 * k + 1], ints[i_dot + 4 * k + 2], ints[i_dot + 4 * k + 3]
+        phi = -reals[r0 + k]
+        gamma = 0.0
+        for d in range(3):
+            a = buffer[x0 + ah + d] - buffer[x0 + at + d]
+            b = buffer[x0 + bh + d] - buffer[x0 + bt + d]
+            da = buffer[v0 + ah + d] - buffer[v0 + at + d]
+            db = buffer[v0 + bh + d] - buffer[v0 + bt + d]
+            phi += a * b
+            gamma -= 2.0 * da * db
+            _add(buffer, a0, row, ah + d, b, n)
+            _add(buffer, a0, row, at + d, -b, n)
+            _add(buffer, a0, row, bh + d, a, n)
+            _add(buffer, a0, row, bt + d, -a, n)
+        buffer[n + row] = phi
+        buffer[g0 + row] = gamma
+        row += 1
+    r0 = ints[real_base + 1 + _LINEAR_COEFFICIENTS]
+    for k in range(n_linear):
+        s = i_linear + 8 * k
+        head, tail = ints[s], ints[s + 1]
+        for d in range(3):
+            value = buffer[x0 + head + d] - buffer[x0 + tail + d]
+            _add(buffer, a0, row, head + d, 1.0, n)
+            _add(buffer, a0, row, tail + d, -1.0, n)
+            for e in range(3):
+                c = reals[r0 + 3 * k + e]
+                he, te = ints[s + 2 + 2 * e], ints[s + 3 + 2 * e]
+                value -= c * (buffer[x0 + he + d] - buffer[x0 + te + d])
+                _add(buffer, a0, row, he + d, -c, n)
+                _add(buffer, a0, row, te + d, c, n)
+            buffer[n + row] = value
+            buffer[g0 + row] = 0.0
+            row += 1
+
+    r0 = ints[real_base + 1 + _Q_CONSTANT]
+    for k in range(n):
+        buffer[k] = reals[r0 + k]
+    i0 = ints[1 + _POINT_FORCE]
+    r0 = ints[real_base + 1 + _POINT_FORCE_VALUE]
+    for k in range(ints[2 + _POINT_FORCE] - i0):
+        p = ints[i0 + k]
+        for d in range(3):
+            if p + d < n:
+                buffer[p + d] += reals[r0 + 3 * k + d]
+    i0 = ints[1 + _SPRING]
+    r0 = ints[real_base + 1 + _SPRING_PARAMETERS]
+    for k in range((ints[2 + _SPRING] - i0) // 2):
+        i, j = ints[i0 + 2 * k], ints[i0 + 2 * k + 1]
+        dx = buffer[x0 + j] - buffer[x0 + i]
+        dy = buffer[x0 + j + 1] - buffer[x0 + i + 1]
+        dz = buffer[x0 + j + 2] - buffer[x0 + i + 2]
+        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        ex, ey, ez = dx / length, dy / length, dz / length
+        rate = (ex * (buffer[v0 + j] - buffer[v0 + i]) + ey * (buffer[v0 + j + 1] - buffer[v0 + i + 1])
+                + ez * (buffer[v0 + j + 2] - buffer[v0 + i + 2]))
+        tension = reals[r0 + 3 * k] * (length - reals[r0 + 3 * k + 2]) + reals[r0 + 3 * k + 1] * rate
+        for d, e in ((0, ex), (1, ey), (2, ez)):
+            if i + d < n:
+                buffer[i + d] += tension * e
+            if j + d < n:
+                buffer[j + d] -= tension * e
+
+
+class SpatialKernel(NamedTuple):
+    """A spatial natural-coordinate model as the compiled loops take it: its index and parameter
+    arrays and its constant mass matrix."""
+
+    ints: np.ndarray
+    reals: np.ndarray
+    mass: np.ndarray
+
+
+@njit(cache=True, inline="always")
+def _evaluate_spatial(kernel, q, qd, t, u, buffer):
+    """:func:`_evaluate` for a :class:`SpatialKernel`."""
+    _evaluate(q, qd, t, u, kernel.ints, kernel.reals, buffer)
+
+
+SpatialKernel.evaluate = staticmethod(_evaluate_spatial)

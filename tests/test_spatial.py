@@ -1,0 +1,391 @@
+"""Spatial natural coordinates (cmbs.model.spatial) against independent references: rigid-body
+kinetic energy and gravity power, finite differences of Φ and A, the spherical pendulum in
+spherical coordinates, the heavy symmetric top in Euler angles, and the planar four-bar."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import cmbs
+from cmbs.errors import ModelError
+from cmbs.model.natural import NaturalModelBuilder
+from cmbs.model.spatial import SpatialModelBuilder
+
+G = 9.81
+
+
+def _random_rotation(rng):
+    Q, R = np.linalg.qr(rng.normal(size=(3, 3)))
+    return Q * np.sign(np.diag(R))
+
+
+def _rigid_velocities(model, origin, v_origin, omega):
+    """q̇ of the rigid motion (velocity of ``origin``, angular velocity ω) of every element."""
+    q = model.q0
+    qd = np.zeros(model.n)
+    o = model.q0[model.coordinate_index(f"{origin}.x"):][:3]
+    for k in range(0, model.n, 3):
+        position = q[k:k + 3]
+        qd[k:k + 3] = (np.cross(omega, position) if model.coordinate_kinds[k] == "direction"
+                       else v_origin + np.cross(omega, position - o))
+    return qd
+
+
+def _general_body(rng):
+    """One body located by O, a further point P and two unit vectors u, w (not orthogonal), with a
+    random centre of mass and inertia tensor."""
+    b = SpatialModelBuilder("body", gravity=(0.3, -1.2, -G))
+    b.add_point("O", rng.normal(size=3))
+    b.add_point("P", rng.normal(size=3))
+    b.add_vector("u", rng.normal(size=3))
+    b.add_vector("w", rng.normal(size=3))
+    moments = np.array([2.0, 3.0, 4.0])
+    R = _random_rotation(rng)
+    inertia = R @ np.diag(moments) @ R.T
+    com = rng.normal(size=3)
+    b.add_body("B", origin="O", basis=["P", "u", "w"], mass=2.5, com=com, inertia=inertia)
+    return b.build(), 2.5, com, inertia
+
+
+def test_body_kinetic_energy_and_gravity_power_are_the_rigid_body_formulas():
+    """½ q̇ᵀ M q̇ = ½ m v_G² + ½ ωᵀ I_G ω and Qᵀ q̇ = m g·v_G for random rigid motions; A q̇ = 0."""
+    rng = np.random.default_rng(3)
+    model, mass, com, inertia = _general_body(rng)
+    o = model.q0[:3]
+    gravity = np.array(model.parameters["gravity"])
+    terms = model.evaluate(model.q0, np.zeros(model.n))
+    for _ in range(5):
+        v_origin, omega = rng.normal(size=3), rng.normal(size=3)
+        qd = _rigid_velocities(model, "O", v_origin, omega)
+        v_com = v_origin + np.cross(omega, com - o)
+        expected = 0.5 * mass * v_com @ v_com + 0.5 * omega @ inertia @ omega
+        assert model.kinetic_energy(model.q0, qd) == pytest.approx(expected, rel=1e-12)
+        assert terms.Q @ qd == pytest.approx(mass * gravity @ v_com, rel=1e-12)
+        np.testing.assert_allclose(terms.A @ qd, 0.0, atol=1e-12)
+    assert np.all(np.linalg.eigvalsh(terms.M) > 0.0)
+
+
+def _kitchen_sink():
+    """Every element, body, row and load kind, with a spring."""
+    b = SpatialModelBuilder("kitchen", gravity=(0.0, -G, 0.0))
+    b.add_point("O", (0.0, 0.0, 0.0), fixed=True)
+    b.add_vector("z", (0.0, 0.0, 1.0), fixed=True)
+    b.add_point("A", (0.4, 0.1, 0.0))
+    b.add_vector("u", (1.0, 0.2, 0.1))
+    b.add_vector("v", (0.1, 1.0, -0.3))
+    b.add_point("K", (0.3, 0.5, 0.2))
+    b.add_vector("n", (0.3, -0.2, 1.0))
+    b.add_point("B", (1.2, 0.3, 0.4))
+    b.add_point("C", (1.0, -0.6, 0.9), mass=0.7)
+    b.add_body("crank", origin="A", basis=["u", "v", "B"], mass=1.5, com=(0.7, 0.2, 0.2),
+               inertia=np.diag([0.02, 0.03, 0.04]), points=["K"], vectors=["n"])
+    b.add_rod("link", "B", "C", mass=0.8, com=0.4, inertia=0.01)
+    b.add_distance("tether", "O", "A")
+    b.add_dot("plane", ("A", "O"), "z")
+    b.add_dot("skew", "u", ("C", "B"))
+    b.add_spring("spring", "O", "C", stiffness=40.0, rest_length=0.5)
+    b.add_force("push", point="K", force=(1.0, -2.0, 0.5))
+    return b.build()
+
+
+def test_jacobian_gamma_and_spring_force_match_finite_differences():
+    model = _kitchen_sink()
+    rng = np.random.default_rng(5)
+    q = model.q0 + 0.05 * rng.normal(size=model.n)
+    qd = rng.normal(size=model.n)
+    terms = model.evaluate(q, qd)
+    h = 1e-6
+    numeric = np.column_stack([(model.constraints(q + h * e) - model.constraints(q - h * e)) / (2 * h)
+                               for e in np.eye(model.n)])
+    np.testing.assert_allclose(terms.A, numeric, atol=1e-8)
+    # γ = -(Ȧ q̇): the derivative of A along q̇
+    a_dot = (model.jacobian(q + h * qd) - model.jacobian(q - h * qd)) / (2 * h)
+    np.testing.assert_allclose(terms.gamma, -a_dot @ qd, atol=1e-7)
+    # the conservative forces are -∇V (no damping; the constant force is added by hand)
+    model_v = model.potential_energy
+    gradient = np.array([(model_v(q + h * e) - model_v(q - h * e)) / (2 * h) for e in np.eye(model.n)])
+    force = np.zeros(model.n)
+    k = model.coordinate_index("K.x")
+    force[k:k + 3] = (1.0, -2.0, 0.5)
+    np.testing.assert_allclose(model.forces(q, np.zeros(model.n)), -gradient + force, atol=1e-6)
+    assert terms.phi.shape == (model.m,) and np.abs(model.constraints(model.q0)).max() < 1e-12
+
+
+def _spherical_pendulum(length=1.3, theta0=0.7, phi_rate=2.1, mass=0.8):
+    b = SpatialModelBuilder("spherical-pendulum")
+    b.add_point("O", (0.0, 0.0, 0.0), fixed=True)
+    b.add_point("P", (length * np.sin(theta0), 0.0, -length * np.cos(theta0)), mass=mass)
+    b.add_distance("rod", "O", "P")
+    model = b.build()
+    qd0 = np.array([0.0, length * np.sin(theta0) * phi_rate, 0.0])
+    return model, qd0
+
+
+def _spherical_reference(times, length=1.3, theta0=0.7, phi_rate=2.1):
+    """θ from the downward vertical, φ about it (Lagrange's equations in spherical coordinates)."""
+    def rhs(t, y):
+        theta, phi, theta_dot, phi_dot = y
+        return [theta_dot, phi_dot, np.sin(theta) * np.cos(theta) * phi_dot**2 - G / length * np.sin(theta),
+                -2.0 * theta_dot * phi_dot / np.tan(theta)]
+    y = solve_ivp(rhs, (0.0, times[-1]), [theta0, 0.0, 0.0, phi_rate], t_eval=times, rtol=1e-12, atol=1e-12,
+                  method="DOP853").y
+    return length * np.stack([np.sin(y[0]) * np.cos(y[1]), np.sin(y[0]) * np.sin(y[1]), -np.cos(y[0])], axis=1)
+
+
+@pytest.mark.parametrize("formulation", ["lagrange", "baumgarte", "projection", "udwadia-kalaba", "penalty"])
+def test_spherical_pendulum_follows_the_spherical_coordinate_solution(formulation):
+    model, qd0 = _spherical_pendulum()
+    run = cmbs.simulate(model, t_end=2.0, dt=0.01, qd0=qd0, formulation=formulation, integrator="dop853",
+                        rtol=1e-10, atol=1e-12)
+    assert run.info["status"] == "success"
+    reference = _spherical_reference(run.t)
+    tolerance = 1e-4 if formulation == "penalty" else 1e-7
+    np.testing.assert_allclose(run.q, reference, atol=tolerance)
+    energy = model.energy_history(run.q, run.qd)
+    assert np.ptp(energy) < 1e-6 * abs(energy[0]) + (1e-4 if formulation == "penalty" else 1e-8)
+
+
+def _heavy_top(theta0=0.4, spin=30.0, precession=0.5, mass=1.2, l=0.15, transverse=4e-3, axial=6e-3):
+    """Symmetric top on a fixed point O: body axes u, v, w (w the symmetry axis) at Euler angles
+    (φ, θ, ψ) = (0, θ0, 0) about z, x, z; centre of mass at l along w; inertia about the centre of
+    mass diag(A', A', C) in the body axes."""
+    R = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(theta0), -np.sin(theta0)], [0.0, np.sin(theta0), np.cos(theta0)]])
+    u, v, w = R.T
+    b = SpatialModelBuilder("heavy-top")
+    b.add_point("O", (0.0, 0.0, 0.0), fixed=True)
+    b.add_vector("u", u)
+    b.add_vector("v", v)
+    b.add_vector("w", w)
+    b.add_body("top", origin="O", basis=["u", "v", "w"], mass=mass, com=l * w,
+               inertia=R @ np.diag([transverse, transverse, axial]) @ R.T)
+    model = b.build()
+    omega = precession * np.array([0.0, 0.0, 1.0]) + spin * w
+    qd0 = np.concatenate([np.cross(omega, u), np.cross(omega, v), np.cross(omega, w)])
+    return model, qd0
+
+
+def _heavy_top_reference(times, theta0=0.4, spin=30.0, precession=0.5, mass=1.2, l=0.15, transverse=4e-3,
+                         axial=6e-3):
+    """The symmetry axis w(t) from the Lagrangian of the heavy symmetric top in Euler angles z-x-z:
+    L = ½A(θ̇² + φ̇² sin²θ) + ½C(ψ̇ + φ̇ cos θ)² - m g l cos θ, A about the fixed point."""
+    A, C = transverse + mass * l * l, axial
+    omega3 = spin + precession * np.cos(theta0)           # ψ̇ + φ̇ cos θ at the start (ψ̇ = spin)
+    p_phi = A * precession * np.sin(theta0) ** 2 + C * omega3 * np.cos(theta0)
+
+    def rhs(t, y):
+        phi, theta, theta_dot = y
+        phi_dot = (p_phi - C * omega3 * np.cos(theta)) / (A * np.sin(theta) ** 2)
+        theta_ddot = (A * phi_dot**2 * np.sin(theta) * np.cos(theta) - C * omega3 * phi_dot * np.sin(theta)
+                      + mass * G * l * np.sin(theta)) / A
+        return [phi_dot, theta_dot, theta_ddot]
+    phi, theta, _ = solve_ivp(rhs, (0.0, times[-1]), [0.0, theta0, 0.0], t_eval=times, rtol=1e-12, atol=1e-12,
+                              method="DOP853").y
+    return np.stack([np.sin(phi) * np.sin(theta), -np.cos(phi) * np.sin(theta), np.cos(theta)], axis=1)
+
+
+@pytest.mark.parametrize("formulation", ["lagrange", "projection", "udwadia-kalaba"])
+def test_heavy_top_axis_follows_the_euler_angle_solution(formulation):
+    model, qd0 = _heavy_top()
+    run = cmbs.simulate(model, t_end=2.0, dt=0.01, qd0=qd0, formulation=formulation, integrator="dop853",
+                        rtol=1e-10, atol=1e-12)
+    assert run.info["status"] == "success"
+    w = run.q[:, model.coordinate_index("w.x"):][:, :3]
+    np.testing.assert_allclose(w, _heavy_top_reference(run.t), atol=1e-7)
+    energy = model.energy_history(run.q, run.qd)
+    assert np.ptp(energy) < 1e-8 * np.abs(energy).max()
+
+
+def test_four_bar_in_space_moves_as_the_planar_four_bar():
+    """The crank-rocker in the plane y = 0: rods with spherical ends, the crank and the rocker
+    kept in the plane by (A - O)·y = 0 and (B - C)·y = 0 — the same motion as the planar model."""
+    flat, space = _four_bar_models(revolute_bodies=False)
+    start = cmbs.velocities(flat, flat.q0, qd=np.array([-1.5, 0.0, 0.0, 0.0]), fixed=["A.x"])   # B follows A
+    run_flat = cmbs.simulate(flat, t_end=2.0, dt=0.02, qd0=start, integrator="dop853", rtol=1e-11, atol=1e-12)
+    qd_space = np.array([start[0], 0.0, start[1], start[2], 0.0, start[3]])
+    run_space = cmbs.simulate(space, t_end=2.0, dt=0.02, qd0=qd_space, integrator="dop853", rtol=1e-11, atol=1e-12)
+    assert [run.info["status"] for run in (run_flat, run_space)] == ["success", "success"]
+    positions_flat = np.array([flat.point_positions(q) for q in run_flat.q])
+    positions_space = np.array([space.point_positions(q) for q in run_space.q])
+    np.testing.assert_allclose(positions_space[:, :, [0, 2]], positions_flat, atol=1e-8)
+    np.testing.assert_allclose(positions_space[:, :, 1], 0.0, atol=1e-12)
+    assert np.ptp(positions_flat[:, 1, 0]) > 0.5        # the crank really turns
+
+
+def _four_bar_models(revolute_bodies: bool):
+    """The crank-rocker O-A-B-C in the plane y = 0 (planar) and in space: rods with spherical
+    ends kept in the plane by two products, or bodies with revolute joints (each body carries the
+    ground axis y, and a body-fixed unit vector n across its bar): redundant constraints."""
+    O, A, B, C = (0.0, 0.0), (0.0, 0.5), (1.0, 1.0), (1.0, 0.0)
+    bars = {"crank": ("O", "A", 1.0), "coupler": ("A", "B", 2.0), "rocker": ("C", "B", 1.5)}
+    points = {"O": O, "A": A, "B": B, "C": C}
+    planar = NaturalModelBuilder("four-bar-planar", gravity=(0.0, -G))
+    spatial = SpatialModelBuilder("four-bar-spatial", gravity=(0.0, 0.0, -G))
+    for name, (x, z) in points.items():
+        planar.add_point(name, x, z, fixed=name in "OC")
+        spatial.add_point(name, (x, 0.0, z), fixed=name in "OC")
+    spatial.add_vector("y", (0.0, 1.0, 0.0), fixed=True)
+    for name, (i, j, mass) in bars.items():
+        d = np.subtract(points[j], points[i])
+        length = float(np.hypot(*d))
+        inertia = mass * length**2 / 12.0
+        planar.add_segment(name, i, j, mass=mass, com=(0.5 * length, 0.0), inertia=inertia)
+        if not revolute_bodies:
+            spatial.add_rod(name, i, j, mass=mass, com=0.5, inertia=inertia)
+            continue
+        along = np.array([d[0], 0.0, d[1]]) / length
+        across = np.cross(along, (0.0, 1.0, 0.0))
+        spatial.add_vector(f"n_{name}", across)
+        rotation = np.column_stack([along, (0.0, 1.0, 0.0), across])
+        middle = 0.5 * (np.array([*points[i]]) + np.array([*points[j]]))
+        spatial.add_body(name, origin=i, basis=[j, "y", f"n_{name}"], mass=mass, com=(middle[0], 0.0, middle[1]),
+                         inertia=rotation @ np.diag([1e-4, inertia, inertia + 1e-4]) @ rotation.T)
+    if not revolute_bodies:
+        spatial.add_dot("crank in plane", ("A", "O"), "y")
+        spatial.add_dot("rocker in plane", ("B", "C"), "y")
+    return planar.build(), spatial.build()
+
+
+@pytest.mark.parametrize("formulation", ["projection", "udwadia-kalaba"])
+def test_four_bar_of_revolute_bodies_in_space_moves_as_the_planar_four_bar(formulation):
+    """Revolute joints by shared points and a shared axis: 15 coordinates, 15 rows of rank 14
+    (the third 'in the plane' condition follows from the other two), one degree of freedom;
+    the formulations that take redundant constraints give the planar motion."""
+    flat, space = _four_bar_models(revolute_bodies=True)
+    report = cmbs.constraint_report(space, space.q0)
+    assert (space.n, space.m, report.rank, report.dof) == (15, 15, 14, 1)
+    assert len(report.redundant) == 1
+    start = cmbs.velocities(flat, flat.q0, qd=np.array([-1.5, 0.0, 0.0, 0.0]), fixed=["A.x"])
+    run_flat = cmbs.simulate(flat, t_end=2.0, dt=0.02, qd0=start, integrator="dop853", rtol=1e-11, atol=1e-12)
+    qd_space = cmbs.velocities(space, space.q0, qd=np.concatenate([[start[0], 0.0, start[1]], np.zeros(12)]),
+                               fixed=["A.x", "A.y", "A.z"])
+    run_space = cmbs.simulate(space, t_end=2.0, dt=0.02, qd0=qd_space, formulation=formulation,
+                              integrator="dop853", rtol=1e-11, atol=1e-12)
+    assert run_space.info["status"] == "success"
+    positions_flat = np.array([flat.point_positions(q) for q in run_flat.q])
+    positions_space = np.array([space.point_positions(q) for q in run_space.q])
+    np.testing.assert_allclose(positions_space[:, :, [0, 2]], positions_flat, atol=1e-8)
+    np.testing.assert_allclose(positions_space[:, :, 1], 0.0, atol=1e-12)
+
+
+def test_assembly_puts_a_perturbed_top_back_on_its_constraints():
+    model, _ = _heavy_top()
+    rng = np.random.default_rng(2)
+    q = cmbs.assemble(model, model.q0 + 0.02 * rng.normal(size=model.n))
+    # assemble's criterion: |Φ_i| < 1e-12 ‖A_i‖ L, L = 1 m (the top has a single point)
+    assert np.all(np.abs(model.constraints(q)) < 1e-12 * np.linalg.norm(model.jacobian(q), axis=1))
+    u, v, w = q[0:3], q[3:6], q[6:9]
+    np.testing.assert_allclose(np.column_stack([u, v, w]).T @ np.column_stack([u, v, w]), np.eye(3), atol=3e-12)
+    assert np.linalg.det(np.column_stack([u, v, w])) > 0.0
+
+
+@pytest.mark.parametrize("mistake, message", [
+    (lambda b: b.add_body("B", origin="O", basis=["P", "u", "w"], mass=1.0, com=(0, 0, 0), inertia=np.eye(3)),
+     "coplanar"),
+    (lambda b: b.add_body("B", origin="O", basis=["P", "u", "uu"], mass=1.0, com=(0, 0, 0), inertia=np.eye(3)),
+     "no point or vector 'uu'"),
+    (lambda b: b.add_body("B", origin="O", basis=["P", "u", "v"], mass=1.0, com=(0, 0, 0),
+                          inertia=np.diag([1.0, 1.0, 3.0])), "not that of a body"),
+    (lambda b: b.add_rod("R", "O", "u", mass=1.0), "'u' is a vector, not a point"),
+    (lambda b: b.add_vector("zero", (0, 0, 0)), "must not be zero"),
+])
+def test_modelling_mistakes_are_named(mistake, message):
+    b = SpatialModelBuilder("mistakes")
+    b.add_point("O", (0.0, 0.0, 0.0))
+    b.add_point("P", (1.0, 0.0, 0.0))
+    b.add_vector("u", (0.0, 1.0, 0.0))
+    b.add_vector("w", (1.0, 1.0, 0.0))         # in the plane of P - O and u
+    b.add_vector("v", (0.0, 0.0, 1.0))
+    with pytest.raises(ModelError, match=message):
+        mistake(b)
+        b.build()
+
+
+def test_the_figure_draws_a_spatial_mechanism_in_3d_and_the_planar_animation_refuses_it(tmp_path):
+    from cmbs.animate import animate
+    from cmbs.plotting import plot_simulation, save_figure
+
+    model, qd0 = _heavy_top()
+    run = cmbs.simulate(model, t_end=0.2, dt=0.01, qd0=qd0)
+    figure = plot_simulation(run, model=model)
+    mechanism = [axis for axis in figure.axes if axis.get_title() == "mechanism (x, y, z)"]
+    assert len(mechanism) == 1 and mechanism[0].name == "3d"
+    assert save_figure(figure, tmp_path / "top.png").stat().st_size > 0
+    with pytest.raises(cmbs.CmbsError, match="spatial"):
+        animate(model, run, tmp_path / "top.gif")
+    assert not (tmp_path / "top.gif").exists()
+
+
+def test_library_four_bar_3d_moves_as_the_planar_library_four_bar():
+    planar = cmbs.load("four-bar").without_drivers()
+    space = cmbs.load("four-bar-3d")
+    runs = [cmbs.simulate(model, t_end=2.0, dt=0.02, integrator="dop853", rtol=1e-11, atol=1e-12)
+            for model in (planar, space)]
+    assert [run.info["status"] for run in runs] == ["success", "success"]
+    flat = np.array([planar.point_positions(q) for q in runs[0].q])
+    positions = np.array([space.point_positions(q) for q in runs[1].q])
+    assert space.point_names == planar.point_names
+    np.testing.assert_allclose(positions[:, :, [0, 2]], flat, atol=1e-7)
+    assert np.ptp(flat[:, 2, 0]) > 0.5                  # P1 really moves
+
+
+@pytest.mark.parametrize("name", ["spherical-pendulum", "heavy-top"])
+def test_library_spatial_models_conserve_energy_and_their_first_integrals(name):
+    """Energy and the angular momentum about the vertical through the fixed point (and for the
+    top, about its axis) stay constant over 2 s."""
+    model = cmbs.load(name)
+    run = cmbs.simulate(model, t_end=2.0, dt=0.01, integrator="dop853", rtol=1e-10, atol=1e-12)
+    assert run.info["status"] == "success"
+    energy = model.energy_history(run.q, run.qd)
+    assert np.ptp(energy) < 1e-7 * np.abs(energy).max()
+    if name == "spherical-pendulum":
+        p, v = run.q, run.qd
+        vertical = p[:, 0] * v[:, 1] - p[:, 1] * v[:, 0]
+        spins = [vertical]
+    else:
+        index = model.coordinate_index
+        u, v, w = (run.q[:, index(f"{e}.x"):index(f"{e}.x") + 3] for e in "uvw")
+        du, dv, dw = (run.qd[:, index(f"{e}.x"):index(f"{e}.x") + 3] for e in "uvw")
+        # ω from the rates of the body axes: ω = ½ Σ e × ė
+        omega = 0.5 * (np.cross(u, du) + np.cross(v, dv) + np.cross(w, dw))
+        parameters = model.parameters
+        transverse = parameters["transverse_inertia"] + parameters["mass"] * parameters["com_height"] ** 2
+        axial = parameters["axial_inertia"]
+        omega_axis = np.sum(omega * w, axis=1)
+        momentum = transverse * (omega - omega_axis[:, None] * w) + axial * omega_axis[:, None] * w
+        spins = [momentum[:, 2], omega_axis]
+    for value in spins:
+        assert np.ptp(value) < 1e-7 * np.abs(value).max()
+
+
+def test_the_example_of_docs_spatial_builds_the_top_it_describes():
+    from pathlib import Path
+
+    text = (Path(__file__).parent.parent / "docs" / "spatial.md").read_text()
+    code = text.split("```python\n", 1)[1].split("```", 1)[0]
+    namespace: dict = {}
+    exec(compile(code, "docs/spatial.md", "exec"), namespace)
+    model = namespace["model"]
+    report = cmbs.constraint_report(model, model.q0)
+    assert (model.n, model.m, report.dof) == (12, 9, 3)
+
+
+@pytest.mark.parametrize("formulation", ["projection", "udwadia-kalaba"])
+def test_bricard_mechanism_follows_exudyn_through_its_redundant_constraints(formulation):
+    """IFToMM A04: P3 over 10 s within 1e-6 m of Exudyn's solution at h = 1e-4 (tests/data, from
+    benchmarks/bench_bricard.py; the two differ by 1e-5 m at Exudyn's h = 1e-3 and 1e-7 m at
+    1e-4, its second-order convergence), energy kept, 1 DOF with 5 redundant rows."""
+    from pathlib import Path
+
+    reference = np.loadtxt(Path(__file__).parent / "data" / "bricard-exudyn-p3.csv", delimiter=",")
+    model = cmbs.load("bricard")
+    report = cmbs.constraint_report(model, model.q0)
+    assert (model.n, model.m, report.rank, report.dof, len(report.redundant)) == (24, 28, 23, 1, 5)
+    run = cmbs.simulate(model, t_end=10.0, dt=0.05, formulation=formulation, integrator="dop853", rtol=1e-10,
+                        atol=1e-12)
+    assert run.info["status"] == "success"
+    np.testing.assert_allclose(run.t, reference[:, 0], atol=1e-12)
+    index = model.coordinate_index("P3.x")
+    assert np.abs(run.q[:, index:index + 3] - reference[:, 1:]).max() < 1e-6
+    assert np.ptp(reference[:, 2]) > 0.7                    # P3 really swings (down to y = -1.73 m)
+    energy = model.energy_history(run.q, run.qd)
+    assert np.ptp(energy) < 1e-8 * np.abs(energy).max()
