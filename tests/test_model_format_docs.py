@@ -12,6 +12,7 @@ import pytest
 
 import cmbs
 from cmbs.model.files import _SECTIONS
+from cmbs.model.spatial_files import SECTIONS as SPATIAL_SECTIONS
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "model-format.md"
 FENCE = re.compile(r"^```(\w+)[ \t]*\n(.*?)^```[ \t]*$", re.MULTILINE | re.DOTALL)
@@ -72,7 +73,14 @@ def test_csv_blocks_are_named_and_used():
     assert used == referenced
 
 
-def test_every_section_has_an_example_and_the_last_uses_all():
-    sections = [set(tomllib.loads(text)) for _, text in TOML_BLOCKS]
-    assert set().union(*sections) == set(_SECTIONS)
-    assert sections[-1] == set(_SECTIONS)
+def _dimension(text):
+    return tomllib.loads(text).get("model", {}).get("dimension", 2)
+
+
+@pytest.mark.parametrize("dimension, allowed", [(2, _SECTIONS), (3, SPATIAL_SECTIONS)])
+def test_every_section_has_an_example_and_the_last_uses_all(dimension, allowed):
+    """For the planar files and for the spatial ones (section 9) alike."""
+    sections = [set(tomllib.loads(text)) for _, text in TOML_BLOCKS if _dimension(text) == dimension]
+    assert sections
+    assert set().union(*sections) == set(allowed)
+    assert sections[-1] == set(allowed)

@@ -181,9 +181,13 @@ def cluster(tmp_path):
                          "--no-dashboard", "--scheduler-file", str(scheduler_file)], log)]
     try:
         deadline = time.monotonic() + 60
-        while not scheduler_file.exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        address = json.loads(scheduler_file.read_text())["address"]
+        address = None
+        while address is None and time.monotonic() < deadline:
+            try:                       # the scheduler creates the file, then writes it
+                address = json.loads(scheduler_file.read_text())["address"]
+            except (FileNotFoundError, json.JSONDecodeError, KeyError):
+                time.sleep(0.1)
+        assert address is not None, f"the Dask scheduler wrote no address in 60 s ({tmp_path / 'cluster.log'})"
         workers = [_start(["distributed.cli.dask_worker", address, "--nthreads", "1", "--no-nanny",
                            "--no-dashboard", "--host", "127.0.0.1"], log) for _ in range(2)]
         processes += workers

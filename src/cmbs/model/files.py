@@ -1,4 +1,5 @@
-"""TOML model files for planar natural-coordinate models (format: docs/model-format.md).
+"""TOML model files for natural-coordinate models (format: docs/model-format.md): planar ones
+here, spatial ones (``[model] dimension = 3``) in :mod:`cmbs.model.spatial_files`.
 
 A file is data: it is parsed with :mod:`tomllib`, every table and key is checked against the
 format (unknown keys are errors, so typos do not pass silently), driver and force expressions go
@@ -177,7 +178,7 @@ def _read_builder(document: dict, base: Path, default_name: str) -> NaturalModel
         raise ModelError(f"unknown section(s) {', '.join(map(repr, unknown))} (allowed: {', '.join(_SECTIONS)})")
     if not any(document.get(section) for section in _SECTIONS if section != "model"):
         raise ModelError("the file defines no points (an empty model)", entry="points")
-    header = _Entry("model", document.get("model", {}), ("name", "description", "source", "gravity"))
+    header = _Entry("model", document.get("model", {}), ("name", "description", "source", "gravity", "dimension"))
     builder = NaturalModelBuilder(header.string("name") or default_name, gravity=header.pair("gravity") or (0.0, -9.81),
                                   description=header.string("description") or "", source=header.string("source") or "")
     handlers: dict[str, Callable[[str, object], None]] = {
@@ -292,7 +293,8 @@ def _entry_of_constraint(constraint: str, bodies: frozenset[str] = frozenset()) 
     return f"{section}.{name.removesuffix(' lock')}"
 
 
-def assembled(model: Model, source: str, given_velocities: tuple[str, ...] = ()) -> Model:
+def assembled(model: Model, source: str, given_velocities: tuple[str, ...] = (),
+              entry_of: Callable[[str], str] | None = None) -> Model:
     """Return ``model`` with q0 assembled and q̇0 consistent, or a :class:`ModelError` naming the
     constraint that could not be closed (e.g. a segment whose points cannot be at its length, or
     an angle half a turn away from the direction of its points), or the driver whose value at
@@ -301,7 +303,8 @@ def assembled(model: Model, source: str, given_velocities: tuple[str, ...] = ())
     q̇0 solves Φ_q q̇ = -Φ_t at (q0, 0) with the velocities of ``given_velocities`` (coordinate
     names, from ``[initial_velocities]``) held at their values in ``model.qd0`` and the others
     corrected by least squares from theirs (minimum norm); given velocities that the constraints
-    do not allow are an error (:func:`_check_velocities`)."""
+    do not allow are an error (:func:`_check_velocities`).  ``entry_of`` names the file entry of a
+    constraint (default: the planar sections', :func:`_entry_of_constraint`)."""
     from cmbs.kinematics import BranchError, assemble, velocities
 
     try:
@@ -310,8 +313,9 @@ def assembled(model: Model, source: str, given_velocities: tuple[str, ...] = ())
         blamed = None if isinstance(error, BranchError) else _unreachable_drivers(model)
         if blamed:
             raise ModelError(f"cannot be assembled at t = 0: {blamed[1]}", source=source, entry=blamed[0]) from None
-        raise ModelError(f"cannot be assembled: {error}", source=source,
-                         entry=_entry_of_constraint(getattr(error, "constraint", ""), _body_names(model))) from None
+        constraint = getattr(error, "constraint", "")
+        entry = entry_of(constraint) if entry_of is not None else _entry_of_constraint(constraint, _body_names(model))
+        raise ModelError(f"cannot be assembled: {error}", source=source, entry=entry) from None
     qd0 = velocities(model, q0, 0.0, qd=model.qd0, fixed=given_velocities)
     _check_velocities(model, q0, qd0, given_velocities, source)
     return model.replace(q0=q0, qd0=qd0)
@@ -441,7 +445,22 @@ def load_model_file(path: str | Path) -> Model:
     except OSError as error:
         raise ModelError(f"cannot be read ({_reason(error)})", source=source) from None
     try:
-        model, given_velocities = _initial_velocities(document, _read_builder(document, path.parent, path.stem).build())
+        if _dimension(document) == 3:
+            from cmbs.model.spatial_files import entry_of_constraint, read_spatial_builder
+
+            builder, entry_of = read_spatial_builder(document, path.stem), entry_of_constraint
+        else:
+            builder, entry_of = _read_builder(document, path.parent, path.stem), None
+        model, given_velocities = _initial_velocities(document, builder.build())
     except ModelError as error:
         raise error.located(source=source) from None
-    return assembled(model, source, given_velocities)
+    return assembled(model, source, given_velocities, entry_of)
+
+
+def _dimension(document: dict) -> int:
+    """The file's ``[model] dimension``: 2 (the plane, the default) or 3 (space)."""
+    header = document.get("model", {})
+    value = header.get("dimension", 2) if isinstance(header, dict) else 2
+    if isinstance(value, bool) or value not in (2, 3):
+        raise ModelError(f"dimension must be 2 (planar) or 3 (spatial), got {value!r}", entry="model.dimension")
+    return int(value)

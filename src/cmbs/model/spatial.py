@@ -125,24 +125,26 @@ class SpatialModelBuilder:
     def add_point(self, name: str, position: Sequence[float], *, fixed: bool = False, mass: float = 0.0) -> None:
         """A basic point at ``position`` (x, y, z); fixed points are constants; ``mass`` a point
         mass at it."""
-        value = _vector3(position, f"point {name!r}", "position")
+        entry = f"points.{name}"
+        value = _vector3(position, entry, "position")
         if not (math.isfinite(mass) and mass >= 0.0):
-            raise ModelError(f"model {self.name!r}: point {name!r}: mass must be a finite number >= 0, got {mass!r}")
+            raise ModelError(f"mass must be a finite number >= 0, got {mass!r}", entry=entry)
         if mass > 0.0 and fixed:
-            raise ModelError(f"model {self.name!r}: point {name!r}: a fixed point cannot carry mass")
+            raise ModelError("a fixed point cannot carry mass", entry=entry)
         self._new_element(_Element(name, "point", value, fixed, float(mass)))
 
     def add_vector(self, name: str, direction: Sequence[float], *, fixed: bool = False) -> None:
         """A unit vector along ``direction`` (normalised here: a zero vector is refused)."""
-        value = _vector3(direction, f"vector {name!r}", "direction")
+        value = _vector3(direction, f"vectors.{name}", "direction")
         norm = float(np.linalg.norm(value))
         if norm == 0.0:
-            raise ModelError(f"model {self.name!r}: vector {name!r}: direction must not be zero")
+            raise ModelError("direction must not be zero", entry=f"vectors.{name}")
         self._new_element(_Element(name, "vector", value / norm, fixed))
 
     def _new_element(self, element: _Element) -> None:
         if element.name in self._elements:
-            raise ModelError(f"model {self.name!r}: {element.kind} {element.name!r} is defined twice")
+            raise ModelError(f"{element.name!r} is defined twice (points and vectors share their names)",
+                             entry=f"{element.kind}s.{element.name}")
         self._elements[element.name] = element
 
     # ------------------------------------------------------------------ bodies
@@ -152,23 +154,26 @@ class SpatialModelBuilder:
         meaning point - origin, or of unit vectors), with centre of mass ``com`` and inertia
         tensor ``inertia`` about it (ground axes, initial configuration); ``points`` and
         ``vectors`` are further elements fixed to it."""
-        entry = f"body {name!r}"
-        self._check_new(self._bodies, name, "body")
-        if len(basis) != 3:
-            raise ModelError(f"model {self.name!r}: {entry}: basis must name three elements, got {list(basis)}")
-        if not (math.isfinite(mass) and mass > 0.0):
-            raise ModelError(f"model {self.name!r}: {entry}: mass must be a finite number > 0, got {mass!r}")
-        tensor = np.array(inertia, dtype=float)
+        entry = f"bodies.{name}"
+        self._check_new(self._bodies, name, "bodies")
+        if isinstance(basis, str) or len(basis) != 3:
+            raise ModelError(f"basis must name three elements, got {basis!r}", entry=entry)
+        if not (isinstance(mass, (int, float)) and math.isfinite(mass) and mass > 0.0):
+            raise ModelError(f"mass must be a finite number > 0, got {mass!r}", entry=entry)
+        try:
+            tensor = np.array(inertia, dtype=float)
+        except (TypeError, ValueError):
+            tensor = np.zeros(0)
         if tensor.shape != (3, 3) or not np.all(np.isfinite(tensor)):
-            raise ModelError(f"model {self.name!r}: {entry}: inertia must be a finite 3x3 tensor, got {inertia!r}")
+            raise ModelError(f"inertia must be a finite 3x3 tensor, got {inertia!r}", entry=entry)
         if not np.allclose(tensor, tensor.T, rtol=1e-12, atol=1e-12 * max(1.0, np.abs(tensor).max())):
-            raise ModelError(f"model {self.name!r}: {entry}: inertia tensor must be symmetric")
+            raise ModelError(f"the inertia tensor must be symmetric, got {inertia!r}", entry=entry)
         moments = np.linalg.eigvalsh(tensor)
         slack = 1e-12 * max(1.0, moments.max())
         if moments[0] < -slack or moments[0] + moments[1] < moments[2] - slack:
-            raise ModelError(f"model {self.name!r}: {entry}: inertia tensor is not that of a body (principal moments "
+            raise ModelError(f"the inertia tensor is not that of a body (principal moments "
                              f"{', '.join(f'{value:.6g}' for value in moments)}: each must be >= 0 and at most the "
-                             "sum of the other two)")
+                             "sum of the other two)", entry=entry)
         self._bodies[name] = _Body(name, origin, tuple(basis), float(mass), _vector3(com, entry, "com"), tensor,
                                    tuple(points), tuple(vectors))
 
@@ -177,50 +182,61 @@ class SpatialModelBuilder:
         """A slender rigid rod from point ``i`` to point ``j``: mass, centre of mass at ``com``
         (fraction of the length from i) and moment of inertia about it perpendicular to the axis
         (default m L²/12, a uniform rod centred)."""
-        entry = f"rod {name!r}"
-        self._check_new(self._rods, name, "rod")
+        entry = f"rods.{name}"
+        self._check_new(self._rods, name, "rods")
         if not (math.isfinite(mass) and mass > 0.0):
-            raise ModelError(f"model {self.name!r}: {entry}: mass must be a finite number > 0, got {mass!r}")
+            raise ModelError(f"mass must be a finite number > 0, got {mass!r}", entry=entry)
         if not math.isfinite(com):
-            raise ModelError(f"model {self.name!r}: {entry}: com must be finite, got {com!r}")
+            raise ModelError(f"com must be finite, got {com!r}", entry=entry)
         if inertia is not None and not (math.isfinite(inertia) and inertia >= 0.0):
-            raise ModelError(f"model {self.name!r}: {entry}: inertia must be a finite number >= 0, got {inertia!r}")
+            raise ModelError(f"inertia must be a finite number >= 0, got {inertia!r}", entry=entry)
         self._rods[name] = _Rod(name, i, j, float(mass), float(com), None if inertia is None else float(inertia))
 
     # ------------------------------------------------------------------ constraints and loads
     def add_distance(self, name: str, i: str, j: str, *, length: float | None = None) -> None:
         """|r_j - r_i| = length (default: the initial distance)."""
-        self._check_new(self._distances, name, "distance")
+        self._check_new(self._distances, name, "distances")
+        _optional_number(length, f"distances.{name}", "length", positive=True)
         self._distances[name] = (i, j, length)
 
     def add_dot(self, name: str, a: str | tuple[str, str], b: str | tuple[str, str], *,
                 value: float | None = None) -> None:
         """a·b = value (default: the initial product) for elements a, b: a unit vector's name or
         a pair of points (head, tail) meaning head - tail."""
-        self._check_new(self._dots, name, "dot")
+        self._check_new(self._dots, name, "dots")
+        _optional_number(value, f"dots.{name}", "value")
         self._dots[name] = (a, b, value)
 
     def add_spring(self, name: str, i: str, j: str, *, stiffness: float, damping: float = 0.0,
                    rest_length: float | None = None) -> None:
         """A linear spring-damper between points i and j: tension k (ℓ - ℓ₀) + c ℓ̇."""
-        self._check_new(self._springs, name, "spring")
+        self._check_new(self._springs, name, "springs")
         for label, value in (("stiffness", stiffness), ("damping", damping)):
             if not (math.isfinite(value) and value >= 0.0):
-                raise ModelError(f"model {self.name!r}: spring {name!r}: {label} must be a finite number >= 0, "
-                                 f"got {value!r}")
+                raise ModelError(f"{label} must be a finite number >= 0, got {value!r}", entry=f"springs.{name}")
+        _optional_number(rest_length, f"springs.{name}", "rest_length", positive=True)
         self._springs[name] = (i, j, float(stiffness), float(damping), rest_length)
 
     def add_force(self, name: str, *, point: str, force: Sequence[float]) -> None:
         """A constant force (fx, fy, fz) in N at a point."""
-        self._check_new(self._forces, name, "force")
-        self._forces[name] = (point, _vector3(force, f"force {name!r}", "force"))
+        self._check_new(self._forces, name, "forces")
+        self._forces[name] = (point, _vector3(force, f"forces.{name}", "force"))
 
-    def _check_new(self, table: dict, name: str, kind: str) -> None:
+    def _check_new(self, table: dict, name: str, section: str) -> None:
         if name in table:
-            raise ModelError(f"model {self.name!r}: {kind} {name!r} is defined twice")
+            raise ModelError(f"{name!r} is defined twice", entry=f"{section}.{name}")
 
     def build(self) -> Model:
         return _Assembler(self).model()
+
+
+def _optional_number(value: object, entry: str, label: str, positive: bool = False) -> None:
+    """ModelError unless ``value`` is None or a finite number (> 0 with ``positive``)."""
+    if value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or (positive and not value > 0):
+        raise ModelError(f"{label} must be a finite number{' > 0' if positive else ''}, got {value!r}", entry=entry)
 
 
 def _vector3(value: object, entry: str, label: str) -> np.ndarray:
@@ -229,7 +245,7 @@ def _vector3(value: object, entry: str, label: str) -> np.ndarray:
     except (TypeError, ValueError):
         array = None
     if array is None or array.shape != (3,) or not np.all(np.isfinite(array)):
-        raise ModelError(f"{entry}: {label} must be three finite numbers, got {value!r}")
+        raise ModelError(f"{label} must be three finite numbers, got {value!r}", entry=entry)
     return array
 
 
@@ -238,7 +254,7 @@ class _Assembler:
 
     def __init__(self, builder: SpatialModelBuilder):
         self.b = builder
-        self.gravity = _vector3(builder.gravity, f"model {builder.name!r}", "gravity")
+        self.gravity = _vector3(builder.gravity, "model", "gravity")
         self.index: dict[str, int] = {}
         names, kinds, q0, constants = [], [], [], []
         free = [e for e in builder._elements.values() if not e.fixed]
@@ -265,11 +281,10 @@ class _Assembler:
     def _element(self, name: object, entry: str, kind: str | None = None) -> _Element:
         elements = self.b._elements
         if not isinstance(name, str) or name not in elements:
-            raise ModelError(f"model {self.b.name!r}: {entry}: no {kind or 'point or vector'} {name!r}"
-                             f"{did_you_mean(str(name), elements)}")
+            raise ModelError(f"no {kind or 'point or vector'} {name!r}{did_you_mean(str(name), elements)}", entry=entry)
         element = elements[name]
         if kind is not None and element.kind != kind:
-            raise ModelError(f"model {self.b.name!r}: {entry}: {name!r} is a {element.kind}, not a {kind}")
+            raise ModelError(f"{name!r} is a {element.kind}, not a {kind}", entry=entry)
         return element
 
     def _pair(self, spec: object, entry: str) -> tuple[int, int]:
@@ -281,8 +296,12 @@ class _Assembler:
         if isinstance(spec, (tuple, list)) and len(spec) == 2:
             head, tail = (self._element(name, entry, "point") for name in spec)
             return self.index[head.name], self.index[tail.name]
-        raise ModelError(f"model {self.b.name!r}: {entry}: an element is a vector's name or a pair of point names, "
-                         f"got {spec!r}")
+        raise ModelError(f"an element is a vector's name or a pair of point names, got {spec!r}", entry=entry)
+
+    def _check_moving(self, indices: Sequence[int], entry: str) -> None:
+        """ModelError for a row between fixed elements only: it involves no coordinate."""
+        if min(indices) >= self.n:
+            raise ModelError("relates fixed elements only: it constrains no coordinate (remove it)", entry=entry)
 
     def _value(self, pair: tuple[int, int]) -> np.ndarray:
         return self.x0[pair[0]:pair[0] + 3] - self.x0[pair[1]:pair[1] + 3]
@@ -294,7 +313,7 @@ class _Assembler:
         linear, coefficients, linear_names = [], [], []
         lines: list[tuple[str, str]] = []
         for body in b._bodies.values():
-            entry = f"body {body.name!r}"
+            entry = f"bodies.{body.name}"
             origin = self._element(body.origin, entry, "point")
             o = self.index[origin.name]
             basis, labels = [], []
@@ -305,12 +324,12 @@ class _Assembler:
                 if element.kind == "point":
                     lines.append((origin.name, element.name))
             if len({pair[0] for pair in basis}) != 3 or o in {pair[0] for pair in basis}:
-                raise ModelError(f"model {b.name!r}: {entry}: origin and basis must be four different elements")
+                raise ModelError("origin and basis must be four different elements", entry=entry)
             X0 = np.column_stack([self._value(pair) for pair in basis])
             scale = np.prod(np.linalg.norm(X0, axis=0))
             if not abs(np.linalg.det(X0)) > 1e-9 * scale:
-                raise ModelError(f"model {b.name!r}: {entry}: the basis elements {list(body.basis)} are coplanar at "
-                                 "the start: they do not locate the body")
+                raise ModelError(f"the basis elements {list(body.basis)} are coplanar at the start: they do not locate "
+                                 "the body", entry=entry)
             for k in range(3):
                 for l in range(k, 3):
                     if min(*basis[k], *basis[l]) >= self.n:
@@ -331,12 +350,12 @@ class _Assembler:
                 if element.kind == "point":
                     lines.append((origin.name, element.name))
         for rod in b._rods.values():
-            entry = f"rod {rod.name!r}"
+            entry = f"rods.{rod.name}"
             i, j = (self._element(name, entry, "point") for name in (rod.i, rod.j))
             pair = (self.index[j.name], self.index[i.name])
             length = float(np.linalg.norm(self._value(pair)))
             if not length > 0.0:
-                raise ModelError(f"model {b.name!r}: {entry}: points {rod.i!r} and {rod.j!r} coincide")
+                raise ModelError(f"points {rod.i!r} and {rod.j!r} coincide", entry=entry)
             dots.append((*pair, *pair))
             dot_values.append(length * length)
             dot_names.append(f"rigid {rod.name}")
@@ -348,28 +367,30 @@ class _Assembler:
                 self.mass_ext[p:p + 3, p:p + 3] += element.mass * np.eye(3)
                 self.gravity_ext[p:p + 3] += element.mass * self.gravity
         for name, (i, j, length) in b._distances.items():
-            entry = f"distance {name!r}"
+            entry = f"distances.{name}"
             pair = tuple(self.index[self._element(p, entry, "point").name] for p in (j, i))
+            self._check_moving(pair, entry)
             value = float(self._value(pair) @ self._value(pair)) if length is None else float(length) ** 2
             dots.append((*pair, *pair))
             dot_values.append(value)
             dot_names.append(f"distance {name}")
         for name, (a, bb, value) in b._dots.items():
-            entry = f"dot {name!r}"
+            entry = f"dots.{name}"
             first, second = self._pair(a, entry), self._pair(bb, entry)
+            self._check_moving((*first, *second), entry)
             dots.append((*first, *second))
             dot_values.append(float(self._value(first) @ self._value(second)) if value is None else float(value))
             dot_names.append(f"dot {name}")
         springs, spring_parameters = [], []
         for name, (i, j, stiffness, damping, rest) in b._springs.items():
-            entry = f"spring {name!r}"
+            entry = f"springs.{name}"
             pair = tuple(self.index[self._element(p, entry, "point").name] for p in (i, j))
             length = float(np.linalg.norm(self.x0[pair[1]:pair[1] + 3] - self.x0[pair[0]:pair[0] + 3]))
             springs.append(pair)
             spring_parameters.append((stiffness, damping, length if rest is None else float(rest)))
         forces, force_values = [], []
         for name, (point, value) in b._forces.items():
-            forces.append(self.index[self._element(point, f"force {name!r}", "point").name])
+            forces.append(self.index[self._element(point, f"forces.{name}", "point").name])
             force_values.append(value)
 
         n = self.n
