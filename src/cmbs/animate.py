@@ -77,13 +77,6 @@ def checked_animation_path(path: str | Path, option: str = "animation") -> Path:
     return path
 
 
-def check_planar(model: Model) -> None:
-    """CmbsError for a spatial model (points in 3-D): the animation draws the plane (x, z)."""
-    if point_array(model, model.q0).shape[1] == 3:
-        raise CmbsError(f"model {model.name!r} is spatial: this animation draws planar mechanisms (x, z) only; "
-                        "plot the run instead (its figure shows the mechanism in 3-D)")
-
-
 def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fps: float = 30,
             speed: float = 1.0, trail: str | None = None, dpi: float = 100,
             reference: Trajectory | None = None) -> Path:
@@ -93,7 +86,8 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
     its points, the label ``t = 1.23 s`` (more decimals when frames are closer than 0.02 s
     apart, so that every frame's label differs) and, with ``trail`` (a name from
     ``model.point_names``), the path that point has traced so far.  The axis limits are fixed
-    and cover every frame, with equal scales on x and z.
+    and cover every frame, with equal scales on x and z.  A spatial model (points in 3-D) is
+    drawn in a 3-D axis with a fixed view and equal scales on x, y and z.
 
     Reference
         ``reference``, a second motion of the same model (e.g. the recorded motion a simulation
@@ -134,7 +128,6 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
     """
     path = checked_animation_path(path)
     _check_positive(fps=fps, speed=speed, dpi=dpi)
-    check_planar(model)
     mp4 = path.suffix.lower() == ".mp4"
     q = _coordinates_of(model, trajectory, "trajectory")
     reference_q = _coordinates_of(model, reference, "reference") if reference is not None else None
@@ -152,20 +145,29 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
     spacing = float(times[1] - times[0]) if times.size > 1 else 1.0
     decimals = max(2, math.ceil(math.log10(2.0 / spacing))) if spacing > 0 else 2
 
+    spatial = points.shape[2] == 3
+    everything = points if ghost is None else np.concatenate([points, ghost], axis=1)
     figure = plt.figure(figsize=FIGURE_SIZE, dpi=dpi)
     try:
-        axis = figure.add_axes((0.1, 0.1, 0.85, 0.8))
-        _fixed_limits(axis, figure, points if ghost is None else np.concatenate([points, ghost], axis=1))
-        axis.set_xlabel("x")
-        axis.set_ylabel("z")
-        axis.grid(alpha=0.3)
+        if spatial:
+            axis = figure.add_subplot(projection="3d")
+            _cube_limits(axis, everything)
+            axis.set(xlabel="x", ylabel="y", zlabel="z")
+        else:
+            axis = figure.add_axes((0.1, 0.1, 0.85, 0.8))
+            _fixed_limits(axis, figure, everything)
+            axis.set_xlabel("x")
+            axis.set_ylabel("z")
+            axis.grid(alpha=0.3)
         axis.set_title(model.name + (f" (trail of {trail})" if trail_index is not None else ""))
-        trail_line = axis.plot([], [], "-", color="C1", linewidth=1.2)[0] if trail_index is not None else None
-        ghosts = [] if ghost is None else [axis.plot([], [], "-", gid="reference", **GHOST_STYLE)[0]
+        empty = ([], [], []) if spatial else ([], [])
+        trail_line = axis.plot(*empty, "-", color="C1", linewidth=1.2)[0] if trail_index is not None else None
+        ghosts = [] if ghost is None else [axis.plot(*empty, "-", gid="reference", **GHOST_STYLE)[0]
                                            for _ in model.lines]
-        segments = [axis.plot([], [], "-", gid="trajectory", **FIGURE_STYLE)[0] for _ in model.lines]
-        dots = axis.plot([], [], "o", color="k", markersize=4, zorder=3)[0]
-        label = axis.text(0.02, 0.96, "", transform=axis.transAxes, va="top", family="monospace")
+        segments = [axis.plot(*empty, "-", gid="trajectory", **FIGURE_STYLE)[0] for _ in model.lines]
+        dots = axis.plot(*empty, "o", color="k", markersize=4, zorder=3)[0]
+        text = axis.text2D if spatial else axis.text
+        label = text(0.02, 0.96, "", transform=axis.transAxes, va="top", family="monospace")
         if ghost is not None:
             axis.legend([Line2D([], [], **FIGURE_STYLE), Line2D([], [], **GHOST_STYLE)], ["simulated", "reference"],
                         loc="upper right")
@@ -175,12 +177,12 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
         def pose(frame: int) -> None:
             here = points[frame]
             for line, (i, j) in zip(segments, model.lines):
-                line.set_data(here[[i, j], 0], here[[i, j], 1])
+                _place(line, here[[i, j]])
             for line, (i, j) in zip(ghosts, model.lines):
-                line.set_data(ghost[frame][[i, j], 0], ghost[frame][[i, j], 1])
-            dots.set_data(here[:, 0], here[:, 1])
+                _place(line, ghost[frame][[i, j]])
+            _place(dots, here)
             if trail_line is not None:
-                trail_line.set_data(points[:frame + 1, trail_index, 0], points[:frame + 1, trail_index, 1])
+                _place(trail_line, points[:frame + 1, trail_index])
             label.set_text(f"t = {times[frame]:.{decimals}f} s")
 
         # Blitting: the axes, ticks and grid are drawn once; each frame redraws only the moving
@@ -274,14 +276,34 @@ def _time_span(trajectory: Trajectory, what: str) -> tuple[float, float]:
 
 
 def _poses(model: Model, times: np.ndarray, sample_times: np.ndarray, q: np.ndarray, what: str) -> np.ndarray:
-    """(frames, points, 2) point positions at ``times``, the coordinates ``q`` (samples, n)
-    interpolated linearly between ``sample_times``."""
+    """(frames, points, 2) point positions (x, z) at ``times``, (frames, points, 3) for a spatial
+    model, the coordinates ``q`` (samples, n) interpolated linearly between ``sample_times``."""
     frames_q = np.column_stack([np.interp(times, sample_times, column) for column in q.T]) \
         if q.shape[1] else np.zeros((times.size, 0))
-    points = np.array([np.asarray(model.point_positions(row), dtype=float).reshape(-1, 2) for row in frames_q])
+    points = np.array([point_array(model, row) for row in frames_q])
     if not np.all(np.isfinite(points)):
         raise CmbsError(f"cannot animate model {model.name!r}: non-finite point positions along the {what}")
     return points
+
+
+def _place(line: Line2D, rows: np.ndarray) -> None:
+    """Put ``line`` through the points ``rows`` (k, 2) in the plane (x, z) or (k, 3) in space."""
+    if rows.shape[1] == 3:
+        line.set_data_3d(rows[:, 0], rows[:, 1], rows[:, 2])
+    else:
+        line.set_data(rows[:, 0], rows[:, 1])
+
+
+def _cube_limits(axis: plt.Axes, points: np.ndarray) -> None:
+    """Limits of a 3-D axis: the cube around every frame's points with a margin, so that x, y
+    and z have the same scale; the view stays fixed."""
+    rows = points.reshape(-1, 3)
+    low, high = rows.min(axis=0), rows.max(axis=0)
+    half = 0.54 * float(max(high - low)) if float(max(high - low)) > 0 else 0.5 * max(1.0, float(np.abs(low).max()))
+    for centre, limits in zip(0.5 * (low + high), (axis.set_xlim, axis.set_ylim, axis.set_zlim)):
+        limits(centre - half, centre + half)
+    axis.set_box_aspect((1.0, 1.0, 1.0))
+    axis.set_autoscale_on(False)
 
 
 def _fixed_limits(axis: plt.Axes, figure: plt.Figure, points: np.ndarray) -> None:

@@ -253,10 +253,6 @@ def _simulate(args: argparse.Namespace) -> int:
 
         checked_animation_path(args.animate, "--animate")
     model = _load(args)
-    if args.animate:
-        from cmbs.animate import check_planar
-
-        check_planar(model)
     formulation = None if args.formulation is None and args.integrator not in ("rk23", "rk45", "rk4") else \
         (args.formulation or "lagrange")
     run = simulate(model, formulation=formulation, formulation_options=_formulation_options(args),
