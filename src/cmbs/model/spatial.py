@@ -38,6 +38,12 @@ sharing a point and a unit vector (their common axis) by a revolute joint.  Furt
 distance |P - Q|² = s², and a scalar product a·b = value of two elements (vectors or point
 differences), e.g. u₁·u₂ = 0 for a universal joint or (P - O)·n = 0 for a point in a plane.
 
+A constant **moment** M on a body does the virtual work M·δθ.  With G = (X₀ᵀX₀)⁻¹ the inverse
+Gram matrix of the basis (constant for a rigid body: the dual basis bᵏ = Σₗ Gₖₗ bₗ turns with it),
+the angular velocity is ω = ½ Σₖ bᵏ × ḃₖ (ḃₖ = ω × bₖ: Σₖ bᵏ × (ω × bₖ) = 3ω - ω), so
+δθ = ½ Σₖₗ Gₖₗ bₗ × δbₖ and the generalized force on the head of bₖ (minus on its tail) is
+½ Σₗ Gₖₗ (M × bₗ).
+
 Each constraint is one of two kinds, evaluated for all its rows by one compiled kernel:
 
 ===========  =====================================  ==========================================
@@ -48,8 +54,8 @@ linear       E - T - Σ cₖ (x_hₖ - x_tₖ)  (3 rows)     0   (constant A)
 ===========  =====================================  ==========================================
 
 (rigid-body rows, rods and distances are dot rows; a unit vector is the difference of its
-coordinates and a constant zero vector.)  Loads: gravity, constant forces at points, linear
-spring-dampers between points.
+coordinates and a constant zero vector.)  Loads: gravity, constant forces at points, constant
+moments on bodies, linear spring-dampers between points.
 """
 
 from __future__ import annotations
@@ -66,9 +72,10 @@ from cmbs.model.model import Model, Terms
 from cmbs.model.packing import pack
 
 # int sections of the kernel
-_DOT, _LINEAR, _SPRING, _POINT_FORCE = 0, 1, 2, 3
+_DOT, _LINEAR, _SPRING, _POINT_FORCE, _MOMENT = 0, 1, 2, 3, 4
 # real sections
 _DOT_VALUE, _LINEAR_COEFFICIENTS, _Q_CONSTANT, _SPRING_PARAMETERS, _POINT_FORCE_VALUE, _CONSTANTS = 0, 1, 2, 3, 4, 5
+_MOMENT_VALUE = 6
 
 
 @dataclass
@@ -120,6 +127,7 @@ class SpatialModelBuilder:
     _dots: dict[str, tuple[object, object, float | None]] = field(default_factory=dict)
     _springs: dict[str, tuple[str, str, float, float, float | None]] = field(default_factory=dict)
     _forces: dict[str, tuple[str, np.ndarray]] = field(default_factory=dict)
+    _moments: dict[str, tuple[str, np.ndarray]] = field(default_factory=dict)
 
     # ------------------------------------------------------------------ elements
     def add_point(self, name: str, position: Sequence[float], *, fixed: bool = False, mass: float = 0.0) -> None:
@@ -222,6 +230,11 @@ class SpatialModelBuilder:
         self._check_new(self._forces, name, "forces")
         self._forces[name] = (point, _vector3(force, f"forces.{name}", "force"))
 
+    def add_moment(self, name: str, *, body: str, moment: Sequence[float]) -> None:
+        """A constant moment (mx, my, mz) in N m, in ground axes, on a body."""
+        self._check_new(self._moments, name, "moments")
+        self._moments[name] = (body, _vector3(moment, f"moments.{name}", "moment"))
+
     def _check_new(self, table: dict, name: str, section: str) -> None:
         if name in table:
             raise ModelError(f"{name!r} is defined twice", entry=f"{section}.{name}")
@@ -312,6 +325,7 @@ class _Assembler:
         dots, dot_values, dot_names = [], [], []
         linear, coefficients, linear_names = [], [], []
         lines: list[tuple[str, str]] = []
+        frames: dict[str, tuple[list[tuple[int, int]], np.ndarray]] = {}
         for body in b._bodies.values():
             entry = f"bodies.{body.name}"
             origin = self._element(body.origin, entry, "point")
@@ -338,6 +352,7 @@ class _Assembler:
                     dot_values.append(float(self._value(basis[k]) @ self._value(basis[l])))
                     dot_names.append(f"rigid {body.name}: {labels[k]}·{labels[l]}")
             self._body_mass(body, o, basis, X0)
+            frames[body.name] = (basis, X0)
             for spec in body.points + body.vectors:
                 element = self._element(spec, entry, "point" if spec in body.points else "vector")
                 target = (self.index[element.name], o if element.kind == "point" else self.zero)
@@ -392,15 +407,24 @@ class _Assembler:
         for name, (point, value) in b._forces.items():
             forces.append(self.index[self._element(point, f"forces.{name}", "point").name])
             force_values.append(value)
+        moments, moment_values = [], []
+        for name, (body_name, value) in b._moments.items():
+            if body_name not in frames:
+                raise ModelError(f"no body {body_name!r}{did_you_mean(str(body_name), frames)}",
+                                 entry=f"moments.{name}")
+            basis, X0 = frames[body_name]
+            moments.append([index for pair in basis for index in pair])
+            moment_values.append(np.concatenate([np.linalg.inv(X0.T @ X0).ravel(), value]))
 
         n = self.n
         mass = self.mass_ext[:n, :n].copy()
         q_constant = self.gravity_ext[:n].copy()
         int_sections = [np.array(dots, dtype=np.int64).reshape(-1, 4), np.array(linear, dtype=np.int64).reshape(-1, 8),
-                        np.array(springs, dtype=np.int64).reshape(-1, 2), np.array(forces, dtype=np.int64)]
+                        np.array(springs, dtype=np.int64).reshape(-1, 2), np.array(forces, dtype=np.int64),
+                        np.array(moments, dtype=np.int64).reshape(-1, 6)]
         real_sections = [np.array(dot_values), np.array(coefficients).reshape(-1, 3), q_constant,
                          np.array(spring_parameters).reshape(-1, 3), np.array(force_values).reshape(-1, 3),
-                         self.constants]
+                         self.constants, np.array(moment_values).reshape(-1, 12)]
         ints, reals = pack(int_sections, real_sections)
         mass.setflags(write=False)
         point_names = [e.name for e in b._elements.values() if e.kind == "point"]
@@ -410,6 +434,7 @@ class _Assembler:
                                               np.array(spring_parameters).reshape(-1, 3)),
                                      point_indices=np.array([self.index[p] for p in point_names], dtype=np.int64),
                                      work_sources=tuple(f"force {name!r}" for name in b._forces)
+                                     + tuple(f"moment {name!r}" for name in b._moments)
                                      + tuple(f"spring {name!r}" for name, s in b._springs.items() if s[3] > 0.0))
         constraint_names = dot_names + linear_names
         return Model(name=b.name, coordinate_names=tuple(self.names), coordinate_kinds=tuple(self.kinds),
@@ -597,6 +622,26 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
         for d in range(3):
             if p + d < n:
                 buffer[p + d] += reals[r0 + 3 * k + d]
+    i0 = ints[1 + _MOMENT]
+    r0 = ints[real_base + 1 + _MOMENT_VALUE]
+    for k in range((ints[2 + _MOMENT] - i0) // 6):
+        s = i0 + 6 * k
+        p = r0 + 12 * k
+        mx, my, mz = reals[p + 9], reals[p + 10], reals[p + 11]
+        for l in range(3):
+            hl, tl = ints[s + 2 * l], ints[s + 2 * l + 1]
+            bx = buffer[x0 + hl] - buffer[x0 + tl]
+            by = buffer[x0 + hl + 1] - buffer[x0 + tl + 1]
+            bz = buffer[x0 + hl + 2] - buffer[x0 + tl + 2]
+            cx, cy, cz = my * bz - mz * by, mz * bx - mx * bz, mx * by - my * bx       # M × b_l
+            for kk in range(3):
+                g = 0.5 * reals[p + 3 * kk + l]
+                hk, tk = ints[s + 2 * kk], ints[s + 2 * kk + 1]
+                for d, c in ((0, cx), (1, cy), (2, cz)):
+                    if hk + d < n:
+                        buffer[hk + d] += g * c
+                    if tk + d < n:
+                        buffer[tk + d] -= g * c
     i0 = ints[1 + _SPRING]
     r0 = ints[real_base + 1 + _SPRING_PARAMETERS]
     for k in range((ints[2 + _SPRING] - i0) // 2):

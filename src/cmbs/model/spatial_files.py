@@ -18,7 +18,7 @@ from cmbs.model.spatial import SpatialModelBuilder
 
 #: the sections of a spatial model file
 SECTIONS = ("model", "points", "vectors", "bodies", "rods", "distances", "dots", "springs", "forces",
-            "initial_velocities")
+            "moments", "initial_velocities")
 
 
 def read_spatial_builder(document: dict, default_name: str) -> SpatialModelBuilder:
@@ -43,6 +43,7 @@ def read_spatial_builder(document: dict, default_name: str) -> SpatialModelBuild
         "dots": lambda name, t: _dot(builder, name, t),
         "springs": lambda name, t: _spring(builder, name, t),
         "forces": lambda name, t: _force(builder, name, t),
+        "moments": lambda name, t: _moment(builder, name, t),
     }
     for section, handler in handlers.items():
         for name, table in _entries(document, section):
@@ -161,3 +162,8 @@ def _spring(builder: SpatialModelBuilder, name: str, table: object) -> None:
 def _force(builder: SpatialModelBuilder, name: str, table: object) -> None:
     entry = _Entry(f"forces.{name}", table, ("point", "force"), ("point", "force"))
     builder.add_force(name, point=entry.string("point"), force=_triple(entry, "force"))
+
+
+def _moment(builder: SpatialModelBuilder, name: str, table: object) -> None:
+    entry = _Entry(f"moments.{name}", table, ("body", "moment"), ("body", "moment"))
+    builder.add_moment(name, body=entry.string("body"), moment=_triple(entry, "moment"))
