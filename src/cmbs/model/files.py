@@ -195,13 +195,19 @@ def _read_builder(document: dict, base: Path, default_name: str) -> NaturalModel
         "springs": lambda name, t: _spring(builder, name, t),
         "actuators": lambda name, t: _actuator(builder, name, t),
     }
+    apply_sections(document, handlers)
+    return builder
+
+
+def apply_sections(document: dict, handlers: dict[str, Callable[[str, object], None]]) -> None:
+    """Call each section's handler on the section's named entries, in the order of ``handlers``;
+    an error is located at its entry ``SECTION.NAME``."""
     for section, handler in handlers.items():
         for name, table in _entries(document, section):
             try:
                 handler(name, table)
             except ModelError as error:
                 raise error.located(entry=f"{section}.{name}") from None
-    return builder
 
 
 def _point(builder: NaturalModelBuilder, name: str, table: object) -> None:

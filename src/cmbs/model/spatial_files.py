@@ -13,7 +13,7 @@ import math
 from typing import Callable
 
 from cmbs.errors import ModelError
-from cmbs.model.files import _Entry, _entries
+from cmbs.model.files import _Entry, apply_sections
 from cmbs.model.spatial import SpatialModelBuilder
 
 #: the sections of a spatial model file
@@ -45,12 +45,7 @@ def read_spatial_builder(document: dict, default_name: str) -> SpatialModelBuild
         "forces": lambda name, t: _force(builder, name, t),
         "moments": lambda name, t: _moment(builder, name, t),
     }
-    for section, handler in handlers.items():
-        for name, table in _entries(document, section):
-            try:
-                handler(name, table)
-            except ModelError as error:
-                raise error.located(entry=f"{section}.{name}") from None
+    apply_sections(document, handlers)
     return builder
 
 
