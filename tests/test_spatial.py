@@ -75,32 +75,40 @@ def _kitchen_sink():
     b.add_vector("v", (0.1, 1.0, -0.3))
     b.add_point("K", (0.3, 0.5, 0.2))
     b.add_vector("n", (0.3, -0.2, 1.0))
+    b.add_vector("h", (0.6, 0.8, 0.0))
     b.add_point("B", (1.2, 0.3, 0.4))
     b.add_point("C", (1.0, -0.6, 0.9), mass=0.7)
     b.add_body("crank", origin="A", basis=["u", "v", "B"], mass=1.5, com=(0.7, 0.2, 0.2),
-               inertia=np.diag([0.02, 0.03, 0.04]), points=["K"], vectors=["n"])
+               inertia=np.diag([0.02, 0.03, 0.04]), points=["K"], vectors=["n", "h"])
     b.add_rod("link", "B", "C", mass=0.8, com=0.4, inertia=0.01)
     b.add_distance("tether", "O", "A")
     b.add_dot("plane", ("A", "O"), "z")
     b.add_dot("skew", "u", ("C", "B"))
     b.add_spring("spring", "O", "C", stiffness=40.0, rest_length=0.5)
     b.add_force("push", point="K", force=(1.0, -2.0, 0.5))
+    b.add_angle("turn", reference=("A", "O"), vector="h", axis="z")
+    b.add_driver("turn", "0.3 + 0.5*sin(2*t)", name="sway")
     return b.build()
 
 
 def test_jacobian_gamma_and_spring_force_match_finite_differences():
+    """Every row kind (dot, linear, angle, driver): A = Φ_q, Φ_t and γ = -(Ȧ q̇) - Φ_tt by central
+    differences at a random state and time; the conservative forces are -∇V."""
     model = _kitchen_sink()
     rng = np.random.default_rng(5)
     q = model.q0 + 0.05 * rng.normal(size=model.n)
     qd = rng.normal(size=model.n)
-    terms = model.evaluate(q, qd)
-    h = 1e-6
-    numeric = np.column_stack([(model.constraints(q + h * e) - model.constraints(q - h * e)) / (2 * h)
+    t, h = 0.37, 1e-6
+    terms = model.evaluate(q, qd, t)
+    numeric = np.column_stack([(model.constraints(q + h * e, t) - model.constraints(q - h * e, t)) / (2 * h)
                                for e in np.eye(model.n)])
     np.testing.assert_allclose(terms.A, numeric, atol=1e-8)
-    # γ = -(Ȧ q̇): the derivative of A along q̇
-    a_dot = (model.jacobian(q + h * qd) - model.jacobian(q - h * qd)) / (2 * h)
-    np.testing.assert_allclose(terms.gamma, -a_dot @ qd, atol=1e-7)
+    phi_t = (model.constraints(q, t + h) - model.constraints(q, t - h)) / (2 * h)
+    np.testing.assert_allclose(terms.phi_t, phi_t, atol=1e-8)
+    a_dot = (model.jacobian(q + h * qd, t) - model.jacobian(q - h * qd, t)) / (2 * h)
+    phi_tt = (model.constraints(q, t + 1e-4) - 2 * model.constraints(q, t) + model.constraints(q, t - 1e-4)) / 1e-8
+    np.testing.assert_allclose(terms.gamma, -a_dot @ qd - phi_tt, atol=1e-6)
+    assert abs(terms.gamma[-1] - (-0.5 * 4.0 * np.sin(2 * t))) < 1e-12        # the driver row: f''(t)
     # the conservative forces are -∇V (no damping; the constant force is added by hand)
     model_v = model.potential_energy
     gradient = np.array([(model_v(q + h * e) - model_v(q - h * e)) / (2 * h) for e in np.eye(model.n)])
@@ -108,7 +116,9 @@ def test_jacobian_gamma_and_spring_force_match_finite_differences():
     k = model.coordinate_index("K.x")
     force[k:k + 3] = (1.0, -2.0, 0.5)
     np.testing.assert_allclose(model.forces(q, np.zeros(model.n)), -gradient + force, atol=1e-6)
-    assert terms.phi.shape == (model.m,) and np.abs(model.constraints(model.q0)).max() < 1e-12
+    assembled = cmbs.assemble(model)
+    assert np.abs(model.constraints(assembled, 0.0)).max() < 1e-10
+    assert assembled[model.coordinate_index("turn")] == pytest.approx(0.3, abs=1e-12)
 
 
 def _spherical_pendulum(length=1.3, theta0=0.7, phi_rate=2.1, mass=0.8):
@@ -442,3 +452,37 @@ def test_a_moment_on_a_body_has_the_power_of_the_moment_and_spins_the_top_up():
         inertia = R @ np.diag([4e-3, 5e-3, 6e-3]) @ R.T + 1.0 * (com @ com * np.eye(3) - np.outer(com, com))
         momentum.append(inertia @ omega[k])
     np.testing.assert_allclose(np.array(momentum), np.outer(run.t, [0.0, 0.0, 0.02]), atol=1e-9)
+
+
+def test_driven_spatial_four_bar_needs_the_planar_torque():
+    """The library four-bar's crank angle driven by (π/4) sin(πt - π/2), built in space with an
+    angle coordinate (from the ground's x axis to the crank about -y, the planar angle's sense)
+    and the same driver: kinematic analysis and inverse dynamics give the planar model's
+    motion and crank torque."""
+    planar = cmbs.load("four-bar")
+    start = dict(zip(planar.point_names, planar.point_positions(planar.q0)))
+    b = SpatialModelBuilder("four-bar-driven-3d", gravity=(0.0, 0.0, -9.81))
+    for name in ("A", "B", "P1", "P2"):
+        x, z = start[name]
+        b.add_point(name, (x, 0.0, z), fixed=name in ("A", "B"))
+    b.add_vector("y", (0.0, 1.0, 0.0), fixed=True)
+    b.add_vector("x", (1.0, 0.0, 0.0), fixed=True)
+    b.add_vector("down-y", (0.0, -1.0, 0.0), fixed=True)
+    for name, i, j, mass in (("crank", "A", "P1", 1.0), ("coupler", "P1", "P2", 5.0), ("rocker", "P2", "B", 3.0)):
+        b.add_rod(name, i, j, mass=mass)
+    b.add_dot("crank axis", ("P1", "A"), "y")
+    b.add_dot("rocker axis", ("P2", "B"), "y")
+    b.add_angle("alpha", reference="x", vector=("P1", "A"), axis="down-y")
+    b.add_driver("alpha", "(pi/4) * sin(2*(pi/2)*t - pi/2)", name="crank")
+    b.add_actuator("torque", coordinate="alpha")
+    space = b.build()
+    space = space.replace(q0=cmbs.assemble(space))
+    assert space.q0[space.coordinate_index("alpha")] == pytest.approx(planar.q0[planar.coordinate_index("alpha")],
+                                                                       abs=1e-10)
+    times = np.linspace(0.0, 2.0, 41)
+    flat, spatial = (cmbs.inverse_dynamics(model, times) for model in (planar, space))
+    np.testing.assert_allclose([space.point_positions(q)[:, [0, 2]] for q in spatial.motion.q],
+                               [planar.point_positions(q) for q in flat.motion.q], atol=1e-9)
+    torque_flat, torque_space = flat.force("alpha"), spatial.force("alpha")
+    assert np.ptp(torque_flat) > 10.0                       # a real torque history
+    np.testing.assert_allclose(torque_space, torque_flat, atol=1e-8 * np.abs(torque_flat).max())

@@ -10,6 +10,7 @@ mistake raises :class:`~cmbs.errors.ModelError` naming the file, the entry and t
 from __future__ import annotations
 
 import csv
+import functools
 import math
 import tomllib
 from pathlib import Path
@@ -451,13 +452,15 @@ def load_model_file(path: str | Path) -> Model:
     except OSError as error:
         raise ModelError(f"cannot be read ({_reason(error)})", source=source) from None
     try:
+        entry_of = None
         if _dimension(document) == 3:
             from cmbs.model.spatial_files import entry_of_constraint, read_spatial_builder
 
-            builder, entry_of = read_spatial_builder(document, path.stem), entry_of_constraint
+            model = read_spatial_builder(document, path.parent, path.stem).build()
+            entry_of = functools.partial(entry_of_constraint, drivers=frozenset(model.driver_names))
         else:
-            builder, entry_of = _read_builder(document, path.parent, path.stem), None
-        model, given_velocities = _initial_velocities(document, builder.build())
+            model = _read_builder(document, path.parent, path.stem).build()
+        model, given_velocities = _initial_velocities(document, model)
     except ModelError as error:
         raise error.located(source=source) from None
     return assembled(model, source, given_velocities, entry_of)

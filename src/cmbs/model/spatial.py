@@ -51,7 +51,14 @@ kind         Φ                                      γ = -(Ȧ q̇)
 ===========  =====================================  ==========================================
 dot          a·b - value,  a = x_aₕ - x_aₜ, ...       -2 ȧ·ḃ
 linear       E - T - Σ cₖ (x_hₖ - x_tₖ)  (3 rows)     0   (constant A)
+angle        cos θ (r × v)·a - sin θ r·v              the velocity-quadratic part of Φ̈, negated
+driver       q_c - f(t)                               f''(t)   (Φ_t = -f'(t))
 ===========  =====================================  ==========================================
+
+An **angle coordinate** θ (massless) is the angle from r to v about the unit vector a, both
+across it: on such vectors the row equals |r||v| sin(θ* - θ), θ* the actual angle, with
+∂Φ/∂θ = -|r||v| at the solution, well conditioned at every angle as in the plane.  Drivers hold
+a coordinate (a point's or an angle) at a function of time; actuators add gain·u to one.
 
 (rigid-body rows, rods and distances are dot rows; a unit vector is the difference of its
 coordinates and a constant zero vector.)  Loads: gravity, constant forces at points, constant
@@ -68,14 +75,15 @@ import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
 from cmbs.jit import borrow, njit
+from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions, is_constant
 from cmbs.model.model import Model, Terms
-from cmbs.model.packing import pack
+from cmbs.model.packing import int_section, pack, real_section
 
 # int sections of the kernel
-_DOT, _LINEAR, _SPRING, _POINT_FORCE, _MOMENT = 0, 1, 2, 3, 4
+_DOT, _LINEAR, _SPRING, _POINT_FORCE, _MOMENT, _ANGLE, _DRIVER, _ACTUATOR, _TF_TABLE, _TF_OPS = range(10)
 # real sections
 _DOT_VALUE, _LINEAR_COEFFICIENTS, _Q_CONSTANT, _SPRING_PARAMETERS, _POINT_FORCE_VALUE, _CONSTANTS = 0, 1, 2, 3, 4, 5
-_MOMENT_VALUE = 6
+_MOMENT_VALUE, _ACTUATOR_GAIN, _TF_REALS = 6, 7, 8
 
 
 @dataclass
@@ -128,6 +136,9 @@ class SpatialModelBuilder:
     _springs: dict[str, tuple[str, str, float, float, float | None]] = field(default_factory=dict)
     _forces: dict[str, tuple[str, np.ndarray]] = field(default_factory=dict)
     _moments: dict[str, tuple[str, np.ndarray]] = field(default_factory=dict)
+    _angles: dict[str, tuple[object, object, str, float | None]] = field(default_factory=dict)
+    _drivers: dict[str, tuple[str, TimeFunction]] = field(default_factory=dict)
+    _actuators: dict[str, tuple[str, float]] = field(default_factory=dict)
 
     # ------------------------------------------------------------------ elements
     def add_point(self, name: str, position: Sequence[float], *, fixed: bool = False, mass: float = 0.0) -> None:
@@ -235,6 +246,34 @@ class SpatialModelBuilder:
         self._check_new(self._moments, name, "moments")
         self._moments[name] = (body, _vector3(moment, f"moments.{name}", "moment"))
 
+    def add_angle(self, name: str, *, reference: str | tuple[str, str], vector: str | tuple[str, str], axis: str,
+                  initial: float | None = None) -> None:
+        """An angle coordinate ``name``: the angle from element ``reference`` to element ``vector``
+        (each a unit vector's name or a pair of points (head, tail)) about the unit vector
+        ``axis``, right-handed; both elements must stay across the axis (a revolute joint's
+        axis and a vector of each of its two bodies).  ``initial`` chooses the turn (default: the
+        start value in (-π, π])."""
+        self._check_new(self._angles, name, "angles")
+        _optional_number(initial, f"angles.{name}", "initial")
+        self._angles[name] = (reference, vector, axis, initial)
+
+    def add_driver(self, coordinate: str, function: object, *, name: str | None = None) -> None:
+        """Rheonomic driver Φ = q_c - f(t) on ``coordinate`` (``"P.x"`` or an angle's name);
+        ``function``: number, expression string, table or callable of t (docs/model-format.md)."""
+        name = name or f"drive {coordinate}"
+        self._check_new(self._drivers, name, "drivers")
+        try:
+            self._drivers[name] = (coordinate, as_time_function(function))
+        except ModelError as error:
+            raise error.located(entry=f"drivers.{name}") from None
+
+    def add_actuator(self, name: str, *, coordinate: str, gain: float = 1.0) -> None:
+        """An actuator input u_k entering as the generalized force gain·u_k on ``coordinate`` (a
+        torque on an angle, a force along a point coordinate)."""
+        self._check_new(self._actuators, name, "actuators")
+        _optional_number(gain, f"actuators.{name}", "gain")
+        self._actuators[name] = (coordinate, float(gain))
+
     def _check_new(self, table: dict, name: str, section: str) -> None:
         if name in table:
             raise ModelError(f"{name!r} is defined twice", entry=f"{section}.{name}")
@@ -271,13 +310,19 @@ class _Assembler:
         self.index: dict[str, int] = {}
         names, kinds, q0, constants = [], [], [], []
         free = [e for e in builder._elements.values() if not e.fixed]
-        n = 3 * len(free)
+        n = 3 * len(free) + len(builder._angles)
         for element in free:
             self.index[element.name] = len(q0)
             axes = ("x", "y", "z")
             names += [f"{element.name}.{axis}" for axis in axes]
             kinds += list(axes) if element.kind == "point" else ["direction"] * 3
             q0 += list(element.value)
+        for name in builder._angles:            # massless coordinates after the elements'
+            if name in builder._elements or name in names:
+                raise ModelError(f"{name!r} is already the name of a point or vector", entry=f"angles.{name}")
+            names.append(name)
+            kinds.append("angle")
+            q0.append(0.0)                       # set in model() from the elements
         for element in builder._elements.values():
             if element.fixed:
                 self.index[element.name] = n + len(constants)
@@ -310,6 +355,13 @@ class _Assembler:
             head, tail = (self._element(name, entry, "point") for name in spec)
             return self.index[head.name], self.index[tail.name]
         raise ModelError(f"an element is a vector's name or a pair of point names, got {spec!r}", entry=entry)
+
+    def _coordinate(self, name: object, entry: str) -> int:
+        """The index of coordinate ``name`` ("P.x", an angle's name)."""
+        if not isinstance(name, str) or name not in self.names:
+            raise ModelError(f"no coordinate {name!r}{did_you_mean(str(name), self.names)} (coordinates: "
+                             f"{', '.join(self.names)})", entry=entry)
+        return self.names.index(name)
 
     def _check_moving(self, indices: Sequence[int], entry: str) -> None:
         """ModelError for a row between fixed elements only: it involves no coordinate."""
@@ -396,6 +448,33 @@ class _Assembler:
             dots.append((*first, *second))
             dot_values.append(float(self._value(first) @ self._value(second)) if value is None else float(value))
             dot_names.append(f"dot {name}")
+        angles, angle_names = [], []
+        for k, (name, (reference, vector, axis, initial)) in enumerate(b._angles.items()):
+            entry = f"angles.{name}"
+            first, second = self._pair(reference, entry), self._pair(vector, entry)
+            normal = (self.index[self._element(axis, entry, "vector").name], self.zero)
+            r, v, a = self._value(first), self._value(second), self._value(normal)
+            for label, element in (("reference", r), ("vector", v)):
+                if abs(element @ a) > 1e-6 * np.linalg.norm(element):
+                    raise ModelError(f"the {label} is not across the axis {axis!r} at the start (their product is "
+                                     f"{element @ a:.3g}): the angle about the axis is that of two vectors across it",
+                                     entry=entry)
+            coordinate = self.names.index(name)
+            start = math.atan2(float(np.cross(r, v) @ a), float(r @ v))
+            self.q0[coordinate] = self.x0[coordinate] = start if initial is None else float(initial)
+            angles.append((*first, *second, *normal, coordinate))
+            angle_names.append(f"angle {name}")
+        drivers, functions, labels, driver_names = [], [], [], []
+        for name, (coordinate, function) in b._drivers.items():
+            drivers.append((self._coordinate(coordinate, f"drivers.{name}"), len(functions)))
+            functions.append(function)
+            labels.append(f"driver {name}")
+            driver_names.append(name)
+        actuators, gains = [], []
+        for name, (coordinate, gain) in b._actuators.items():
+            actuators.append(self._coordinate(coordinate, f"actuators.{name}"))
+            gains.append(gain)
+        time_functions = TimeFunctionPack.build(functions, labels)
         springs, spring_parameters = [], []
         for name, (i, j, stiffness, damping, rest) in b._springs.items():
             entry = f"springs.{name}"
@@ -421,25 +500,34 @@ class _Assembler:
         q_constant = self.gravity_ext[:n].copy()
         int_sections = [np.array(dots, dtype=np.int64).reshape(-1, 4), np.array(linear, dtype=np.int64).reshape(-1, 8),
                         np.array(springs, dtype=np.int64).reshape(-1, 2), np.array(forces, dtype=np.int64),
-                        np.array(moments, dtype=np.int64).reshape(-1, 6)]
+                        np.array(moments, dtype=np.int64).reshape(-1, 6),
+                        np.array(angles, dtype=np.int64).reshape(-1, 7),
+                        np.array(drivers, dtype=np.int64).reshape(-1, 2), np.array(actuators, dtype=np.int64),
+                        time_functions.table, time_functions.ops]
         real_sections = [np.array(dot_values), np.array(coefficients).reshape(-1, 3), q_constant,
                          np.array(spring_parameters).reshape(-1, 3), np.array(force_values).reshape(-1, 3),
-                         self.constants, np.array(moment_values).reshape(-1, 12)]
+                         self.constants, np.array(moment_values).reshape(-1, 12), np.array(gains),
+                         time_functions.reals]
         ints, reals = pack(int_sections, real_sections)
         mass.setflags(write=False)
         point_names = [e.name for e in b._elements.values() if e.kind == "point"]
-        equations = SpatialEquations(n=n, m=len(dots) + 3 * len(linear), ints=ints, reals=reals, mass=mass,
+        equations = SpatialEquations(n=n, m=len(dots) + 3 * len(linear) + len(angles) + len(drivers), ints=ints,
+                                     reals=reals, mass=mass, time_functions=time_functions,
                                      constants=self.constants, gravity_ext=self.gravity_ext.copy(),
                                      springs=(np.array(springs, dtype=np.int64).reshape(-1, 2),
                                               np.array(spring_parameters).reshape(-1, 3)),
                                      point_indices=np.array([self.index[p] for p in point_names], dtype=np.int64),
                                      work_sources=tuple(f"force {name!r}" for name in b._forces)
                                      + tuple(f"moment {name!r}" for name in b._moments)
-                                     + tuple(f"spring {name!r}" for name, s in b._springs.items() if s[3] > 0.0))
-        constraint_names = dot_names + linear_names
+                                     + tuple(f"spring {name!r}" for name, s in b._springs.items() if s[3] > 0.0),
+                                     steady_drivers=frozenset(name for name, (_, function) in b._drivers.items()
+                                                              if is_constant(function)))
+        constraint_names = dot_names + linear_names + angle_names + driver_names
         return Model(name=b.name, coordinate_names=tuple(self.names), coordinate_kinds=tuple(self.kinds),
-                     constraint_names=tuple(constraint_names), drivers=np.zeros(len(constraint_names), dtype=bool),
-                     actuator_names=(), q0=self.q0.copy(), qd0=np.zeros(n), point_names=tuple(point_names),
+                     constraint_names=tuple(constraint_names),
+                     drivers=np.arange(len(constraint_names)) >= len(constraint_names) - len(driver_names),
+                     actuator_names=tuple(b._actuators), q0=self.q0.copy(), qd0=np.zeros(n),
+                     point_names=tuple(point_names),
                      lines=tuple((point_names.index(i), point_names.index(j)) for i, j in lines),
                      equations=equations, description=b.description, source=b.source,
                      parameters={"gravity": tuple(float(g) for g in self.gravity), "dimension": 3},
@@ -504,16 +592,28 @@ class SpatialEquations:
     gravity_ext: np.ndarray
     springs: tuple[np.ndarray, np.ndarray]
     point_indices: np.ndarray
+    time_functions: TimeFunctionPack
     #: the forces and dampers, by name (see :attr:`cmbs.model.model.Model.work_sources`)
     work_sources: tuple[str, ...] = ()
+    #: the drivers of a constant, which hold their coordinate and do no work
+    steady_drivers: frozenset[str] = frozenset()
 
     def new_terms(self) -> Terms:
-        return Terms(self.n, self.m, constant_mass=self.mass, scratch=2 * (self.n + self.constants.size))
+        """Terms whose scratch holds the time functions' (f, f', f'') and stack, then the extended
+        x = (q, constants) and v = (q̇, 0)."""
+        functions = self.time_functions
+        return Terms(self.n, self.m, constant_mass=self.mass,
+                     scratch=3 * (functions.count + functions.depth) + 2 * (self.n + self.constants.size))
 
-    def compiled_kernel(self) -> "SpatialKernel":
+    def compiled_kernel(self) -> "SpatialKernel | None":
+        """The model's data for the compiled loops, or None when a driver is a Python callable."""
+        if self.time_functions.python:
+            return None
         return SpatialKernel(self.ints, self.reals, np.ascontiguousarray(self.mass, dtype=float))
 
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
+        for k, function in self.time_functions.python:
+            terms.scratch[3 * k:3 * k + 3] = function(t)
         _evaluate(q, qd, t, u, self.ints, self.reals, terms.buffer)
 
     def _extended(self, q: np.ndarray) -> np.ndarray:
@@ -560,11 +660,14 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     n_ext = n + c1 - c0
     i_dot, n_dot = ints[1 + _DOT], (ints[2 + _DOT] - ints[1 + _DOT]) // 4
     i_linear, n_linear = ints[1 + _LINEAR], (ints[2 + _LINEAR] - ints[1 + _LINEAR]) // 8
-    m = n_dot + 3 * n_linear
+    i_angle, n_angle = ints[1 + _ANGLE], (ints[2 + _ANGLE] - ints[1 + _ANGLE]) // 7
+    i_driver, n_driver = ints[1 + _DRIVER], (ints[2 + _DRIVER] - ints[1 + _DRIVER]) // 2
+    m = n_dot + 3 * n_linear + n_angle + n_driver
     a0 = n + m
     g0 = a0 + m * n
     t0 = g0 + m
-    x0 = t0 + m
+    s0 = t0 + m
+    x0 = buffer.shape[0] - 2 * n_ext
     v0 = x0 + n_ext
     for k in range(n):
         buffer[x0 + k] = q[k]
@@ -572,8 +675,14 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     for k in range(n, n_ext):
         buffer[x0 + k] = reals[c0 + k - n]
         buffer[v0 + k] = 0.0
+    # time functions: (f, f', f'') rows at the scratch's start, then the expression stack
+    n_tf = (ints[2 + _TF_TABLE] - ints[1 + _TF_TABLE]) // 4
+    if n_tf > 0:
+        evaluate_time_functions(int_section(ints, _TF_TABLE).reshape((n_tf, 4)),
+                                int_section(ints, _TF_OPS).reshape((-1, 2)), real_section(ints, reals, _TF_REALS), t,
+                                buffer[s0 + 3 * n_tf:x0].reshape((-1, 3)), buffer[s0:s0 + 3 * n_tf].reshape((n_tf, 3)))
     buffer[a0:g0] = 0.0
-    buffer[t0:x0] = 0.0
+    buffer[t0:s0] = 0.0
     row = 0
     r0 = ints[real_base + 1 + _DOT_VALUE]
     for k in range(n_dot):
@@ -612,9 +721,24 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
             buffer[g0 + row] = 0.0
             row += 1
 
+    for k in range(n_angle):
+        _angle_row(buffer, ints, i_angle + 7 * k, n, a0, g0, x0, v0, row)
+        row += 1
+    for k in range(n_driver):
+        c, f = ints[i_driver + 2 * k], ints[i_driver + 2 * k + 1]
+        buffer[n + row] = buffer[x0 + c] - buffer[s0 + 3 * f]
+        buffer[a0 + row * n + c] = 1.0
+        buffer[t0 + row] = -buffer[s0 + 3 * f + 1]
+        buffer[g0 + row] = buffer[s0 + 3 * f + 2]
+        row += 1
+
     r0 = ints[real_base + 1 + _Q_CONSTANT]
     for k in range(n):
         buffer[k] = reals[r0 + k]
+    i0 = ints[1 + _ACTUATOR]
+    r0 = ints[real_base + 1 + _ACTUATOR_GAIN]
+    for k in range(ints[2 + _ACTUATOR] - i0):
+        buffer[ints[i0 + k]] += reals[r0 + k] * u[k]
     i0 = ints[1 + _POINT_FORCE]
     r0 = ints[real_base + 1 + _POINT_FORCE_VALUE]
     for k in range(ints[2 + _POINT_FORCE] - i0):
@@ -659,6 +783,49 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
                 buffer[i + d] += tension * e
             if j + d < n:
                 buffer[j + d] -= tension * e
+
+
+@njit(cache=True, inline="always")
+def _triple_at(buffer, base, head, tail):
+    """The 3-vector x[head] - x[tail] of the extended array at ``buffer[base:]``."""
+    return (buffer[base + head] - buffer[base + tail], buffer[base + head + 1] - buffer[base + tail + 1],
+            buffer[base + head + 2] - buffer[base + tail + 2])
+
+
+@njit(cache=True, inline="always")
+def _cross(a, b):
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+@njit(cache=True, inline="always")
+def _dot3(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True, error_model="numpy")
+def _angle_row(buffer, ints, s, n, a0, g0, x0, v0, row):
+    """Row ``row`` of an angle coordinate θ from r to v about the axis a (module docstring):
+    Φ = cos θ T - sin θ D, T = (r × v)·a, D = r·v; its Jacobian and γ = -(Ȧ q̇)."""
+    rh, rt, vh, vt, ah, at, c = ints[s], ints[s + 1], ints[s + 2], ints[s + 3], ints[s + 4], ints[s + 5], ints[s + 6]
+    r, v, a = _triple_at(buffer, x0, rh, rt), _triple_at(buffer, x0, vh, vt), _triple_at(buffer, x0, ah, at)
+    dr, dv, da = _triple_at(buffer, v0, rh, rt), _triple_at(buffer, v0, vh, vt), _triple_at(buffer, v0, ah, at)
+    angle, rate = buffer[x0 + c], buffer[v0 + c]
+    co, si = math.cos(angle), math.sin(angle)
+    r_v, v_a, a_r = _cross(r, v), _cross(v, a), _cross(a, r)
+    T, D = _dot3(r_v, a), _dot3(r, v)
+    buffer[n + row] = co * T - si * D
+    for d in range(3):
+        for head, tail, value in ((rh, rt, co * v_a[d] - si * v[d]), (vh, vt, co * a_r[d] - si * r[d]),
+                                  (ah, at, co * r_v[d])):
+            _add(buffer, a0, row, head + d, value, n)
+            _add(buffer, a0, row, tail + d, -value, n)
+    _add(buffer, a0, row, c, -si * T - co * D, n)
+    T_rate = _dot3(_cross(dr, v), a) + _dot3(_cross(r, dv), a) + _dot3(r_v, da)
+    D_rate = _dot3(dr, v) + _dot3(r, dv)
+    T_quadratic = 2.0 * (_dot3(_cross(dr, dv), a) + _dot3(_cross(dr, v), da) + _dot3(_cross(r, dv), da))
+    D_quadratic = 2.0 * _dot3(dr, dv)
+    buffer[g0 + row] = -(-co * rate * rate * T - 2.0 * si * rate * T_rate + co * T_quadratic
+                         + si * rate * rate * D - 2.0 * co * rate * D_rate - si * D_quadratic)
 
 
 class SpatialKernel(NamedTuple):

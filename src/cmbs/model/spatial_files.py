@@ -10,19 +10,21 @@ to one onto :class:`~cmbs.model.spatial.SpatialModelBuilder`'s calls.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Callable
 
 from cmbs.errors import ModelError
-from cmbs.model.files import _Entry, apply_sections
+from cmbs.model.files import _actuator, _driver, _Entry, apply_sections
 from cmbs.model.spatial import SpatialModelBuilder
 
 #: the sections of a spatial model file
-SECTIONS = ("model", "points", "vectors", "bodies", "rods", "distances", "dots", "springs", "forces",
-            "moments", "initial_velocities")
+SECTIONS = ("model", "points", "vectors", "bodies", "rods", "distances", "dots", "angles", "drivers", "springs",
+            "forces", "moments", "actuators", "initial_velocities")
 
 
-def read_spatial_builder(document: dict, default_name: str) -> SpatialModelBuilder:
-    """The builder of a spatial model file's ``document`` (``[model] dimension = 3``)."""
+def read_spatial_builder(document: dict, base: Path, default_name: str) -> SpatialModelBuilder:
+    """The builder of a spatial model file's ``document`` (``[model] dimension = 3``); ``base`` is
+    the file's folder (for drivers' CSV files)."""
     unknown = sorted(set(document) - set(SECTIONS))
     if unknown:
         raise ModelError(f"unknown section(s) {', '.join(map(repr, unknown))} of a spatial model (dimension = 3; "
@@ -41,22 +43,27 @@ def read_spatial_builder(document: dict, default_name: str) -> SpatialModelBuild
         "rods": lambda name, t: _rod(builder, name, t),
         "distances": lambda name, t: _distance(builder, name, t),
         "dots": lambda name, t: _dot(builder, name, t),
+        "angles": lambda name, t: _angle(builder, name, t),
+        "drivers": lambda name, t: _driver(builder, name, t, base),
         "springs": lambda name, t: _spring(builder, name, t),
         "forces": lambda name, t: _force(builder, name, t),
         "moments": lambda name, t: _moment(builder, name, t),
+        "actuators": lambda name, t: _actuator(builder, name, t),
     }
     apply_sections(document, handlers)
     return builder
 
 
-def entry_of_constraint(constraint: str) -> str:
+def entry_of_constraint(constraint: str, drivers: frozenset[str] = frozenset()) -> str:
     """The file entry behind a spatial constraint name: 'rigid top: u·v' and 'body top: tip.x' ->
     'bodies.top', 'rigid crank' -> 'rods.crank', 'distance rod' -> 'distances.rod', 'dot plane'
-    -> 'dots.plane'."""
+    -> 'dots.plane', 'angle turn' -> 'angles.turn', a name in ``drivers`` -> 'drivers.NAME'."""
+    if constraint in drivers:
+        return f"drivers.{constraint}"
     kind, _, name = constraint.partition(" ")
     if kind == "body" or (kind == "rigid" and ": " in name):
         return f"bodies.{name.partition(': ')[0]}"
-    return {"rigid": "rods", "distance": "distances", "dot": "dots"}.get(kind, "model") + f".{name}"
+    return {"rigid": "rods", "distance": "distances", "dot": "dots", "angle": "angles"}.get(kind, "model") + f".{name}"
 
 
 def _triple(entry: _Entry, key: str) -> tuple[float, float, float] | None:
@@ -162,3 +169,9 @@ def _force(builder: SpatialModelBuilder, name: str, table: object) -> None:
 def _moment(builder: SpatialModelBuilder, name: str, table: object) -> None:
     entry = _Entry(f"moments.{name}", table, ("body", "moment"), ("body", "moment"))
     builder.add_moment(name, body=entry.string("body"), moment=_triple(entry, "moment"))
+
+
+def _angle(builder: SpatialModelBuilder, name: str, table: object) -> None:
+    entry = _Entry(f"angles.{name}", table, ("reference", "vector", "axis", "initial"), ("reference", "vector", "axis"))
+    builder.add_angle(name, reference=_element(entry, "reference"), vector=_element(entry, "vector"),
+                      axis=entry.string("axis"), initial=entry.number("initial"))
