@@ -28,6 +28,7 @@ import numpy as np
 
 from cmbs.errors import ModelError
 from cmbs.model.limits import MAX_MAGNITUDE, MIN_LENGTH_RATIO
+from cmbs.model.packing import int_section, real_section
 from cmbs.lazy import on_first_use
 from cmbs.model.expressions import Program, evaluate_program, parse_expression
 
@@ -275,6 +276,35 @@ def _describe(function: TimeFunction) -> str:
     if isinstance(function, Expression):
         return repr(function.text)
     return type(function).__name__.lower()
+
+
+@njit(cache=True, inline="always")
+def packed_time_functions(ints, reals, table_section, ops_section, reals_section, t, buffer, s0, x0):
+    """A model kernel's time functions at t (their table, ops and reals the given sections of
+    its packed ``ints``, ``reals``: :mod:`cmbs.model.packing`) into ``buffer``: the rows
+    (f, f', f'') from ``s0``, then the expression stack up to ``x0``."""
+    n_tf = (ints[2 + table_section] - ints[1 + table_section]) // 4
+    if n_tf > 0:
+        evaluate_time_functions(int_section(ints, table_section).reshape((n_tf, 4)),
+                                int_section(ints, ops_section).reshape((-1, 2)),
+                                real_section(ints, reals, reals_section), t,
+                                buffer[s0 + 3 * n_tf:x0].reshape((-1, 3)), buffer[s0:s0 + 3 * n_tf].reshape((n_tf, 3)))
+
+
+@njit(cache=True, inline="always")
+def driver_rows(ints, section, buffer, n, a0, g0, t0, s0, x0, row):
+    """The driver rows Φ = q_c - f(t), Φ_t = -f'(t), γ = f''(t) of the (coordinate, function)
+    pairs in int section ``section``, from row ``row`` of a terms buffer (A row-major at ``a0``,
+    γ at ``g0``, Φ_t at ``t0``, the functions' rows at ``s0``, x at ``x0``); the next row."""
+    i0 = ints[1 + section]
+    for k in range((ints[2 + section] - i0) // 2):
+        c, f = ints[i0 + 2 * k], ints[i0 + 2 * k + 1]
+        buffer[n + row] = buffer[x0 + c] - buffer[s0 + 3 * f]
+        buffer[a0 + row * n + c] = 1.0
+        buffer[t0 + row] = -buffer[s0 + 3 * f + 1]
+        buffer[g0 + row] = buffer[s0 + 3 * f + 2]
+        row += 1
+    return row
 
 
 @njit(cache=True)

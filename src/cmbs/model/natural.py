@@ -63,10 +63,11 @@ from cmbs.jit import borrow, njit
 import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
-from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions, is_constant
+from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, driver_rows, is_constant, \
+    packed_time_functions
 from cmbs.model.limits import MAX_MAGNITUDE, MIN_LENGTH_RATIO
 from cmbs.model.model import Model, Terms
-from cmbs.model.packing import int_section, pack, real_section
+from cmbs.model.packing import pack
 
 # int sections of the packed kernel data, in this order
 (_RIGID, _DISTANCE, _ANGLE, _PARALLEL, _DRIVER, _POINT_FORCE, _TORQUE, _SPRING, _ACTUATOR,
@@ -1037,11 +1038,7 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     v = buffer[v0:v0 + n_ext]
 
     # time functions: (f, f', f'') rows at the scratch's start, then the expression stack
-    n_tf = (ints[2 + _TF_TABLE] - ints[1 + _TF_TABLE]) // 4
-    if n_tf > 0:
-        evaluate_time_functions(int_section(ints, _TF_TABLE).reshape((n_tf, 4)),
-                                int_section(ints, _TF_OPS).reshape((-1, 2)), real_section(ints, reals, _TF_REALS), t,
-                                buffer[s0 + 3 * n_tf:x0].reshape((-1, 3)), buffer[s0:s0 + 3 * n_tf].reshape((n_tf, 3)))
+    packed_time_functions(ints, reals, _TF_TABLE, _TF_OPS, _TF_REALS, t, buffer, s0, x0)
 
     buffer[a0:g0] = 0.0                      # A (a slice assignment: numba makes it a memset, which
     buffer[t0:s0] = 0.0                      # an element loop is not: 7x slower for 200 links)
@@ -1145,14 +1142,7 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
         buffer[g0 + row + 1] = 0.0
         row += 2
 
-    i0 = ints[1 + _DRIVER]
-    for k in range((ints[2 + _DRIVER] - i0) // 2):
-        c, f = ints[i0 + 2 * k], ints[i0 + 2 * k + 1]
-        buffer[n + row] = x[c] - buffer[s0 + 3 * f]
-        buffer[a0 + row * n + c] = 1.0
-        buffer[t0 + row] = -buffer[s0 + 3 * f + 1]
-        buffer[g0 + row] = buffer[s0 + 3 * f + 2]
-        row += 1
+    row = driver_rows(ints, _DRIVER, buffer, n, a0, g0, t0, s0, x0, row)
 
     # generalized forces
     r0 = ints[real_base + 1 + _Q_CONSTANT]

@@ -75,9 +75,10 @@ import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
 from cmbs.jit import borrow, njit
-from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, evaluate_time_functions, is_constant
+from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, driver_rows, is_constant, \
+    packed_time_functions
 from cmbs.model.model import Model, Terms
-from cmbs.model.packing import int_section, pack, real_section
+from cmbs.model.packing import pack
 
 # int sections of the kernel
 _DOT, _LINEAR, _SPRING, _POINT_FORCE, _MOMENT, _ANGLE, _DRIVER, _ACTUATOR, _TF_TABLE, _TF_OPS = range(10)
@@ -661,7 +662,7 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     i_dot, n_dot = ints[1 + _DOT], (ints[2 + _DOT] - ints[1 + _DOT]) // 4
     i_linear, n_linear = ints[1 + _LINEAR], (ints[2 + _LINEAR] - ints[1 + _LINEAR]) // 8
     i_angle, n_angle = ints[1 + _ANGLE], (ints[2 + _ANGLE] - ints[1 + _ANGLE]) // 7
-    i_driver, n_driver = ints[1 + _DRIVER], (ints[2 + _DRIVER] - ints[1 + _DRIVER]) // 2
+    n_driver = (ints[2 + _DRIVER] - ints[1 + _DRIVER]) // 2
     m = n_dot + 3 * n_linear + n_angle + n_driver
     a0 = n + m
     g0 = a0 + m * n
@@ -676,11 +677,7 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
         buffer[x0 + k] = reals[c0 + k - n]
         buffer[v0 + k] = 0.0
     # time functions: (f, f', f'') rows at the scratch's start, then the expression stack
-    n_tf = (ints[2 + _TF_TABLE] - ints[1 + _TF_TABLE]) // 4
-    if n_tf > 0:
-        evaluate_time_functions(int_section(ints, _TF_TABLE).reshape((n_tf, 4)),
-                                int_section(ints, _TF_OPS).reshape((-1, 2)), real_section(ints, reals, _TF_REALS), t,
-                                buffer[s0 + 3 * n_tf:x0].reshape((-1, 3)), buffer[s0:s0 + 3 * n_tf].reshape((n_tf, 3)))
+    packed_time_functions(ints, reals, _TF_TABLE, _TF_OPS, _TF_REALS, t, buffer, s0, x0)
     buffer[a0:g0] = 0.0
     buffer[t0:s0] = 0.0
     row = 0
@@ -724,13 +721,7 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     for k in range(n_angle):
         _angle_row(buffer, ints, i_angle + 7 * k, n, a0, g0, x0, v0, row)
         row += 1
-    for k in range(n_driver):
-        c, f = ints[i_driver + 2 * k], ints[i_driver + 2 * k + 1]
-        buffer[n + row] = buffer[x0 + c] - buffer[s0 + 3 * f]
-        buffer[a0 + row * n + c] = 1.0
-        buffer[t0 + row] = -buffer[s0 + 3 * f + 1]
-        buffer[g0 + row] = buffer[s0 + 3 * f + 2]
-        row += 1
+    row = driver_rows(ints, _DRIVER, buffer, n, a0, g0, t0, s0, x0, row)
 
     r0 = ints[real_base + 1 + _Q_CONSTANT]
     for k in range(n):
