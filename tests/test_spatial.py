@@ -125,7 +125,7 @@ def _spherical_pendulum(length=1.3, theta0=0.7, phi_rate=2.1, mass=0.8):
     b = SpatialModelBuilder("spherical-pendulum")
     b.add_point("O", (0.0, 0.0, 0.0), fixed=True)
     b.add_point("P", (length * np.sin(theta0), 0.0, -length * np.cos(theta0)), mass=mass)
-    b.add_distance("rod", "O", "P")
+    b.add_rod("rod", "O", "P", mass=0.0)
     model = b.build()
     qd0 = np.array([0.0, length * np.sin(theta0) * phi_rate, 0.0])
     return model, qd0
@@ -486,3 +486,21 @@ def test_driven_spatial_four_bar_needs_the_planar_torque():
     torque_flat, torque_space = flat.force("alpha"), spatial.force("alpha")
     assert np.ptp(torque_flat) > 10.0                       # a real torque history
     np.testing.assert_allclose(torque_space, torque_flat, atol=1e-8 * np.abs(torque_flat).max())
+
+
+def test_a_jack_on_a_distance_coordinate_pushes_along_the_line():
+    """A linear actuator on the distance s between a fixed point and a free point mass (no
+    gravity): the input u is a force u along the line, so the mass moves as x(t) = x0 + ½ (u/m) t²."""
+    b = SpatialModelBuilder("jack", gravity=(0.0, 0.0, 0.0))
+    b.add_point("O", (0.0, 0.0, 0.0), fixed=True)
+    b.add_point("P", (0.6, 0.0, 0.8), mass=2.0)
+    b.add_distance("s", "O", "P")
+    b.add_actuator("jack", coordinate="s", gain=1.5)
+    model = b.build()
+    assert model.q0[model.coordinate_index("s")] == pytest.approx(1.0)
+    run = cmbs.simulate(model, t_end=1.0, dt=0.1, u=np.array([2.0]), integrator="dop853", rtol=1e-11, atol=1e-12)
+    assert run.info["status"] == "success"
+    travel = 0.5 * (1.5 * 2.0 / 2.0) * run.t**2
+    np.testing.assert_allclose(run["P.x"], 0.6 + 0.6 * travel, atol=1e-9)
+    np.testing.assert_allclose(run["P.z"], 0.8 + 0.8 * travel, atol=1e-9)
+    np.testing.assert_allclose(run["s"], 1.0 + travel, atol=1e-9)

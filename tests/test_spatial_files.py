@@ -100,14 +100,17 @@ second = { points = ["B", "C"], mass = 1.0 }
 """
     path.write_text(text)                     # 1 m + 4 m reach C 5 m away: it closes, B on the line
     assert cmbs.load(path).n == 3
-    path.write_text(text.replace("C = { position = [5.0, 0.0, 0.0]", "C = { position = [9.0, 0.0, 0.0]")
-                    .replace('second = { points = ["B", "C"], mass = 1.0 }',
-                             'second = { points = ["B", "C"], mass = 1.0 }\n[distances.short]\n'
-                             'points = ["B", "C"]\nlength = 2.0'))
-    with pytest.raises(ModelError) as caught:      # B cannot be 2 m from C and 8 m (the rod) at once
+    path.write_text(text.replace('second = { points = ["B", "C"], mass = 1.0 }', "") + """
+[distances.gap]
+points = ["B", "C"]
+[drivers.hold]
+coordinate = "gap"
+expression = "7.0"
+""")                                               # B, 1 m from A, cannot be 7 m from C, 5 m away
+    with pytest.raises(ModelError) as caught:
         cmbs.load(path)
-    assert caught.value.entry in ("rods.first", "rods.second", "distances.short")
-    assert "cannot be assembled" in str(caught.value)
-    path.write_text(text + '[distances.ground]\npoints = ["A", "C"]\n')
-    with pytest.raises(ModelError, match="distances.ground: relates fixed elements only"):
+    assert caught.value.entry == "drivers.hold"
+    assert "cannot reach" in str(caught.value) and "gap at 7" in str(caught.value)
+    path.write_text(text + '[dots.ground]\na = ["C", "A"]\nb = ["C", "A"]\n')
+    with pytest.raises(ModelError, match="dots.ground: relates fixed elements only"):
         cmbs.load(path)

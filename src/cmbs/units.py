@@ -2,10 +2,10 @@
 
 A generalized force τ on coordinate q does the virtual work τ δq [J], so its unit is J divided
 by the coordinate's: N m on an angle (rad), N on a length (m).  Natural coordinates say what each
-coordinate is (:attr:`~cmbs.model.model.Model.coordinate_kinds`: x, y, z, distance, angle; the components of a
-spatial unit vector, kind ``direction``, have no unit), joint
-coordinates by their joint (revolute or prismatic); a model from the user's own equations
-(kind ``generic``) does not say, and the unit is then ``""``.
+coordinate is (:attr:`~cmbs.model.model.Model.coordinate_kinds`: x, y, z, distance, angle; the
+components of a spatial unit vector, kind ``direction``, have no unit), joint coordinates by
+their joint (revolute or prismatic); a model from the user's own equations (kind ``generic``)
+does not say, and the unit is then ``""``.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ def spherical_pendulum(length: float = 1.0, mass: float = 1.0, polar_angle: floa
                                   source="Landau & Lifshitz, Mechanics §14 problem 1 (values chosen)")
     builder.add_point("O", (0.0, 0.0, 0.0), fixed=True)
     builder.add_point("P", (length * math.sin(theta), 0.0, -length * math.cos(theta)), mass=mass)
-    builder.add_distance("rod", "O", "P")
+    builder.add_rod("rod", "O", "P", mass=0.0)                  # massless
     model = builder.build()
     return model.replace(qd0=np.array([0.0, length * math.sin(theta) * azimuth_rate, 0.0]),
                          parameters={"length": length, "mass": mass, "polar_angle": polar_angle,

@@ -31,12 +31,13 @@ revolute joint to the ground); its products of two fixed elements are identities
 A **rod** is a slender body between two points i and j (its rotation about its own axis is no
 coordinate): r = (1 - c) r_i + c r_j, M_e = ∫ [(1-c)²  c(1-c); c(1-c)  c²] dm ⊗ I₃ with
 ∫ c dm = m c̄ and ∫ c² dm = (I_⊥ + m c̄² L²)/L² (I_⊥ about the centre of mass, perpendicular to
-the axis), and one rigid row |r_j - r_i|² = L².  A **point mass** adds m I₃ to its point.
+the axis), and one rigid row |r_j - r_i|² = L² (mass 0: a massless link, the row alone).  A
+**point mass** adds m I₃ to its point.
 
 **Joints by shared elements:** two bodies that share a point are joined by a spherical joint,
 sharing a point and a unit vector (their common axis) by a revolute joint.  Further rows: a
-distance |P - Q|² = s², and a scalar product a·b = value of two elements (vectors or point
-differences), e.g. u₁·u₂ = 0 for a universal joint or (P - O)·n = 0 for a point in a plane.
+scalar product a·b = value of two elements (vectors or point differences), e.g. u₁·u₂ = 0 for a
+universal joint or (P - O)·n = 0 for a point in a plane.
 
 A constant **moment** M on a body does the virtual work M·δθ.  With G = (X₀ᵀX₀)⁻¹ the inverse
 Gram matrix of the basis (constant for a rigid body: the dual basis bᵏ = Σₗ Gₖₗ bₗ turns with it),
@@ -52,15 +53,17 @@ kind         Φ                                      γ = -(Ȧ q̇)
 dot          a·b - value,  a = x_aₕ - x_aₜ, ...       -2 ȧ·ḃ
 linear       E - T - Σ cₖ (x_hₖ - x_tₖ)  (3 rows)     0   (constant A)
 angle        cos θ (r × v)·a - sin θ r·v              the velocity-quadratic part of Φ̈, negated
+distance     |x_j - x_i|² - s²                        -2 |ẋ_j - ẋ_i|² + 2 ṡ²
 driver       q_c - f(t)                               f''(t)   (Φ_t = -f'(t))
 ===========  =====================================  ==========================================
 
 An **angle coordinate** θ (massless) is the angle from r to v about the unit vector a, both
 across it: on such vectors the row equals |r||v| sin(θ* - θ), θ* the actual angle, with
-∂Φ/∂θ = -|r||v| at the solution, well conditioned at every angle as in the plane.  Drivers hold
-a coordinate (a point's or an angle) at a function of time; actuators add gain·u to one.
+∂Φ/∂θ = -|r||v| at the solution, well conditioned at every angle as in the plane.  A **distance
+coordinate** s (massless) is the distance between two points.  Drivers hold a coordinate (a
+point's, an angle, a distance) at a function of time; actuators add gain·u to one.
 
-(rigid-body rows, rods and distances are dot rows; a unit vector is the difference of its
+(rigid-body rows and rods are dot rows; a unit vector is the difference of its
 coordinates and a constant zero vector.)  Loads: gravity, constant forces at points, constant
 moments on bodies, linear spring-dampers between points.
 """
@@ -81,7 +84,7 @@ from cmbs.model.model import Model, Terms
 from cmbs.model.packing import pack
 
 # int sections of the kernel
-_DOT, _LINEAR, _SPRING, _POINT_FORCE, _MOMENT, _ANGLE, _DRIVER, _ACTUATOR, _TF_TABLE, _TF_OPS = range(10)
+_DOT, _LINEAR, _SPRING, _POINT_FORCE, _MOMENT, _ANGLE, _DRIVER, _ACTUATOR, _TF_TABLE, _TF_OPS, _DISTANCE = range(11)
 # real sections
 _DOT_VALUE, _LINEAR_COEFFICIENTS, _Q_CONSTANT, _SPRING_PARAMETERS, _POINT_FORCE_VALUE, _CONSTANTS = 0, 1, 2, 3, 4, 5
 _MOMENT_VALUE, _ACTUATOR_GAIN, _TF_REALS = 6, 7, 8
@@ -132,7 +135,7 @@ class SpatialModelBuilder:
     _elements: dict[str, _Element] = field(default_factory=dict)
     _bodies: dict[str, _Body] = field(default_factory=dict)
     _rods: dict[str, _Rod] = field(default_factory=dict)
-    _distances: dict[str, tuple[str, str, float | None]] = field(default_factory=dict)
+    _distances: dict[str, tuple[str, str, float | None]] = field(default_factory=dict)    # coordinates
     _dots: dict[str, tuple[object, object, float | None]] = field(default_factory=dict)
     _springs: dict[str, tuple[str, str, float, float, float | None]] = field(default_factory=dict)
     _forces: dict[str, tuple[str, np.ndarray]] = field(default_factory=dict)
@@ -204,20 +207,25 @@ class SpatialModelBuilder:
         (default m L²/12, a uniform rod centred)."""
         entry = f"rods.{name}"
         self._check_new(self._rods, name, "rods")
-        if not (math.isfinite(mass) and mass > 0.0):
-            raise ModelError(f"mass must be a finite number > 0, got {mass!r}", entry=entry)
+        if not (math.isfinite(mass) and mass >= 0.0):
+            raise ModelError(f"mass must be a finite number >= 0 (0: a massless link), got {mass!r}", entry=entry)
         if not math.isfinite(com):
             raise ModelError(f"com must be finite, got {com!r}", entry=entry)
         if inertia is not None and not (math.isfinite(inertia) and inertia >= 0.0):
             raise ModelError(f"inertia must be a finite number >= 0, got {inertia!r}", entry=entry)
+        if mass == 0.0 and inertia:
+            raise ModelError(f"a massless rod has no inertia, got {inertia!r}", entry=entry)
         self._rods[name] = _Rod(name, i, j, float(mass), float(com), None if inertia is None else float(inertia))
 
     # ------------------------------------------------------------------ constraints and loads
-    def add_distance(self, name: str, i: str, j: str, *, length: float | None = None) -> None:
-        """|r_j - r_i| = length (default: the initial distance)."""
+    def add_distance(self, name: str, i: str, j: str, *, initial: float | None = None) -> None:
+        """A distance coordinate ``name`` (massless, as in the plane): s = |r_j - r_i|, the row
+        |r_j - r_i|² - s² = 0; to drive or to actuate (a linear actuator between two points).
+        ``initial`` defaults to the start distance.  A fixed length is a rod (mass 0 for a
+        massless link)."""
         self._check_new(self._distances, name, "distances")
-        _optional_number(length, f"distances.{name}", "length", positive=True)
-        self._distances[name] = (i, j, length)
+        _optional_number(initial, f"distances.{name}", "initial", positive=True)
+        self._distances[name] = (i, j, initial)
 
     def add_dot(self, name: str, a: str | tuple[str, str], b: str | tuple[str, str], *,
                 value: float | None = None) -> None:
@@ -311,19 +319,22 @@ class _Assembler:
         self.index: dict[str, int] = {}
         names, kinds, q0, constants = [], [], [], []
         free = [e for e in builder._elements.values() if not e.fixed]
-        n = 3 * len(free) + len(builder._angles)
+        n = 3 * len(free) + len(builder._angles) + len(builder._distances)
         for element in free:
             self.index[element.name] = len(q0)
             axes = ("x", "y", "z")
             names += [f"{element.name}.{axis}" for axis in axes]
             kinds += list(axes) if element.kind == "point" else ["direction"] * 3
             q0 += list(element.value)
-        for name in builder._angles:            # massless coordinates after the elements'
-            if name in builder._elements or name in names:
-                raise ModelError(f"{name!r} is already the name of a point or vector", entry=f"angles.{name}")
-            names.append(name)
-            kinds.append("angle")
-            q0.append(0.0)                       # set in model() from the elements
+        for section, table, kind in (("angles", builder._angles, "angle"),
+                                     ("distances", builder._distances, "distance")):
+            for name in table:                   # massless coordinates after the elements'
+                if name in builder._elements or name in names:
+                    raise ModelError(f"{name!r} is already the name of a coordinate, point or vector",
+                                     entry=f"{section}.{name}")
+                names.append(name)
+                kinds.append(kind)
+                q0.append(0.0)                   # set in model() from the elements
         for element in builder._elements.values():
             if element.fixed:
                 self.index[element.name] = n + len(constants)
@@ -434,14 +445,6 @@ class _Assembler:
                 p = self.index[element.name]
                 self.mass_ext[p:p + 3, p:p + 3] += element.mass * np.eye(3)
                 self.gravity_ext[p:p + 3] += element.mass * self.gravity
-        for name, (i, j, length) in b._distances.items():
-            entry = f"distances.{name}"
-            pair = tuple(self.index[self._element(p, entry, "point").name] for p in (j, i))
-            self._check_moving(pair, entry)
-            value = float(self._value(pair) @ self._value(pair)) if length is None else float(length) ** 2
-            dots.append((*pair, *pair))
-            dot_values.append(value)
-            dot_names.append(f"distance {name}")
         for name, (a, bb, value) in b._dots.items():
             entry = f"dots.{name}"
             first, second = self._pair(a, entry), self._pair(bb, entry)
@@ -465,6 +468,15 @@ class _Assembler:
             self.q0[coordinate] = self.x0[coordinate] = start if initial is None else float(initial)
             angles.append((*first, *second, *normal, coordinate))
             angle_names.append(f"angle {name}")
+        distances, distance_names = [], []
+        for name, (i, j, initial) in b._distances.items():
+            entry = f"distances.{name}"
+            pair = tuple(self.index[self._element(p, entry, "point").name] for p in (j, i))
+            coordinate = self.names.index(name)
+            start = float(np.linalg.norm(self._value(pair)))
+            self.q0[coordinate] = self.x0[coordinate] = start if initial is None else float(initial)
+            distances.append((*pair, coordinate))
+            distance_names.append(f"distance {name}")
         drivers, functions, labels, driver_names = [], [], [], []
         for name, (coordinate, function) in b._drivers.items():
             drivers.append((self._coordinate(coordinate, f"drivers.{name}"), len(functions)))
@@ -504,7 +516,7 @@ class _Assembler:
                         np.array(moments, dtype=np.int64).reshape(-1, 6),
                         np.array(angles, dtype=np.int64).reshape(-1, 7),
                         np.array(drivers, dtype=np.int64).reshape(-1, 2), np.array(actuators, dtype=np.int64),
-                        time_functions.table, time_functions.ops]
+                        time_functions.table, time_functions.ops, np.array(distances, dtype=np.int64).reshape(-1, 3)]
         real_sections = [np.array(dot_values), np.array(coefficients).reshape(-1, 3), q_constant,
                          np.array(spring_parameters).reshape(-1, 3), np.array(force_values).reshape(-1, 3),
                          self.constants, np.array(moment_values).reshape(-1, 12), np.array(gains),
@@ -512,7 +524,8 @@ class _Assembler:
         ints, reals = pack(int_sections, real_sections)
         mass.setflags(write=False)
         point_names = [e.name for e in b._elements.values() if e.kind == "point"]
-        equations = SpatialEquations(n=n, m=len(dots) + 3 * len(linear) + len(angles) + len(drivers), ints=ints,
+        equations = SpatialEquations(n=n, m=len(dots) + 3 * len(linear) + len(angles) + len(distances) + len(drivers),
+                                     ints=ints,
                                      reals=reals, mass=mass, time_functions=time_functions,
                                      constants=self.constants, gravity_ext=self.gravity_ext.copy(),
                                      springs=(np.array(springs, dtype=np.int64).reshape(-1, 2),
@@ -523,7 +536,7 @@ class _Assembler:
                                      + tuple(f"spring {name!r}" for name, s in b._springs.items() if s[3] > 0.0),
                                      steady_drivers=frozenset(name for name, (_, function) in b._drivers.items()
                                                               if is_constant(function)))
-        constraint_names = dot_names + linear_names + angle_names + driver_names
+        constraint_names = dot_names + linear_names + angle_names + distance_names + driver_names
         return Model(name=b.name, coordinate_names=tuple(self.names), coordinate_kinds=tuple(self.kinds),
                      constraint_names=tuple(constraint_names),
                      drivers=np.arange(len(constraint_names)) >= len(constraint_names) - len(driver_names),
@@ -652,8 +665,9 @@ def _add(buffer, a0, row, column, value, n):
 @njit(cache=True, error_model="numpy")
 def _evaluate(q, qd, t, u, ints, reals, buffer):
     """Q, Φ, A, γ, Φ_t of a spatial natural-coordinate model into ``buffer`` (layout of
-    :class:`Terms`; its scratch holds the extended x = (q, constants) and v = (q̇, 0)): the dot
-    and linear rows of the module docstring, gravity, point forces and spring-dampers."""
+    :class:`Terms`; its scratch holds the time functions' rows and stack, then the extended
+    x = (q, constants) and v = (q̇, 0)): the dot, linear, angle, distance and driver rows of the
+    module docstring; gravity, point forces, moments, spring-dampers and actuators."""
     q, qd, u, ints, reals, buffer = borrow((q, qd, u, ints, reals, buffer))
     n = q.shape[0]
     real_base = ints[0] + 2
@@ -662,8 +676,9 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     i_dot, n_dot = ints[1 + _DOT], (ints[2 + _DOT] - ints[1 + _DOT]) // 4
     i_linear, n_linear = ints[1 + _LINEAR], (ints[2 + _LINEAR] - ints[1 + _LINEAR]) // 8
     i_angle, n_angle = ints[1 + _ANGLE], (ints[2 + _ANGLE] - ints[1 + _ANGLE]) // 7
+    i_distance, n_distance = ints[1 + _DISTANCE], (ints[2 + _DISTANCE] - ints[1 + _DISTANCE]) // 3
     n_driver = (ints[2 + _DRIVER] - ints[1 + _DRIVER]) // 2
-    m = n_dot + 3 * n_linear + n_angle + n_driver
+    m = n_dot + 3 * n_linear + n_angle + n_distance + n_driver
     a0 = n + m
     g0 = a0 + m * n
     t0 = g0 + m
@@ -720,6 +735,22 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
 
     for k in range(n_angle):
         _angle_row(buffer, ints, i_angle + 7 * k, n, a0, g0, x0, v0, row)
+        row += 1
+    for k in range(n_distance):
+        j, i, c = ints[i_distance + 3 * k], ints[i_distance + 3 * k + 1], ints[i_distance + 3 * k + 2]
+        length, rate = buffer[x0 + c], buffer[v0 + c]
+        phi = -length * length
+        gamma = 2.0 * rate * rate
+        for d in range(3):
+            e = buffer[x0 + j + d] - buffer[x0 + i + d]
+            de = buffer[v0 + j + d] - buffer[v0 + i + d]
+            phi += e * e
+            gamma -= 2.0 * de * de
+            _add(buffer, a0, row, j + d, 2.0 * e, n)
+            _add(buffer, a0, row, i + d, -2.0 * e, n)
+        buffer[n + row] = phi
+        buffer[a0 + row * n + c] += -2.0 * length
+        buffer[g0 + row] = gamma
         row += 1
     row = driver_rows(ints, _DRIVER, buffer, n, a0, g0, t0, s0, x0, row)
 

@@ -133,9 +133,9 @@ def _rod(builder: SpatialModelBuilder, name: str, table: object) -> None:
 
 
 def _distance(builder: SpatialModelBuilder, name: str, table: object) -> None:
-    entry = _Entry(f"distances.{name}", table, ("points", "length"), ("points",))
+    entry = _Entry(f"distances.{name}", table, ("points", "initial"), ("points",))
     i, j = entry.pair("points", str)
-    builder.add_distance(name, i, j, length=entry.number("length"))
+    builder.add_distance(name, i, j, initial=entry.number("initial"))
 
 
 def _element(entry: _Entry, key: str) -> str | tuple[str, str]:
