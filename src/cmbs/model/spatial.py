@@ -544,7 +544,7 @@ class _Assembler:
                      point_names=tuple(point_names),
                      lines=tuple((point_names.index(i), point_names.index(j)) for i, j in lines),
                      equations=equations, description=b.description, source=b.source,
-                     parameters={"gravity": tuple(float(g) for g in self.gravity), "dimension": 3},
+                     parameters={"gravity": tuple(float(g) for g in self.gravity)},
                      constant_mass=True)
 
     def _add_element_matrix(self, slots: Sequence[int], matrix: np.ndarray, weights: np.ndarray) -> None:
