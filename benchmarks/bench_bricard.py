@@ -11,7 +11,7 @@ Exudyn (J. Gerstmayr, Multibody Syst. Dyn. 2023) models the five rods as rigid b
 leaves the rotation about x free; its dense solver ignores the redundant rows
 (``ignoreSingularJacobian``).  It integrates by its implicit generalized-α (index 3, spectral
 radius 1, Newton tolerance 1e-10) at the step given; P3 (body 2's end) is sampled every 0.05 s.
-cmbs runs ``cmbs.load("bricard")`` (natural coordinates, 24 coordinates, 28 rows of rank 23) with
+cmbs runs ``cmbs.load("bricard")`` (natural coordinates, 24 coordinates, 24 rows of rank 23) with
 the projection and Udwadia-Kalaba formulations and DOP853 at rtol 1e-10.  Each cmbs run is timed
 after an untimed 0.1 s warm-up (numba compilation excluded).
 

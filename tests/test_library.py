@@ -26,6 +26,12 @@ from cmbs.library import names
     ("chaplygin-sleigh", {}, 3, 3),
     ("n-four-bar", {}, 6, 1),
     ("n-four-bar", {"N": 40}, 82, 1),
+    ("spherical-pendulum", {}, 3, 2),
+    ("heavy-top", {}, 12, 3),
+    ("four-bar-3d", {}, 6, 1),
+    ("bricard", {}, 24, 1),
+    ("spatial-slider-crank", {}, 14, 1),
+    ("flyball-governor", {}, 43, 4),
 ])
 def test_library_models_assemble_with_their_dof(name, parameters, n, dof):
     model = cmbs.load(name, **parameters)

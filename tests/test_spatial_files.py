@@ -114,3 +114,26 @@ expression = "7.0"
     path.write_text(text + '[dots.ground]\na = ["C", "A"]\nb = ["C", "A"]\n')
     with pytest.raises(ModelError, match="dots.ground: relates fixed elements only"):
         cmbs.load(path)
+
+
+@pytest.mark.parametrize("extra, entry, problem", [
+    ('[forces.push]\npoint = "tip"\nforce = [0.0, "sin(", 0.0]', "forces.push.force.y", "sin("),
+    ('[forces.push]\npoint = "tip"\nforce = [0.0, 1.0]', "forces.push", "three components"),
+    ('[forces.push]\npoint = "tip"\nforce = [1.0, 0.0, 0.0]\nbody = "topp"', "forces.push", "no body 'topp'"),
+    ('[moments.turn]\nbody = "top"\nmoment = [0.0, 0.0, 1.0]\nframe = "local"', "moments.turn",
+     "frame must be one of 'ground', 'body', got 'local'"),
+    ('[rotational_springs.twist]\nangle = "spin"\nstiffness = 1.0', "rotational_springs.twist", "no angle 'spin'"),
+    ('[rotational_springs.twist]\nangle = "spin"\nstiffness = -1.0', "rotational_springs.twist",
+     "stiffness must be a finite number >= 0, got -1.0"),
+    ('[sliders.s]\npoint = "tip"\norigin = "O"\naxis = "u"', "sliders.s", "'tip' is 0.2 m off the line"),
+    ('[sliders.s]\npoint = "tip"\norigin = "O"\naxis = "tip"', "sliders.s", "'tip' is a point, not a vector"),
+])
+def test_a_mistake_in_a_load_or_a_slider_names_its_entry(tmp_path, extra, entry, problem):
+    path = tmp_path / "top.toml"
+    path.write_text(TOP + "\n" + extra + "\n")
+    with pytest.raises(ModelError) as caught:
+        cmbs.load(path)
+    message = str(caught.value)
+    assert message.startswith(str(path))
+    assert caught.value.entry == entry, message
+    assert problem in message

@@ -377,7 +377,7 @@ def _inverse(args: argparse.Namespace) -> int:
         extras = dict(motion.extras)
         for label, value, unit in _reaction_series(model, joint_reaction_history(model, motion)):
             extras[label] = value
-            size = np.hypot(*value.T) if value.ndim == 2 else np.abs(value)
+            size = np.linalg.norm(value, axis=1) if value.ndim == 2 else np.abs(value)
             print(f"  {label:<32} max {size.max():.6g} {unit}")
         motion = cmbs.Trajectory(motion.t, motion.q, motion.qd, motion.qdd, motion.names, extras, motion.info)
     if args.out:
@@ -406,14 +406,17 @@ def _prescribed(model: cmbs.Model, args: argparse.Namespace) -> cmbs.Model:
 
 def _reaction_series(model: cmbs.Model, reactions: dict) -> list[tuple[str, np.ndarray, str]]:
     """(label, history, unit) of every joint reaction, for printing and saving; natural-coordinate
-    models report forces per segment end, joint-coordinate models per joint (a torque in N m at a
-    revolute joint, a force in N along a prismatic one)."""
+    models report forces per segment end (spatial ones: per body point, and couples through its
+    unit vectors), joint-coordinate models per joint (a torque in N m at a revolute joint, a
+    force in N along a prismatic one)."""
     if "joint_forces" in reactions:
         return ([(f"reaction on {link}", force, "N") for link, force in reactions["forces"].items()]
                 + [(f"joint force {name}", force, force_unit(model, name))
                    for name, force in reactions["joint_forces"].items()]
                 + [(f"closure force {name}", force, "N") for name, force in reactions["closures"].items()])
     return ([(f"reaction {segment}@{point}", force, "N") for (segment, point), force in reactions["forces"].items()]
+            + [(f"couple {body}@{vector}", couple, "N m")
+               for (body, vector), couple in reactions.get("vector_couples", {}).items()]
             + [(f"joint torque {angle}", torque, "N m") for angle, torque in reactions["torques"].items()]
             + [(f"slider force {slider}", force, "N") for slider, force in reactions["sliders"].items()])
 
@@ -630,7 +633,8 @@ def build_parser() -> argparse.ArgumentParser:
                               "coordinates if the file has them, else every matching column)")
     inverse.add_argument("--reactions", action="store_true",
                          help="also the joint reactions: at every segment end, joint torques and slider forces "
-                              "(natural coordinates); at every joint and closure (joint coordinates)")
+                              "(natural coordinates; in 3-D at every body point, and couples through its unit "
+                              "vectors); at every joint and closure (joint coordinates)")
     inverse.add_argument("--out", help="result file (.npz or .csv) with the motion and driver_forces")
     inverse.add_argument("--plot", help="figure of the forces and the motion")
     inverse.set_defaults(run=_inverse)

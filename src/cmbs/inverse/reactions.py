@@ -197,15 +197,20 @@ def joint_reaction_history(model: Model, motion: Trajectory) -> dict:
     """Joint reactions at every instant of ``motion`` (a trajectory of this model with extras
     ``'lam'`` (k, m), e.g. ``inverse_dynamics(...).motion``, and ``'u'`` (k, n_u) if the inputs
     were not zero): :func:`joint_reactions` for natural-coordinate models,
+    :func:`~cmbs.inverse.spatial_reactions.spatial_reactions` for spatial ones,
     :func:`~cmbs.inverse.tree_reactions.tree_reactions` for joint-coordinate ones.  The same keys,
-    each value with a leading time axis ((k, 2) for forces, (k,) for scalars)."""
+    each value with a leading time axis ((k, 2) or (k, 3) for forces, (k,) for scalars)."""
+    from cmbs.inverse.spatial_reactions import spatial_reactions
     from cmbs.inverse.tree_reactions import tree_reactions
+    from cmbs.model.spatial import SpatialEquations
 
     if "lam" not in motion.extras:
         raise CmbsError("the trajectory has no 'lam' extra (multipliers); use inverse_dynamics' motion")
     lam = np.asarray(motion.extras["lam"], dtype=float)
-    if isinstance(base_equations(model)[0], NaturalEquations):
-        per_time = [joint_reactions(model, motion.q[i], motion.qd[i], motion.qdd[i], lam[i], motion.t[i])
+    equations = base_equations(model)[0]
+    if isinstance(equations, (NaturalEquations, SpatialEquations)):
+        reactions = joint_reactions if isinstance(equations, NaturalEquations) else spatial_reactions
+        per_time = [reactions(model, motion.q[i], motion.qd[i], motion.qdd[i], lam[i], motion.t[i])
                     for i in range(motion.t.size)]
     else:
         inputs = np.asarray(motion.extras.get("u", np.zeros((motion.t.size, model.n_u))), dtype=float)

@@ -91,6 +91,10 @@ _BUILDERS = [
      "spatial: the thesis four-bar built in 3-D (plane y = 0), undriven, 1 DOF"),
     ("bricard", "spatial", "bricard",
      "spatial: IFToMM A04 Bricard's mechanism, five rods and six revolute joints, 1 DOF, redundant constraints"),
+    ("spatial-slider-crank", "spatial", "spatial_slider_crank",
+     "spatial: IFToMM slider-crank, revolute, spherical, universal and prismatic joints, 1 DOF"),
+    ("flyball-governor", "spatial", "flyball_governor",
+     "spatial: IFToMM A05 stiff flyball governor, shaft, slider, two rods with balls, stiff springs, 4 DOF"),
 ]
 
 

@@ -67,7 +67,7 @@ from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function,
     packed_time_functions
 from cmbs.model.limits import MAX_MAGNITUDE, MIN_LENGTH_RATIO
 from cmbs.model.model import Model, Terms
-from cmbs.model.packing import pack
+from cmbs.model.packing import pack, unpack
 
 # int sections of the packed kernel data, in this order
 (_RIGID, _DISTANCE, _ANGLE, _PARALLEL, _DRIVER, _POINT_FORCE, _TORQUE, _SPRING, _ACTUATOR,
@@ -897,10 +897,7 @@ class NaturalEquations:
     def without_drivers(self) -> "NaturalEquations":
         """The same equations with the driver rows (the last section of constraints) removed, and
         the time functions only they used no longer evaluated (:meth:`TimeFunctionPack.keeping`)."""
-        ints, reals = self.ints, self.reals
-        int_sections = [ints[ints[1 + k]:ints[2 + k]] for k in range(int(ints[0]))]
-        base = int(ints[0]) + 2
-        real_sections = [reals[ints[base + 1 + k]:ints[base + 2 + k]] for k in range(int(ints[base]))]
+        int_sections, real_sections = unpack(self.ints, self.reals)
         drivers = int_sections[_DRIVER].size // 2
         int_sections[_DRIVER] = np.zeros(0, dtype=np.int64)
         used = set(int_sections[_POINT_FORCE].reshape(-1, 4)[:, 2:].ravel().tolist())

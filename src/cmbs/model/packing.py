@@ -29,6 +29,14 @@ def pack(int_sections: Sequence[np.ndarray], real_sections: Sequence[np.ndarray]
     return ints, reals  # left writable: numba's calls are about 0.1 µs cheaper than with read-only arrays
 
 
+def unpack(ints: np.ndarray, reals: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """The flat sections of :func:`pack`'s ``(ints, reals)`` (copies, to change and pack again)."""
+    int_sections = [ints[ints[1 + k]:ints[2 + k]].copy() for k in range(int(ints[0]))]
+    base = int(ints[0]) + 2
+    real_sections = [reals[ints[base + 1 + k]:ints[base + 2 + k]].copy() for k in range(int(ints[base]))]
+    return int_sections, real_sections
+
+
 @njit(cache=True, inline="always")
 def int_section(ints, k):
     """Int section ``k`` as a 1-D view."""

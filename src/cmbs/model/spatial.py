@@ -34,10 +34,23 @@ coordinate): r = (1 - c) r_i + c r_j, M_e = ∫ [(1-c)²  c(1-c); c(1-c)  c²] d
 the axis), and one rigid row |r_j - r_i|² = L² (mass 0: a massless link, the row alone).  A
 **point mass** adds m I₃ to its point.
 
-**Joints by shared elements:** two bodies that share a point are joined by a spherical joint,
-sharing a point and a unit vector (their common axis) by a revolute joint.  Further rows: a
-scalar product a·b = value of two elements (vectors or point differences), e.g. u₁·u₂ = 0 for a
-universal joint or (P - O)·n = 0 for a point in a plane.
+**Joints by shared elements** (book ch. 3.3), with the rows of the elements they share once
+(a product of two elements that two bodies share is one row, not two):
+
+==============  ======================================================================
+spherical       a shared point
+revolute        a shared point and a shared unit vector (the axis)
+universal       a shared point; a·b = 0 for an axis a of one body and b of the other
+cylindrical     a shared axis u; a slide: point P of one body on the line through a point
+                O of the other along u, r_P - r_O - s u = 0 (s a coordinate)
+prismatic       a cylindrical joint whose bodies share a second unit vector
+planar          a shared normal n; (P - O)·n = 0 for points of either body
+rigid (weld)    a shared origin and basis: the two are one body
+point on line   a slide with a fixed (or body) point and axis
+point in plane  (P - O)·n = 0 with a fixed (or body) point O and normal n
+==============  ======================================================================
+
+A scalar product row a·b = value relates two elements (vectors or point differences).
 
 A constant **moment** M on a body does the virtual work M·δθ.  With G = (X₀ᵀX₀)⁻¹ the inverse
 Gram matrix of the basis (constant for a rigid body: the dual basis bᵏ = Σₗ Gₖₗ bₗ turns with it),
@@ -45,7 +58,7 @@ the angular velocity is ω = ½ Σₖ bᵏ × ḃₖ (ḃₖ = ω × bₖ: Σₖ
 δθ = ½ Σₖₗ Gₖₗ bₗ × δbₖ and the generalized force on the head of bₖ (minus on its tail) is
 ½ Σₗ Gₖₗ (M × bₗ).
 
-Each constraint is one of two kinds, evaluated for all its rows by one compiled kernel:
+Each constraint is one of these kinds, evaluated for all its rows by one compiled kernel:
 
 ===========  =====================================  ==========================================
 kind         Φ                                      γ = -(Ȧ q̇)
@@ -54,13 +67,15 @@ dot          a·b - value,  a = x_aₕ - x_aₜ, ...       -2 ȧ·ḃ
 linear       E - T - Σ cₖ (x_hₖ - x_tₖ)  (3 rows)     0   (constant A)
 angle        cos θ (r × v)·a - sin θ r·v              the velocity-quadratic part of Φ̈, negated
 distance     |x_j - x_i|² - s²                        -2 |ẋ_j - ẋ_i|² + 2 ṡ²
+slide        x_P - x_O - s u  (3 rows)                2 ṡ u̇
 driver       q_c - f(t)                               f''(t)   (Φ_t = -f'(t))
 ===========  =====================================  ==========================================
 
 An **angle coordinate** θ (massless) is the angle from r to v about the unit vector a, both
 across it: on such vectors the row equals |r||v| sin(θ* - θ), θ* the actual angle, with
 ∂Φ/∂θ = -|r||v| at the solution, well conditioned at every angle as in the plane.  A **distance
-coordinate** s (massless) is the distance between two points.  Drivers hold a coordinate (a
+coordinate** s (massless) is the distance between two points, a **slide** s the position of a
+point along a line.  Drivers hold a coordinate (a
 point's, an angle, a distance) at a function of time; actuators add gain·u to one.
 
 (rigid-body rows and rods are dot rows; a unit vector is the difference of its
@@ -70,6 +85,7 @@ moments on bodies, linear spring-dampers between points.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import NamedTuple, Sequence
@@ -81,13 +97,16 @@ from cmbs.jit import borrow, njit
 from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, driver_rows, is_constant, \
     packed_time_functions
 from cmbs.model.model import Model, Terms
-from cmbs.model.packing import pack
+from cmbs.model.packing import pack, unpack
 
 # int sections of the kernel
-_DOT, _LINEAR, _SPRING, _POINT_FORCE, _MOMENT, _ANGLE, _DRIVER, _ACTUATOR, _TF_TABLE, _TF_OPS, _DISTANCE = range(11)
+(_DOT, _LINEAR, _SPRING, _POINT_FORCE, _MOMENT, _ANGLE, _DRIVER, _ACTUATOR, _TF_TABLE, _TF_OPS, _DISTANCE,
+ _SLIDER, _ROTATIONAL_SPRING) = range(13)
 # real sections
-_DOT_VALUE, _LINEAR_COEFFICIENTS, _Q_CONSTANT, _SPRING_PARAMETERS, _POINT_FORCE_VALUE, _CONSTANTS = 0, 1, 2, 3, 4, 5
-_MOMENT_VALUE, _ACTUATOR_GAIN, _TF_REALS = 6, 7, 8
+_DOT_VALUE, _LINEAR_COEFFICIENTS, _Q_CONSTANT, _SPRING_PARAMETERS, _POINT_FORCE_FRAME, _CONSTANTS = 0, 1, 2, 3, 4, 5
+_MOMENT_VALUE, _ACTUATOR_GAIN, _TF_REALS, _ROTATIONAL_SPRING_PARAMETERS = 6, 7, 8, 9
+#: a load's components along the ground axes, or along a body's axes (turning with it)
+FRAMES = ("ground", "body")
 
 
 @dataclass
@@ -136,10 +155,12 @@ class SpatialModelBuilder:
     _bodies: dict[str, _Body] = field(default_factory=dict)
     _rods: dict[str, _Rod] = field(default_factory=dict)
     _distances: dict[str, tuple[str, str, float | None]] = field(default_factory=dict)    # coordinates
+    _sliders: dict[str, tuple[str, str, str, float | None]] = field(default_factory=dict)  # coordinates
     _dots: dict[str, tuple[object, object, float | None]] = field(default_factory=dict)
     _springs: dict[str, tuple[str, str, float, float, float | None]] = field(default_factory=dict)
-    _forces: dict[str, tuple[str, np.ndarray]] = field(default_factory=dict)
-    _moments: dict[str, tuple[str, np.ndarray]] = field(default_factory=dict)
+    _forces: dict[str, tuple[str, tuple[TimeFunction, ...], str | None]] = field(default_factory=dict)
+    _moments: dict[str, tuple[str, tuple[TimeFunction, ...], bool]] = field(default_factory=dict)
+    _rotational_springs: dict[str, tuple[str, float, float, float | None]] = field(default_factory=dict)
     _angles: dict[str, tuple[object, object, str, float | None]] = field(default_factory=dict)
     _drivers: dict[str, tuple[str, TimeFunction]] = field(default_factory=dict)
     _actuators: dict[str, tuple[str, float]] = field(default_factory=dict)
@@ -227,6 +248,16 @@ class SpatialModelBuilder:
         _optional_number(initial, f"distances.{name}", "initial", positive=True)
         self._distances[name] = (i, j, initial)
 
+    def add_slider(self, name: str, *, point: str, origin: str, axis: str, initial: float | None = None) -> None:
+        """A slide coordinate ``name`` (massless): ``point`` stays on the line through ``origin``
+        along the unit vector ``axis``, at s along it: r_point - r_origin - s u = 0 (three rows).
+        With the axis shared by two bodies it is a cylindrical joint, with a second shared vector
+        a prismatic joint; with ground elements a point on a fixed line.  ``initial`` defaults
+        to the start value (point - origin)·u."""
+        self._check_new(self._sliders, name, "sliders")
+        _optional_number(initial, f"sliders.{name}", "initial")
+        self._sliders[name] = (point, origin, axis, initial)
+
     def add_dot(self, name: str, a: str | tuple[str, str], b: str | tuple[str, str], *,
                 value: float | None = None) -> None:
         """a·b = value (default: the initial product) for elements a, b: a unit vector's name or
@@ -245,15 +276,37 @@ class SpatialModelBuilder:
         _optional_number(rest_length, f"springs.{name}", "rest_length", positive=True)
         self._springs[name] = (i, j, float(stiffness), float(damping), rest_length)
 
-    def add_force(self, name: str, *, point: str, force: Sequence[float]) -> None:
-        """A constant force (fx, fy, fz) in N at a point."""
+    def add_force(self, name: str, *, point: str, force: Sequence[object], body: str | None = None) -> None:
+        """A force (fx, fy, fz) in N at a point, each component a number or a function of time
+        (an expression, a table or a callable, as for drivers); along the ground axes, or with
+        ``body`` along that body's axes (a follower force: the axes are the ground's at the
+        start and turn with the body, F = X X₀⁻¹ f with X = [b₁ b₂ b₃])."""
         self._check_new(self._forces, name, "forces")
-        self._forces[name] = (point, _vector3(force, f"forces.{name}", "force"))
+        self._forces[name] = (point, _time_functions3(force, f"forces.{name}", "force"), body)
 
-    def add_moment(self, name: str, *, body: str, moment: Sequence[float]) -> None:
-        """A constant moment (mx, my, mz) in N m, in ground axes, on a body."""
+    def add_moment(self, name: str, *, body: str, moment: Sequence[object], frame: str = "ground") -> None:
+        """A moment (mx, my, mz) in N m on a body, each component a number or a function of
+        time; along the ground axes (``frame="ground"``) or the body's (``"body"``, turning with
+        it as for :meth:`add_force`)."""
         self._check_new(self._moments, name, "moments")
-        self._moments[name] = (body, _vector3(moment, f"moments.{name}", "moment"))
+        if frame not in FRAMES:
+            raise ModelError(f"frame must be one of {', '.join(map(repr, FRAMES))}, got {frame!r}",
+                             entry=f"moments.{name}")
+        self._moments[name] = (body, _time_functions3(moment, f"moments.{name}", "moment"), frame == "body")
+
+    def add_rotational_spring(self, name: str, *, angle: str, stiffness: float, damping: float = 0.0,
+                              rest_angle: float | None = None) -> None:
+        """A rotational spring-damper on angle coordinate ``angle`` (about its axis, e.g. a
+        revolute joint's): the torque -k (θ - θ₀) - c θ̇ between the two elements of the angle;
+        ``rest_angle`` θ₀ defaults to the start angle."""
+        self._check_new(self._rotational_springs, name, "rotational_springs")
+        entry = f"rotational_springs.{name}"
+        for label, value in (("stiffness", stiffness), ("damping", damping)):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value)
+                                                                                    and value >= 0.0):
+                raise ModelError(f"{label} must be a finite number >= 0, got {value!r}", entry=entry)
+        _optional_number(rest_angle, entry, "rest_angle")
+        self._rotational_springs[name] = (angle, float(stiffness), float(damping), rest_angle)
 
     def add_angle(self, name: str, *, reference: str | tuple[str, str], vector: str | tuple[str, str], axis: str,
                   initial: float | None = None) -> None:
@@ -300,6 +353,19 @@ def _optional_number(value: object, entry: str, label: str, positive: bool = Fal
         raise ModelError(f"{label} must be a finite number{' > 0' if positive else ''}, got {value!r}", entry=entry)
 
 
+def _time_functions3(value: object, entry: str, label: str) -> tuple[TimeFunction, ...]:
+    """Three time functions from three components (numbers, expressions, tables, callables)."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)) or len(value) != 3:
+        raise ModelError(f"{label} must be three components (numbers or functions of t), got {value!r}", entry=entry)
+    functions = []
+    for axis, component in zip("xyz", value):
+        try:
+            functions.append(as_time_function(component))
+        except ModelError as error:
+            raise ModelError(error.problem, entry=f"{entry}.{label}.{axis}") from None
+    return tuple(functions)
+
+
 def _vector3(value: object, entry: str, label: str) -> np.ndarray:
     try:
         array = np.array(value, dtype=float)
@@ -319,7 +385,7 @@ class _Assembler:
         self.index: dict[str, int] = {}
         names, kinds, q0, constants = [], [], [], []
         free = [e for e in builder._elements.values() if not e.fixed]
-        n = 3 * len(free) + len(builder._angles) + len(builder._distances)
+        n = 3 * len(free) + len(builder._angles) + len(builder._distances) + len(builder._sliders)
         for element in free:
             self.index[element.name] = len(q0)
             axes = ("x", "y", "z")
@@ -327,7 +393,8 @@ class _Assembler:
             kinds += list(axes) if element.kind == "point" else ["direction"] * 3
             q0 += list(element.value)
         for section, table, kind in (("angles", builder._angles, "angle"),
-                                     ("distances", builder._distances, "distance")):
+                                     ("distances", builder._distances, "distance"),
+                                     ("sliders", builder._sliders, "distance")):
             for name in table:                   # massless coordinates after the elements'
                 if name in builder._elements or name in names:
                     raise ModelError(f"{name!r} is already the name of a coordinate, point or vector",
@@ -346,6 +413,9 @@ class _Assembler:
         self.x0 = np.concatenate([self.q0, self.constants])
         self.mass_ext = np.zeros((self.x0.size, self.x0.size))
         self.gravity_ext = np.zeros(self.x0.size)
+        # each body's and rod's own share of M and gravity: {owner: ({(slot, slot): coefficient}, {slot: weight})}
+        self.shares: dict[str, tuple[dict[tuple[int, int], float], dict[int, float]]] = {}
+        self.owner = ""
 
     # ------------------------------------------------------------ lookups
     def _element(self, name: object, entry: str, kind: str | None = None) -> _Element:
@@ -380,6 +450,13 @@ class _Assembler:
         if min(indices) >= self.n:
             raise ModelError("relates fixed elements only: it constrains no coordinate (remove it)", entry=entry)
 
+    def _frame(self, frames: dict[str, tuple[list[tuple[int, int]], np.ndarray]], body: object,
+               entry: str) -> tuple[list[tuple[int, int]], np.ndarray]:
+        """The basis (head, tail pairs) and its start matrix X₀ of body ``body``."""
+        if not isinstance(body, str) or body not in frames:
+            raise ModelError(f"no body {body!r}{did_you_mean(str(body), frames)}", entry=entry)
+        return frames[body]
+
     def _value(self, pair: tuple[int, int]) -> np.ndarray:
         return self.x0[pair[0]:pair[0] + 3] - self.x0[pair[1]:pair[1] + 3]
 
@@ -390,8 +467,12 @@ class _Assembler:
         linear, coefficients, linear_names = [], [], []
         lines: list[tuple[str, str]] = []
         frames: dict[str, tuple[list[tuple[int, int]], np.ndarray]] = {}
+        shared_products: set[frozenset[tuple[int, int]]] = set()
+        owned: dict[str, tuple[list[str], list[int], list[int]]] = {}    # elements, dot rows, linear rows
         for body in b._bodies.values():
             entry = f"bodies.{body.name}"
+            self.owner = body.name
+            elements, own_dots, own_linear = owned.setdefault(body.name, ([body.origin], [], []))
             origin = self._element(body.origin, entry, "point")
             o = self.index[origin.name]
             basis, labels = [], []
@@ -412,13 +493,21 @@ class _Assembler:
                 for l in range(k, 3):
                     if min(*basis[k], *basis[l]) >= self.n:
                         continue            # between fixed elements only: an identity, no row
+                    product = frozenset((basis[k], basis[l]))
+                    if product in shared_products:
+                        continue            # of elements shared with an earlier body: its row already
+                    shared_products.add(product)
+                    own_dots.append(len(dots))
                     dots.append((*basis[k], *basis[l]))
                     dot_values.append(float(self._value(basis[k]) @ self._value(basis[l])))
                     dot_names.append(f"rigid {body.name}: {labels[k]}·{labels[l]}")
             self._body_mass(body, o, basis, X0)
             frames[body.name] = (basis, X0)
+            elements += list(body.basis)
             for spec in body.points + body.vectors:
                 element = self._element(spec, entry, "point" if spec in body.points else "vector")
+                elements.append(element.name)
+                own_linear.append(len(linear))
                 target = (self.index[element.name], o if element.kind == "point" else self.zero)
                 c = np.linalg.solve(X0, self._value(target))
                 for axis in range(3):
@@ -435,11 +524,14 @@ class _Assembler:
             length = float(np.linalg.norm(self._value(pair)))
             if not length > 0.0:
                 raise ModelError(f"points {rod.i!r} and {rod.j!r} coincide", entry=entry)
+            self.owner = rod.name
+            owned[rod.name] = ([rod.i, rod.j], [len(dots)], [])
             dots.append((*pair, *pair))
             dot_values.append(length * length)
             dot_names.append(f"rigid {rod.name}")
             self._rod_mass(rod, self.index[i.name], self.index[j.name], length)
             lines.append((i.name, j.name))
+        self.owner = ""                         # point masses: no body's
         for element in b._elements.values():
             if element.mass > 0.0:
                 p = self.index[element.name]
@@ -477,12 +569,60 @@ class _Assembler:
             self.q0[coordinate] = self.x0[coordinate] = start if initial is None else float(initial)
             distances.append((*pair, coordinate))
             distance_names.append(f"distance {name}")
+        sliders, slider_names = [], []
+        for name, (point, origin, axis, initial) in b._sliders.items():
+            entry = f"sliders.{name}"
+            p, o = (self.index[self._element(e, entry, "point").name] for e in (point, origin))
+            u = self.index[self._element(axis, entry, "vector").name]
+            if p == o:
+                raise ModelError(f"point and origin are both {point!r}", entry=entry)
+            if min(p, o) >= self.n and u >= self.n:
+                raise ModelError("point, origin and axis are fixed: the slide constrains nothing that moves",
+                                 entry=entry)
+            along = self.x0[p:p + 3] - self.x0[o:o + 3]
+            direction = self.x0[u:u + 3]
+            start = float(along @ direction)
+            off = float(np.linalg.norm(along - start * direction))
+            if off > 1e-6 * max(1.0, float(np.linalg.norm(along))):
+                raise ModelError(f"{point!r} is {off:.6g} m off the line through {origin!r} along {axis!r} at the "
+                                 "start", entry=entry)
+            coordinate = self.names.index(name)
+            self.q0[coordinate] = self.x0[coordinate] = start if initial is None else float(initial)
+            sliders.append((p, o, u, coordinate))
+            lines.append((origin, point))
+            slider_names += [f"slider {name}.{axis_name}" for axis_name in "xyz"]
         drivers, functions, labels, driver_names = [], [], [], []
         for name, (coordinate, function) in b._drivers.items():
             drivers.append((self._coordinate(coordinate, f"drivers.{name}"), len(functions)))
             functions.append(function)
             labels.append(f"driver {name}")
             driver_names.append(name)
+        forces, force_frames = [], []
+        for name, (point, components, body_name) in b._forces.items():
+            entry = f"forces.{name}"
+            p = self.index[self._element(point, entry, "point").name]
+            basis, X0 = self._frame(frames, body_name, entry) if body_name is not None else (None, None)
+            forces.append([p, *range(len(functions), len(functions) + 3), int(basis is not None),
+                           *([index for pair in basis for index in pair] if basis is not None else [0] * 6)])
+            force_frames.append(np.linalg.inv(X0).ravel() if X0 is not None else np.zeros(9))
+            functions += components
+            labels += [f"force {name} {axis}" for axis in "xyz"]
+        moments, moment_values = [], []
+        for name, (body_name, components, in_body) in b._moments.items():
+            basis, X0 = self._frame(frames, body_name, f"moments.{name}")
+            moments.append([*(index for pair in basis for index in pair), *range(len(functions), len(functions) + 3),
+                            int(in_body)])
+            moment_values.append(np.concatenate([np.linalg.inv(X0.T @ X0).ravel(), np.linalg.inv(X0).ravel()]))
+            functions += components
+            labels += [f"moment {name} {axis}" for axis in "xyz"]
+        rotational_springs, rotational_parameters = [], []
+        for name, (angle, stiffness, damping, rest) in b._rotational_springs.items():
+            entry = f"rotational_springs.{name}"
+            if angle not in b._angles:
+                raise ModelError(f"no angle {angle!r}{did_you_mean(str(angle), b._angles)}", entry=entry)
+            coordinate = self.names.index(angle)
+            rotational_springs.append(coordinate)
+            rotational_parameters.append((stiffness, damping, self.q0[coordinate] if rest is None else float(rest)))
         actuators, gains = [], []
         for name, (coordinate, gain) in b._actuators.items():
             actuators.append(self._coordinate(coordinate, f"actuators.{name}"))
@@ -495,48 +635,49 @@ class _Assembler:
             length = float(np.linalg.norm(self.x0[pair[1]:pair[1] + 3] - self.x0[pair[0]:pair[0] + 3]))
             springs.append(pair)
             spring_parameters.append((stiffness, damping, length if rest is None else float(rest)))
-        forces, force_values = [], []
-        for name, (point, value) in b._forces.items():
-            forces.append(self.index[self._element(point, f"forces.{name}", "point").name])
-            force_values.append(value)
-        moments, moment_values = [], []
-        for name, (body_name, value) in b._moments.items():
-            if body_name not in frames:
-                raise ModelError(f"no body {body_name!r}{did_you_mean(str(body_name), frames)}",
-                                 entry=f"moments.{name}")
-            basis, X0 = frames[body_name]
-            moments.append([index for pair in basis for index in pair])
-            moment_values.append(np.concatenate([np.linalg.inv(X0.T @ X0).ravel(), value]))
 
         n = self.n
         mass = self.mass_ext[:n, :n].copy()
         q_constant = self.gravity_ext[:n].copy()
         int_sections = [np.array(dots, dtype=np.int64).reshape(-1, 4), np.array(linear, dtype=np.int64).reshape(-1, 8),
-                        np.array(springs, dtype=np.int64).reshape(-1, 2), np.array(forces, dtype=np.int64),
-                        np.array(moments, dtype=np.int64).reshape(-1, 6),
+                        np.array(springs, dtype=np.int64).reshape(-1, 2),
+                        np.array(forces, dtype=np.int64).reshape(-1, 11),
+                        np.array(moments, dtype=np.int64).reshape(-1, 10),
                         np.array(angles, dtype=np.int64).reshape(-1, 7),
                         np.array(drivers, dtype=np.int64).reshape(-1, 2), np.array(actuators, dtype=np.int64),
-                        time_functions.table, time_functions.ops, np.array(distances, dtype=np.int64).reshape(-1, 3)]
+                        time_functions.table, time_functions.ops, np.array(distances, dtype=np.int64).reshape(-1, 3),
+                        np.array(sliders, dtype=np.int64).reshape(-1, 4),
+                        np.array(rotational_springs, dtype=np.int64)]
         real_sections = [np.array(dot_values), np.array(coefficients).reshape(-1, 3), q_constant,
-                         np.array(spring_parameters).reshape(-1, 3), np.array(force_values).reshape(-1, 3),
-                         self.constants, np.array(moment_values).reshape(-1, 12), np.array(gains),
-                         time_functions.reals]
+                         np.array(spring_parameters).reshape(-1, 3), np.array(force_frames).reshape(-1, 9),
+                         self.constants, np.array(moment_values).reshape(-1, 18), np.array(gains),
+                         time_functions.reals, np.array(rotational_parameters).reshape(-1, 3)]
         ints, reals = pack(int_sections, real_sections)
         mass.setflags(write=False)
         point_names = [e.name for e in b._elements.values() if e.kind == "point"]
-        equations = SpatialEquations(n=n, m=len(dots) + 3 * len(linear) + len(angles) + len(distances) + len(drivers),
+        equations = SpatialEquations(n=n, m=len(dots) + 3 * len(linear) + len(angles) + len(distances)
+                                     + 3 * len(sliders) + len(drivers),
                                      ints=ints,
                                      reals=reals, mass=mass, time_functions=time_functions,
                                      constants=self.constants, gravity_ext=self.gravity_ext.copy(),
                                      springs=(np.array(springs, dtype=np.int64).reshape(-1, 2),
                                               np.array(spring_parameters).reshape(-1, 3)),
+                                     rotational_springs=(np.array(rotational_springs, dtype=np.int64),
+                                                         np.array(rotational_parameters).reshape(-1, 3)),
                                      point_indices=np.array([self.index[p] for p in point_names], dtype=np.int64),
+                                     bodies=tuple(self._body_frame(name, elements,
+                                                                   [*own_dots, *(len(dots) + 3 * k + d for k in own_linear
+                                                                                 for d in range(3))])
+                                                  for name, (elements, own_dots, own_linear) in owned.items()),
+                                     moment_bodies=tuple(body for body, _, _ in b._moments.values()),
                                      work_sources=tuple(f"force {name!r}" for name in b._forces)
                                      + tuple(f"moment {name!r}" for name in b._moments)
-                                     + tuple(f"spring {name!r}" for name, s in b._springs.items() if s[3] > 0.0),
+                                     + tuple(f"spring {name!r}" for name, s in b._springs.items() if s[3] > 0.0)
+                                     + tuple(f"rotational spring {name!r}"
+                                             for name, s in b._rotational_springs.items() if s[2] > 0.0),
                                      steady_drivers=frozenset(name for name, (_, function) in b._drivers.items()
                                                               if is_constant(function)))
-        constraint_names = dot_names + linear_names + angle_names + distance_names + driver_names
+        constraint_names = dot_names + linear_names + angle_names + distance_names + slider_names + driver_names
         return Model(name=b.name, coordinate_names=tuple(self.names), coordinate_kinds=tuple(self.kinds),
                      constraint_names=tuple(constraint_names),
                      drivers=np.arange(len(constraint_names)) >= len(constraint_names) - len(driver_names),
@@ -548,11 +689,29 @@ class _Assembler:
                      constant_mass=True)
 
     def _add_element_matrix(self, slots: Sequence[int], matrix: np.ndarray, weights: np.ndarray) -> None:
-        """M_ext += matrix ⊗ I₃ over the 3-vectors at ``slots``; gravity += weights ⊗ g."""
+        """M_ext += matrix ⊗ I₃ over the 3-vectors at ``slots``; gravity += weights ⊗ g; the same
+        into the share of the body or rod being assembled (``self.owner``)."""
+        blocks, gravity = self.shares.setdefault(self.owner, ({}, {}))
         for a, p in enumerate(slots):
             self.gravity_ext[p:p + 3] += weights[a] * self.gravity
+            gravity[p] = gravity.get(p, 0.0) + weights[a]
             for b, r in enumerate(slots):
                 self.mass_ext[p:p + 3, r:r + 3] += matrix[a, b] * np.eye(3)
+                blocks[p, r] = blocks.get((p, r), 0.0) + matrix[a, b]
+
+    def _body_frame(self, name: str, elements: Sequence[str], rows: Sequence[int]) -> "BodyFrame":
+        """The :class:`BodyFrame` of body or rod ``name`` from its share of M and gravity."""
+        slots = np.array([self.index[element] for element in elements], dtype=np.int64)
+        blocks, weights = self.shares[name]
+        position = {int(slot): k for k, slot in enumerate(slots)}
+        matrix = np.zeros((slots.size, slots.size))
+        for (p, r), value in blocks.items():
+            matrix[position[p], position[r]] += value
+        gravity = np.zeros(slots.size)
+        for p, weight in weights.items():
+            gravity[position[p]] += weight
+        return BodyFrame(name, tuple(elements), tuple(self.b._elements[e].kind for e in elements), slots,
+                         np.kron(matrix, np.eye(3)), np.kron(gravity, self.gravity), np.array(rows, dtype=np.int64))
 
     def _body_mass(self, body: _Body, o: int, basis: list[tuple[int, int]], X0: np.ndarray) -> None:
         """The body's element mass matrix and gravity (module docstring)."""
@@ -605,7 +764,12 @@ class SpatialEquations:
     constants: np.ndarray
     gravity_ext: np.ndarray
     springs: tuple[np.ndarray, np.ndarray]
+    rotational_springs: tuple[np.ndarray, np.ndarray]
     point_indices: np.ndarray
+    #: each body's and rod's share of the model, for its free-body equation
+    bodies: tuple["BodyFrame", ...]
+    #: the body of each moment, in the order of the moments
+    moment_bodies: tuple[str, ...]
     time_functions: TimeFunctionPack
     #: the forces and dampers, by name (see :attr:`cmbs.model.model.Model.work_sources`)
     work_sources: tuple[str, ...] = ()
@@ -625,6 +789,36 @@ class SpatialEquations:
             return None
         return SpatialKernel(self.ints, self.reals, np.ascontiguousarray(self.mass, dtype=float))
 
+    def moment_loads(self, body: str, q: np.ndarray, t: float) -> np.ndarray:
+        """The generalized force (n,) of the moments on ``body`` alone at (q, t): the model's own
+        kernel on a copy of its data that keeps only those moments."""
+        int_sections, real_sections = unpack(self.ints, self.reals)
+        for k in (_DOT, _LINEAR, _SPRING, _POINT_FORCE, _ANGLE, _DRIVER, _ACTUATOR, _DISTANCE, _SLIDER,
+                  _ROTATIONAL_SPRING):
+            int_sections[k] = np.zeros(0, dtype=np.int64)
+        keep = [k for k, name in enumerate(self.moment_bodies) if name == body]
+        int_sections[_MOMENT] = int_sections[_MOMENT].reshape(-1, 10)[keep]
+        real_sections[_MOMENT_VALUE] = real_sections[_MOMENT_VALUE].reshape(-1, 18)[keep]
+        real_sections[_Q_CONSTANT] = np.zeros(self.n)
+        ints, reals = pack(int_sections, real_sections)
+        loads = dataclasses.replace(self, m=0, ints=ints, reals=reals)
+        terms = loads.new_terms()
+        loads.evaluate(np.array(q, dtype=float), np.zeros(self.n), t, np.zeros(0), terms)
+        return terms.Q.copy()
+
+    def without_drivers(self) -> "SpatialEquations":
+        """The same equations with the driver rows (the last constraints) removed, and the time
+        functions only they used no longer evaluated (:meth:`TimeFunctionPack.keeping`)."""
+        int_sections, real_sections = unpack(self.ints, self.reals)
+        drivers = int_sections[_DRIVER].size // 2
+        int_sections[_DRIVER] = np.zeros(0, dtype=np.int64)
+        used = set(int_sections[_POINT_FORCE].reshape(-1, 11)[:, 1:4].ravel().tolist())
+        used |= set(int_sections[_MOMENT].reshape(-1, 10)[:, 6:9].ravel().tolist())
+        time_functions = self.time_functions.keeping(used)
+        int_sections[_TF_TABLE] = time_functions.table.ravel() if used else np.zeros(0, dtype=np.int64)
+        ints, reals = pack(int_sections, real_sections)
+        return dataclasses.replace(self, m=self.m - drivers, ints=ints, reals=reals, time_functions=time_functions)
+
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
         for k, function in self.time_functions.python:
             terms.scratch[3 * k:3 * k + 3] = function(t)
@@ -637,13 +831,16 @@ class SpatialEquations:
         return 0.5 * float(qd @ self.mass @ qd)
 
     def energy_parts(self, q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """T = ½ q̇ᵀ M q̇ and V = -Q_gravityᵀ x + Σ ½ k (ℓ - ℓ₀)² at every row of q, q̇ (k, n)."""
+        """T = ½ q̇ᵀ M q̇ and V = -Q_gravityᵀ x + Σ ½ k (ℓ - ℓ₀)² + Σ ½ k (θ - θ₀)² at every row of
+        q, q̇ (k, n)."""
         x = self._extended(q)
         potential = -(x @ self.gravity_ext)
         rows, parameters = self.springs
         for (i, j), (stiffness, _, rest) in zip(rows, parameters):
             length = np.linalg.norm(x[:, j:j + 3] - x[:, i:i + 3], axis=1)
             potential = potential + 0.5 * stiffness * (length - rest) ** 2
+        for coordinate, (stiffness, _, rest) in zip(*self.rotational_springs):
+            potential = potential + 0.5 * stiffness * (q[:, coordinate] - rest) ** 2
         return 0.5 * np.sum((qd @ self.mass) * qd, axis=1), potential
 
     def potential_energy(self, q: np.ndarray) -> float:
@@ -677,8 +874,9 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     i_linear, n_linear = ints[1 + _LINEAR], (ints[2 + _LINEAR] - ints[1 + _LINEAR]) // 8
     i_angle, n_angle = ints[1 + _ANGLE], (ints[2 + _ANGLE] - ints[1 + _ANGLE]) // 7
     i_distance, n_distance = ints[1 + _DISTANCE], (ints[2 + _DISTANCE] - ints[1 + _DISTANCE]) // 3
+    i_slider, n_slider = ints[1 + _SLIDER], (ints[2 + _SLIDER] - ints[1 + _SLIDER]) // 4
     n_driver = (ints[2 + _DRIVER] - ints[1 + _DRIVER]) // 2
-    m = n_dot + 3 * n_linear + n_angle + n_distance + n_driver
+    m = n_dot + 3 * n_linear + n_angle + n_distance + 3 * n_slider + n_driver
     a0 = n + m
     g0 = a0 + m * n
     t0 = g0 + m
@@ -752,6 +950,19 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
         buffer[a0 + row * n + c] += -2.0 * length
         buffer[g0 + row] = gamma
         row += 1
+    for k in range(n_slider):
+        p, o, a, c = ints[i_slider + 4 * k], ints[i_slider + 4 * k + 1], ints[i_slider + 4 * k + 2], \
+            ints[i_slider + 4 * k + 3]
+        along, rate = buffer[x0 + c], buffer[v0 + c]
+        for d in range(3):
+            axis = buffer[x0 + a + d]
+            buffer[n + row] = buffer[x0 + p + d] - buffer[x0 + o + d] - along * axis
+            _add(buffer, a0, row, p + d, 1.0, n)
+            _add(buffer, a0, row, o + d, -1.0, n)
+            _add(buffer, a0, row, a + d, -along, n)
+            buffer[a0 + row * n + c] += -axis
+            buffer[g0 + row] = 2.0 * rate * buffer[v0 + a + d]
+            row += 1
     row = driver_rows(ints, _DRIVER, buffer, n, a0, g0, t0, s0, x0, row)
 
     r0 = ints[real_base + 1 + _Q_CONSTANT]
@@ -762,18 +973,20 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
     for k in range(ints[2 + _ACTUATOR] - i0):
         buffer[ints[i0 + k]] += reals[r0 + k] * u[k]
     i0 = ints[1 + _POINT_FORCE]
-    r0 = ints[real_base + 1 + _POINT_FORCE_VALUE]
-    for k in range(ints[2 + _POINT_FORCE] - i0):
-        p = ints[i0 + k]
+    r0 = ints[real_base + 1 + _POINT_FORCE_FRAME]
+    for k in range((ints[2 + _POINT_FORCE] - i0) // 11):
+        s = i0 + 11 * k
+        p = ints[s]
+        f = _load_vector(buffer, ints, reals, s + 1, s + 5, r0 + 9 * k, s0, x0)
         for d in range(3):
             if p + d < n:
-                buffer[p + d] += reals[r0 + 3 * k + d]
+                buffer[p + d] += f[d]
     i0 = ints[1 + _MOMENT]
     r0 = ints[real_base + 1 + _MOMENT_VALUE]
-    for k in range((ints[2 + _MOMENT] - i0) // 6):
-        s = i0 + 6 * k
-        p = r0 + 12 * k
-        mx, my, mz = reals[p + 9], reals[p + 10], reals[p + 11]
+    for k in range((ints[2 + _MOMENT] - i0) // 10):
+        s = i0 + 10 * k
+        p = r0 + 18 * k
+        mx, my, mz = _load_vector(buffer, ints, reals, s + 6, s, p + 9, s0, x0)
         for l in range(3):
             hl, tl = ints[s + 2 * l], ints[s + 2 * l + 1]
             bx = buffer[x0 + hl] - buffer[x0 + tl]
@@ -805,6 +1018,31 @@ def _evaluate(q, qd, t, u, ints, reals, buffer):
                 buffer[i + d] += tension * e
             if j + d < n:
                 buffer[j + d] -= tension * e
+    i0 = ints[1 + _ROTATIONAL_SPRING]
+    r0 = ints[real_base + 1 + _ROTATIONAL_SPRING_PARAMETERS]
+    for k in range(ints[2 + _ROTATIONAL_SPRING] - i0):
+        c = ints[i0 + k]
+        buffer[c] -= reals[r0 + 3 * k] * (buffer[x0 + c] - reals[r0 + 3 * k + 2]) + reals[r0 + 3 * k + 1] * buffer[v0 + c]
+
+
+@njit(cache=True, inline="always")
+def _load_vector(buffer, ints, reals, functions, frame, inverse, s0, x0):
+    """A force's or moment's vector at time t: the three time functions at ``ints[functions:]``
+    (values in the scratch at ``s0``), along the ground axes; when ``ints[functions + 3]`` is 1,
+    along the axes of the body whose basis pairs are at ``ints[frame:]``: X X₀⁻¹ f, X₀⁻¹ at
+    ``reals[inverse:]``."""
+    fx, fy, fz = buffer[s0 + 3 * ints[functions]], buffer[s0 + 3 * ints[functions + 1]], \
+        buffer[s0 + 3 * ints[functions + 2]]
+    if ints[functions + 3] == 0:
+        return fx, fy, fz
+    gx, gy, gz = 0.0, 0.0, 0.0
+    for l in range(3):
+        c = reals[inverse + 3 * l] * fx + reals[inverse + 3 * l + 1] * fy + reals[inverse + 3 * l + 2] * fz
+        b = _triple_at(buffer, x0, ints[frame + 2 * l], ints[frame + 2 * l + 1])
+        gx += c * b[0]
+        gy += c * b[1]
+        gz += c * b[2]
+    return gx, gy, gz
 
 
 @njit(cache=True, inline="always")
@@ -848,6 +1086,24 @@ def _angle_row(buffer, ints, s, n, a0, g0, x0, v0, row):
     D_quadratic = 2.0 * _dot3(dr, dv)
     buffer[g0 + row] = -(-co * rate * rate * T - 2.0 * si * rate * T_rate + co * T_quadratic
                          + si * rate * rate * D - 2.0 * co * rate * D_rate - si * D_quadratic)
+
+
+@dataclass(frozen=True)
+class BodyFrame:
+    """A body's (or rod's) own share of a spatial model: its elements (``slots``: their indices
+    in the extended coordinates x = (q, constants), three each), its element mass matrix and
+    gravity force over them (3k×3k, 3k; with the rigidity mass of its further elements) and the
+    constraint rows it owns (its rigid-body and further-element rows).  Its free-body equation
+    M_e ẍ_e = Q_e + F_e - Σ_own A_rᵀ λ_r gives the forces F_e that the rest of the mechanism
+    applies at its elements (:mod:`cmbs.inverse.spatial_reactions`)."""
+
+    name: str
+    elements: tuple[str, ...]
+    kinds: tuple[str, ...]
+    slots: np.ndarray
+    mass: np.ndarray
+    gravity: np.ndarray
+    rows: np.ndarray
 
 
 class SpatialKernel(NamedTuple):

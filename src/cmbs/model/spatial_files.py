@@ -14,12 +14,13 @@ from pathlib import Path
 from typing import Callable
 
 from cmbs.errors import ModelError
+from cmbs.model.drivers import TimeFunction
 from cmbs.model.files import _actuator, _driver, _Entry, apply_sections
 from cmbs.model.spatial import SpatialModelBuilder
 
 #: the sections of a spatial model file
-SECTIONS = ("model", "points", "vectors", "bodies", "rods", "distances", "dots", "angles", "drivers", "springs",
-            "forces", "moments", "actuators", "initial_velocities")
+SECTIONS = ("model", "points", "vectors", "bodies", "rods", "distances", "sliders", "dots", "angles", "drivers",
+            "springs", "rotational_springs", "forces", "moments", "actuators", "initial_velocities")
 
 
 def read_spatial_builder(document: dict, base: Path, default_name: str) -> SpatialModelBuilder:
@@ -42,12 +43,14 @@ def read_spatial_builder(document: dict, base: Path, default_name: str) -> Spati
         "bodies": lambda name, t: _body(builder, name, t),
         "rods": lambda name, t: _rod(builder, name, t),
         "distances": lambda name, t: _distance(builder, name, t),
+        "sliders": lambda name, t: _slider(builder, name, t),
         "dots": lambda name, t: _dot(builder, name, t),
         "angles": lambda name, t: _angle(builder, name, t),
         "drivers": lambda name, t: _driver(builder, name, t, base),
         "springs": lambda name, t: _spring(builder, name, t),
-        "forces": lambda name, t: _force(builder, name, t),
-        "moments": lambda name, t: _moment(builder, name, t),
+        "rotational_springs": lambda name, t: _rotational_spring(builder, name, t),
+        "forces": lambda name, t: _force(builder, name, t, base),
+        "moments": lambda name, t: _moment(builder, name, t, base),
         "actuators": lambda name, t: _actuator(builder, name, t),
     }
     apply_sections(document, handlers)
@@ -56,13 +59,16 @@ def read_spatial_builder(document: dict, base: Path, default_name: str) -> Spati
 
 def entry_of_constraint(constraint: str, drivers: frozenset[str] = frozenset()) -> str:
     """The file entry behind a spatial constraint name: 'rigid top: u·v' and 'body top: tip.x' ->
-    'bodies.top', 'rigid crank' -> 'rods.crank', 'distance rod' -> 'distances.rod', 'dot plane'
-    -> 'dots.plane', 'angle turn' -> 'angles.turn', a name in ``drivers`` -> 'drivers.NAME'."""
+    'bodies.top', 'rigid crank' -> 'rods.crank', 'distance rod' -> 'distances.rod', 'slider s.x'
+    -> 'sliders.s', 'dot plane' -> 'dots.plane', 'angle turn' -> 'angles.turn', a name in ``drivers`` ->
+    'drivers.NAME'."""
     if constraint in drivers:
         return f"drivers.{constraint}"
     kind, _, name = constraint.partition(" ")
     if kind == "body" or (kind == "rigid" and ": " in name):
         return f"bodies.{name.partition(': ')[0]}"
+    if kind == "slider":
+        return f"sliders.{name.rpartition('.')[0]}"
     return {"rigid": "rods", "distance": "distances", "dot": "dots", "angle": "angles"}.get(kind, "model") + f".{name}"
 
 
@@ -138,6 +144,12 @@ def _distance(builder: SpatialModelBuilder, name: str, table: object) -> None:
     builder.add_distance(name, i, j, initial=entry.number("initial"))
 
 
+def _slider(builder: SpatialModelBuilder, name: str, table: object) -> None:
+    entry = _Entry(f"sliders.{name}", table, ("point", "origin", "axis", "initial"), ("point", "origin", "axis"))
+    builder.add_slider(name, point=entry.string("point"), origin=entry.string("origin"), axis=entry.string("axis"),
+                       initial=entry.number("initial"))
+
+
 def _element(entry: _Entry, key: str) -> str | tuple[str, str]:
     value = entry.get(key)
     if isinstance(value, str):
@@ -161,14 +173,33 @@ def _spring(builder: SpatialModelBuilder, name: str, table: object) -> None:
                        rest_length=entry.number("rest_length"))
 
 
-def _force(builder: SpatialModelBuilder, name: str, table: object) -> None:
-    entry = _Entry(f"forces.{name}", table, ("point", "force"), ("point", "force"))
-    builder.add_force(name, point=entry.string("point"), force=_triple(entry, "force"))
+def _rotational_spring(builder: SpatialModelBuilder, name: str, table: object) -> None:
+    entry = _Entry(f"rotational_springs.{name}", table, ("angle", "stiffness", "damping", "rest_angle"),
+                   ("angle", "stiffness"))
+    builder.add_rotational_spring(name, angle=entry.string("angle"), stiffness=entry.number("stiffness"),
+                                  damping=entry.number("damping", 0.0), rest_angle=entry.number("rest_angle"))
 
 
-def _moment(builder: SpatialModelBuilder, name: str, table: object) -> None:
-    entry = _Entry(f"moments.{name}", table, ("body", "moment"), ("body", "moment"))
-    builder.add_moment(name, body=entry.string("body"), moment=_triple(entry, "moment"))
+def _components(entry: _Entry, key: str, base: Path) -> list[TimeFunction]:
+    """Three components [x, y, z], each a number, an expression of t or a table {t, value}."""
+    value = entry.get(key)
+    if not (isinstance(value, list) and len(value) == 3):
+        raise ModelError(f"{key} must be a list of three components (numbers, expressions of t or tables), got "
+                         f"{value!r}", entry=entry.label)
+    return [_Entry(f"{entry.label}.{key}", {axis: component}, (axis,)).time_function(axis, base)
+            for axis, component in zip("xyz", value)]
+
+
+def _force(builder: SpatialModelBuilder, name: str, table: object, base: Path) -> None:
+    entry = _Entry(f"forces.{name}", table, ("point", "force", "body"), ("point", "force"))
+    builder.add_force(name, point=entry.string("point"), force=_components(entry, "force", base),
+                      body=entry.string("body"))
+
+
+def _moment(builder: SpatialModelBuilder, name: str, table: object, base: Path) -> None:
+    entry = _Entry(f"moments.{name}", table, ("body", "moment", "frame"), ("body", "moment"))
+    builder.add_moment(name, body=entry.string("body"), moment=_components(entry, "moment", base),
+                       frame=entry.string("frame") or "ground")
 
 
 def _angle(builder: SpatialModelBuilder, name: str, table: object) -> None:
