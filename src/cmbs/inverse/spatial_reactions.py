@@ -4,7 +4,7 @@ vectors (:mod:`cmbs.model.spatial`).
 Convention of the library: ``M q̈ + Aᵀλ = Q``.  Work in extended coordinates x = (q, constants)
 (fixed elements have zero acceleration).  A body (or rod) b owns some slots e (its origin, basis
 and further elements), its element mass matrix M_e and gravity Q_e, and some rows (its rigid-body
-products and further-element rows, :class:`~cmbs.model.spatial.BodyFrame`).  As a free body
+products and further-element rows, :class:`~cmbs.model.spatial.FreeBody`).  As a free body
 
     M_e ẍ_e = Q_e + L_e + F_e - A_ownᵀ λ_own                                           (1)
 
@@ -109,7 +109,7 @@ def spatial_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarr
     x = np.concatenate([q, equations.constants])
     acceleration = np.concatenate([qdd, np.zeros(equations.constants.size)])
     forces, couples = {}, {}
-    for body in equations.bodies:
+    for body in equations.free_bodies:
         extended = (body.slots[:, None] + np.arange(3)).ravel()
         own = _own_row_forces(equations, x, lam, body.rows)[extended]
         moments = np.zeros(x.size)

@@ -665,10 +665,10 @@ class _Assembler:
                                      rotational_springs=(np.array(rotational_springs, dtype=np.int64),
                                                          np.array(rotational_parameters).reshape(-1, 3)),
                                      point_indices=np.array([self.index[p] for p in point_names], dtype=np.int64),
-                                     bodies=tuple(self._body_frame(name, elements,
-                                                                   [*own_dots, *(len(dots) + 3 * k + d for k in own_linear
-                                                                                 for d in range(3))])
-                                                  for name, (elements, own_dots, own_linear) in owned.items()),
+                                     free_bodies=tuple(self._free_body(name, elements,
+                                                                       [*own_dots, *(len(dots) + 3 * k + d
+                                                                                     for k in own_linear for d in range(3))])
+                                                       for name, (elements, own_dots, own_linear) in owned.items()),
                                      moment_bodies=tuple(body for body, _, _ in b._moments.values()),
                                      work_sources=tuple(f"force {name!r}" for name in b._forces)
                                      + tuple(f"moment {name!r}" for name in b._moments)
@@ -699,8 +699,8 @@ class _Assembler:
                 self.mass_ext[p:p + 3, r:r + 3] += matrix[a, b] * np.eye(3)
                 blocks[p, r] = blocks.get((p, r), 0.0) + matrix[a, b]
 
-    def _body_frame(self, name: str, elements: Sequence[str], rows: Sequence[int]) -> "BodyFrame":
-        """The :class:`BodyFrame` of body or rod ``name`` from its share of M and gravity."""
+    def _free_body(self, name: str, elements: Sequence[str], rows: Sequence[int]) -> "FreeBody":
+        """The :class:`FreeBody` of body or rod ``name`` from its share of M and gravity."""
         slots = np.array([self.index[element] for element in elements], dtype=np.int64)
         blocks, weights = self.shares[name]
         position = {int(slot): k for k, slot in enumerate(slots)}
@@ -710,7 +710,7 @@ class _Assembler:
         gravity = np.zeros(slots.size)
         for p, weight in weights.items():
             gravity[position[p]] += weight
-        return BodyFrame(name, tuple(elements), tuple(self.b._elements[e].kind for e in elements), slots,
+        return FreeBody(name, tuple(elements), tuple(self.b._elements[e].kind for e in elements), slots,
                          np.kron(matrix, np.eye(3)), np.kron(gravity, self.gravity), np.array(rows, dtype=np.int64))
 
     def _body_mass(self, body: _Body, o: int, basis: list[tuple[int, int]], X0: np.ndarray) -> None:
@@ -767,7 +767,7 @@ class SpatialEquations:
     rotational_springs: tuple[np.ndarray, np.ndarray]
     point_indices: np.ndarray
     #: each body's and rod's share of the model, for its free-body equation
-    bodies: tuple["BodyFrame", ...]
+    free_bodies: tuple["FreeBody", ...]
     #: the body of each moment, in the order of the moments
     moment_bodies: tuple[str, ...]
     time_functions: TimeFunctionPack
@@ -1089,7 +1089,7 @@ def _angle_row(buffer, ints, s, n, a0, g0, x0, v0, row):
 
 
 @dataclass(frozen=True)
-class BodyFrame:
+class FreeBody:
     """A body's (or rod's) own share of a spatial model: its elements (``slots``: their indices
     in the extended coordinates x = (q, constants), three each), its element mass matrix and
     gravity force over them (3k×3k, 3k; with the rigidity mass of its further elements) and the
