@@ -241,11 +241,12 @@ def test_the_singular_message_survives_a_failing_diagnosis():
     ["simulate", "pendulum", "--t-end", "0.05", "--out", "{bad}.npz"],
     ["simulate", "pendulum", "--t-end", "0.05", "--plot", "{bad}.png"],
     ["simulate", "pendulum", "--t-end", "0.05", "--animate", "{bad}.gif"],
+    ["simulate", "pendulum", "--t-end", "0.05", "--animate", "{bad}.html"],
     ["kinematics", "slider-crank", "--t-end", "0.05", "--dt", "0.01", "--out", "{bad}.csv"],
     ["inverse", "slider-crank", "--t-end", "0.05", "--dt", "0.01", "--plot", "{bad}.png"],
     ["track", "four-bar", "--t-end", "0.05", "--out", "{bad}.npz"],
     ["sweep", "pendulum", "--t-end", "0.05", "--speed", "P.x=0,1", "--out", "{bad}.npz"],
-], ids=["simulate-out", "simulate-plot", "simulate-animate", "kinematics-out", "inverse-plot", "track-out",
+], ids=["simulate-out", "simulate-plot", "simulate-animate", "simulate-viewer", "kinematics-out", "inverse-plot", "track-out",
         "sweep-out"])
 @pytest.mark.parametrize("bad", ["/proc/cmbs-x", "{tmp}/a-directory", "{tmp}/" + "n" * 300],
                          ids=["unwritable", "directory", "name-too-long"])
@@ -256,7 +257,7 @@ def test_an_output_path_that_cannot_be_written_is_refused_before_any_work(tmp_pa
 
     monkeypatch.setattr(cmbs, "load", no_work)
     (tmp_path / "a-directory.npz").mkdir()
-    for suffix in (".png", ".gif", ".csv"):
+    for suffix in (".png", ".gif", ".html", ".csv"):
         (tmp_path / f"a-directory{suffix}").mkdir()
     arguments = [part.format(bad=bad.format(tmp=tmp_path)) for part in command]
     before = sorted(tmp_path.rglob("*"))

@@ -9,6 +9,7 @@ import math
 import os
 import subprocess
 from pathlib import Path
+from typing import NamedTuple
 
 import matplotlib
 
@@ -67,10 +68,60 @@ def frame_times(trajectory: Trajectory, *, fps: float = 30, speed: float = 1.0,
     return np.linspace(start, end, count), rate
 
 
+class Frames(NamedTuple):
+    """What an animation shows (:func:`animation_frames`): the simulated ``times`` of its frames,
+    the frame ``rate`` they are played at, the model's point positions ``points`` (frames, points,
+    2) in the plane (x, z) or (frames, points, 3) in space, those of the reference (``ghost``,
+    same shape) or None, and the index of the ``trail`` point or None."""
+
+    times: np.ndarray
+    rate: float
+    points: np.ndarray
+    ghost: np.ndarray | None
+    trail: int | None
+
+
+def animation_frames(model: Model, trajectory: Trajectory, *, fps: float = 30, speed: float = 1.0,
+                     trail: str | None = None, reference: Trajectory | None = None) -> Frames:
+    """The frames of an animation of ``model`` moving along ``trajectory`` (and ``reference``):
+    the frame times of :func:`frame_times`, the coordinates interpolated linearly to them, the
+    point positions there (see :func:`animate` for the options).
+
+    Raises
+    ------
+    CmbsError
+        Non-positive ``fps``/``speed``, unknown ``trail`` point, a trajectory or reference of
+        another model or with non-finite coordinates or point positions, a reference that does
+        not overlap the trajectory in time.
+    """
+    _check_positive(fps=fps, speed=speed)
+    q = _coordinates_of(model, trajectory, "trajectory")
+    reference_q = _coordinates_of(model, reference, "reference") if reference is not None else None
+    trail_index = None
+    if trail is not None:
+        if trail not in model.point_names:
+            raise CmbsError(f"no point {trail!r}{did_you_mean(trail, model.point_names)} to trail in model "
+                            f"{model.name!r}; points: "
+                            f"{', '.join(model.point_names) or 'none'}")
+        trail_index = model.point_names.index(trail)
+    times, rate = frame_times(trajectory, fps=fps, speed=speed, reference=reference)
+    points = _poses(model, times, trajectory.t, q, "trajectory")
+    ghost = _poses(model, times, reference.t, reference_q, "reference") if reference is not None else None
+    return Frames(times, rate, points, ghost, trail_index)
+
+
+def label_decimals(times: np.ndarray) -> int:
+    """Decimals of the frames' label ``t = 1.23 s``: 2, more when frames are closer than 0.02 s
+    apart, so that every frame's label differs."""
+    spacing = float(times[1] - times[0]) if times.size > 1 else 1.0
+    return max(2, math.ceil(math.log10(2.0 / spacing))) if spacing > 0 else 2
+
+
 def checked_animation_path(path: str | Path, option: str = "animation") -> Path:
-    """``path`` as an animation file that can be written: a .gif, or a .mp4 when ffmpeg is found,
-    in an existing folder (CmbsError otherwise; the CLI checks it before the run)."""
-    path = checked_output(path, (".gif", ".mp4"), option)
+    """``path`` as an animation file that can be written: a .gif, an .html (interactive 3-D
+    viewer), or a .mp4 when ffmpeg is found, in an existing folder (CmbsError otherwise; the CLI
+    checks it before the run)."""
+    path = checked_output(path, (".gif", ".mp4", ".html"), option)
     if path.suffix.lower() == ".mp4" and not animation.writers.is_available("ffmpeg"):
         raise CmbsError(f"{path}: writing .mp4 needs ffmpeg, which was not found; "
                         "install ffmpeg or write a .gif instead (always available)")
@@ -80,7 +131,8 @@ def checked_animation_path(path: str | Path, option: str = "animation") -> Path:
 def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fps: float = 30,
             speed: float = 1.0, trail: str | None = None, dpi: float = 100,
             reference: Trajectory | None = None) -> Path:
-    """Draw ``model`` moving along ``trajectory`` into a ``.gif`` or ``.mp4`` file; returns its path.
+    """Draw ``model`` moving along ``trajectory`` into a ``.gif``, ``.mp4`` or ``.html`` file;
+    returns its path.
 
     Each frame shows the model's segments (``model.lines`` between ``model.point_positions``),
     its points, the label ``t = 1.23 s`` (more decimals when frames are closer than 0.02 s
@@ -112,8 +164,10 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
         ``.gif``: always available (matplotlib's PillowWriter).  GIF stores frame delays in
         hundredths of a second, so the frame rate is approximate, and viewers play rates above
         50 fps slower.  ``.mp4``: needs ffmpeg (``matplotlib.animation.writers.is_available
-        ("ffmpeg")``); without it a :class:`CmbsError` suggests ``.gif``.  Anything else is a
-        :class:`CmbsError`.
+        ("ffmpeg")``); without it a :class:`CmbsError` suggests ``.gif``.  ``.html``: an
+        interactive viewer in one self-contained file (:func:`cmbs.viewer_html.write_viewer`:
+        play/pause, a time slider, a camera to orbit and zoom; the same frames, ``dpi`` unused).
+        Anything else is a :class:`CmbsError`.
     Files
         Written atomically: to a temporary file in the destination folder, renamed on success,
         so a failed write leaves neither a partial file nor a changed old one.
@@ -127,23 +181,15 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
         failed write.
     """
     path = checked_animation_path(path)
-    _check_positive(fps=fps, speed=speed, dpi=dpi)
-    mp4 = path.suffix.lower() == ".mp4"
-    q = _coordinates_of(model, trajectory, "trajectory")
-    reference_q = _coordinates_of(model, reference, "reference") if reference is not None else None
-    trail_index = None
-    if trail is not None:
-        if trail not in model.point_names:
-            raise CmbsError(f"no point {trail!r}{did_you_mean(trail, model.point_names)} to trail in model "
-                            f"{model.name!r}; points: "
-                            f"{', '.join(model.point_names) or 'none'}")
-        trail_index = model.point_names.index(trail)
+    _check_positive(dpi=dpi)
+    frames = animation_frames(model, trajectory, fps=fps, speed=speed, trail=trail, reference=reference)
+    if path.suffix.lower() == ".html":
+        from cmbs.viewer_html import write_viewer
 
-    times, rate = frame_times(trajectory, fps=fps, speed=speed, reference=reference)
-    points = _poses(model, times, trajectory.t, q, "trajectory")
-    ghost = _poses(model, times, reference.t, reference_q, "reference") if reference is not None else None
-    spacing = float(times[1] - times[0]) if times.size > 1 else 1.0
-    decimals = max(2, math.ceil(math.log10(2.0 / spacing))) if spacing > 0 else 2
+        return write_viewer(model, frames, path)
+    mp4 = path.suffix.lower() == ".mp4"
+    times, rate, points, ghost, trail_index = frames
+    decimals = label_decimals(times)
 
     spatial = points.shape[2] == 3
     everything = points if ghost is None else np.concatenate([points, ghost], axis=1)

@@ -10,6 +10,7 @@ import argparse
 import math
 import signal
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING, Iterable, Sequence
 
 import numpy as np
@@ -228,7 +229,7 @@ def _kinematics(args: argparse.Namespace) -> int:
     model = _load(args)
     motion = cmbs.kinematic_analysis(model, times)
     singular = cmbs.singular_configurations(model, motion)
-    saved = f" -> {motion.save(args.out)}" if args.out else ""
+    saved = f" -> {_save(model, motion, args.out)}" if args.out else ""
     print(f"{model.name}: kinematics of {len(times)} instants over [0, {args.t_end:g}] s{saved}")
     for name in model.coordinate_names:
         column = motion[name]
@@ -267,7 +268,7 @@ def _simulate(args: argparse.Namespace) -> int:
     if info.get("note"):
         print(f"  note: {info['note']}")
     if args.out:
-        print(f"  result -> {run.save(args.out)}")
+        print(f"  result -> {_save(model, run, args.out)}")
     if args.plot:
         from cmbs.plotting import plot_simulation, save_figure
 
@@ -280,6 +281,14 @@ def _simulate(args: argparse.Namespace) -> int:
         print(f"cmbs: simulation failed: {info['message']}", file=sys.stderr)
         return 1
     return 0
+
+
+def _save(model: cmbs.Model, run: cmbs.Trajectory, path: str) -> Path:
+    """Write ``run`` to the result file ``path`` with the poses of a spatial model's bodies
+    (:func:`cmbs.kinematics.with_body_poses`); its path."""
+    from cmbs.kinematics import with_body_poses
+
+    return with_body_poses(model, run).save(path)
 
 
 def _energy_balance(model: cmbs.Model, run: cmbs.Trajectory) -> str:
@@ -381,7 +390,7 @@ def _inverse(args: argparse.Namespace) -> int:
             print(f"  {label:<32} max {size.max():.6g} {unit}")
         motion = cmbs.Trajectory(motion.t, motion.q, motion.qd, motion.qdd, motion.names, extras, motion.info)
     if args.out:
-        print(f"  result -> {motion.save(args.out)}")
+        print(f"  result -> {_save(model, motion, args.out)}")
     if args.plot:
         from cmbs.plotting import plot_driver_forces, save_figure
 
@@ -464,7 +473,7 @@ def _track(args: argparse.Namespace) -> int:
     print(f"  NRMSE (of the reference's range) {nrmse}; settling time (1 %) {_settling(result, motion)}")
     print(f"  actuation RMS norm {result.rms_norm:.6g}, peak norm {result.peak_norm:.6g}")
     if args.out:
-        print(f"  result -> {run.save(args.out)}")
+        print(f"  result -> {_save(plant, run, args.out)}")
     if args.plot:
         from cmbs.plotting import plot_simulation, save_figure
 
@@ -615,7 +624,8 @@ def build_parser() -> argparse.ArgumentParser:
                                "fixed-step runs still step by --dt but store and write only these")
     simulate.add_argument("--out", help="result file (.npz or .csv)")
     simulate.add_argument("--plot", help="figure: coordinates, energy, constraint error (.png, .pdf, .svg)")
-    simulate.add_argument("--animate", help="animation of the mechanism (.gif; .mp4 with ffmpeg)")
+    simulate.add_argument("--animate", help="animation of the mechanism (.gif; .mp4 with ffmpeg; .html: an interactive "
+                                            "3-D viewer in one self-contained file)")
     simulate.set_defaults(run=_simulate)
 
     inverse = model_command("inverse", "inverse dynamics: the forces on the driven coordinates of a driven model")

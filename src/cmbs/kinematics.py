@@ -16,13 +16,14 @@ from typing import Sequence
 
 import numpy as np
 
-from cmbs.errors import ConvergenceError, ModelError
+from cmbs.errors import CmbsError, ConvergenceError, ModelError
 from cmbs.lazy import on_first_use
-from cmbs.model.model import Model
+from cmbs.model.model import Model, base_equations
 from cmbs.trajectory import Trajectory
 
 linalg = on_first_use("scipy.linalg")
 optimize = on_first_use("scipy.optimize")
+transform = on_first_use("scipy.spatial.transform")
 
 
 @dataclass(frozen=True)
@@ -93,6 +94,95 @@ def point_array(model: Model, q: np.ndarray) -> np.ndarray:
         return np.zeros((0, 2))
     points = np.asarray(model.point_positions(q), dtype=float)
     return points if points.ndim == 2 else points.reshape(len(model.point_names), -1)
+
+
+@dataclass(frozen=True)
+class BodyPoses:
+    """Poses of a spatial model's rigid bodies (:func:`body_poses`), ``...`` the leading shape of
+    the coordinates given (none for one configuration, (k,) for k of them).
+
+    ``names`` (bodies,), in the order they were added; ``origins`` (..., bodies, 3) the position
+    of each body's origin point; ``rotations`` (..., bodies, 3, 3) the rotation R that turns the
+    body as built (the positions given to the builder, where its inertia is given in ground
+    axes) into its pose: a body-fixed point p is at o + R (p₀ - o₀); ``quaternions``
+    (..., bodies, 4) the same rotations as unit quaternions, **scalar first** (w, x, y, z), of
+    continuous sign along the first axis (the first with w >= 0).
+    """
+
+    names: tuple[str, ...]
+    origins: np.ndarray
+    rotations: np.ndarray
+    quaternions: np.ndarray
+
+
+def body_poses(model: Model, q: np.ndarray) -> BodyPoses:
+    """The poses of the rigid bodies of a spatial model (:class:`~cmbs.SpatialModelBuilder`
+    ``add_body``) at coordinates ``q``, (n,) or (k, n): each body's origin, and the rotation
+    R = X X₀⁻¹ from its basis elements X = [b₁ b₂ b₃] (point differences and unit vectors) at
+    q and as built, made exactly orthonormal by polar decomposition (the constraint error of a
+    simulation leaves it slightly off; see ``SpatialEquations.body_poses``), and its quaternion.
+    Rods and point masses are no bodies (a rod's spin about its axis is no coordinate).
+    Configurations with non-finite coordinates give NaN.
+
+    Raises
+    ------
+    ModelError
+        ``model`` is not a spatial natural-coordinate model, or ``q`` has not n columns.
+    """
+    equations = base_equations(model)[0]
+    if not hasattr(equations, "body_poses"):
+        raise ModelError(f"model {model.name!r} is not a spatial model (cmbs.SpatialModelBuilder): body poses are "
+                         "those of its rigid bodies")
+    q = np.asarray(q, dtype=float)
+    if q.ndim not in (1, 2) or q.shape[-1] != model.n:
+        raise ModelError(f"body poses of model {model.name!r} need coordinates of shape ({model.n},) or (k, "
+                         f"{model.n}), got {q.shape}")
+    origins, rotations = equations.body_poses(q)
+    flat = rotations.reshape(-1, 3, 3)
+    quaternions = np.full((flat.shape[0], 4), np.nan)
+    finite = np.all(np.isfinite(flat), axis=(1, 2))
+    if finite.any():
+        quaternions[finite] = transform.Rotation.from_matrix(flat[finite]).as_quat()[:, [3, 0, 1, 2]]
+    quaternions = quaternions.reshape(*rotations.shape[:-2], 4)
+    quaternions *= np.where(quaternions[..., :1] < 0, -1.0, 1.0)
+    if q.ndim == 2:
+        for k in range(1, q.shape[0]):        # the sign of least change from the previous instant
+            flip = np.einsum("bi,bi->b", quaternions[k], quaternions[k - 1]) < 0
+            quaternions[k, flip] *= -1.0
+    return BodyPoses(tuple(body.name for body in equations.bodies), origins, rotations, quaternions)
+
+
+#: the result-file columns of a body's pose, after the body's name: its origin, then its
+#: quaternion scalar first (:func:`with_body_poses`)
+POSE_COLUMNS = ("origin.x", "origin.y", "origin.z", "qw", "qx", "qy", "qz")
+
+
+def with_body_poses(model: Model, trajectory: Trajectory) -> Trajectory:
+    """``trajectory`` with the poses of a spatial model's bodies (:func:`body_poses`) added as
+    extras, seven per body: ``BODY.origin.x``, ``.origin.y``, ``.origin.z`` (m) and the
+    quaternion ``BODY.qw``, ``.qx``, ``.qy``, ``.qz`` (scalar first); what a result file holds.
+    Returned unchanged for a model that is not spatial or has no bodies.
+
+    Raises
+    ------
+    CmbsError
+        A pose column would have the name of a coordinate or of another array of the trajectory.
+    """
+    if not getattr(base_equations(model)[0], "bodies", ()):
+        return trajectory
+    q = np.asarray(trajectory.q, dtype=float)[:, [trajectory.names.index(name) for name in model.coordinate_names]]
+    poses = body_poses(model, q)
+    extras = dict(trajectory.extras)
+    for k, name in enumerate(poses.names):
+        values = np.concatenate([poses.origins[:, k], poses.quaternions[:, k]], axis=1)
+        for column, value in zip(POSE_COLUMNS, values.T):
+            label = f"{name}.{column}"
+            if label in extras or label in trajectory.names:
+                raise CmbsError(f"the pose of body {name!r} would be written as {label!r}, which is already a "
+                                "coordinate or result column; rename the body")
+            extras[label] = value
+    return Trajectory(trajectory.t, trajectory.q, trajectory.qd, trajectory.qdd, trajectory.names, extras,
+                      trajectory.info)
 
 
 def model_size(model: Model, q: np.ndarray) -> float:

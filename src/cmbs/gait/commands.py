@@ -25,7 +25,8 @@ def add_gait_commands(commands) -> None:
     prepare.add_argument("--cutoff", type=float, default=6.0, help="smoothing-spline cut-off frequency [Hz]")
     prepare.add_argument("--out", default="reference.npz", help="reference motion file (.npz or .csv)")
     prepare.add_argument("--plot", help="figure of the independent coordinates (.png, .pdf or .svg)")
-    prepare.add_argument("--animate", help="stick-figure animation of the reconstructed walker (.gif or .mp4)")
+    prepare.add_argument("--animate", help="stick-figure animation of the reconstructed walker (.gif, .mp4 or .html "
+                                           "viewer)")
     prepare.add_argument("--opensim", help="reference kinematics in OpenSim coordinates (.mot or .sto)")
     prepare.set_defaults(run=_gait_prepare)
     inverse = gait_commands.add_parser("inverse", help="inverse dynamics of a stride, compared with the lab's moments",
@@ -64,8 +65,8 @@ def add_gait_commands(commands) -> None:
     follow.add_argument("--dt", type=float, default=1e-3, help="RK4 step [s]")
     follow.add_argument("--out", help="nominal run (.npz or .csv)")
     follow.add_argument("--plot", help="figure of the tracking errors (.png, .pdf or .svg)")
-    follow.add_argument("--animate", help="stick-figure animation of the nominal run over the reference (.gif or "
-                                          ".mp4)")
+    follow.add_argument("--animate", help="stick-figure animation of the nominal run over the reference (.gif, "
+                                          ".mp4 or .html viewer)")
     follow.add_argument("--opensim", help="nominal run in OpenSim coordinates (.mot or .sto)")
     follow.set_defaults(run=_gait_track)
 

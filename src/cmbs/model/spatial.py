@@ -469,6 +469,7 @@ class _Assembler:
         frames: dict[str, tuple[list[tuple[int, int]], np.ndarray]] = {}
         shared_products: set[frozenset[tuple[int, int]]] = set()
         owned: dict[str, tuple[list[str], list[int], list[int]]] = {}    # elements, dot rows, linear rows
+        bodies: list[BodyFrame] = []
         for body in b._bodies.values():
             entry = f"bodies.{body.name}"
             self.owner = body.name
@@ -504,6 +505,7 @@ class _Assembler:
             self._body_mass(body, o, basis, X0)
             frames[body.name] = (basis, X0)
             elements += list(body.basis)
+            bodies.append(BodyFrame(body.name, o, tuple(basis), np.linalg.inv(X0)))
             for spec in body.points + body.vectors:
                 element = self._element(spec, entry, "point" if spec in body.points else "vector")
                 elements.append(element.name)
@@ -670,6 +672,7 @@ class _Assembler:
                                                                                      for k in own_linear for d in range(3))])
                                                        for name, (elements, own_dots, own_linear) in owned.items()),
                                      moment_bodies=tuple(body for body, _, _ in b._moments.values()),
+                                     gravity=tuple(float(g) for g in self.gravity), bodies=tuple(bodies),
                                      work_sources=tuple(f"force {name!r}" for name in b._forces)
                                      + tuple(f"moment {name!r}" for name in b._moments)
                                      + tuple(f"spring {name!r}" for name, s in b._springs.items() if s[3] > 0.0)
@@ -752,6 +755,17 @@ class _Assembler:
         self._add_element_matrix([i, j], matrix, np.array([rod.mass - first, first]))
 
 
+class BodyFrame(NamedTuple):
+    """Where a body's pose is read from: the extended index of its origin point, the (head, tail)
+    extended indices of its three basis elements (tail: the origin for a point difference, the
+    zero constant for a unit vector) and the inverse of their matrix X₀ = [b₁ b₂ b₃] as built."""
+
+    name: str
+    origin: int
+    basis: tuple[tuple[int, int], ...]
+    start_inverse: np.ndarray
+
+
 @dataclass(frozen=True)
 class SpatialEquations:
     """Compiled evaluator of a spatial natural-coordinate model (see the module docstring)."""
@@ -775,6 +789,10 @@ class SpatialEquations:
     work_sources: tuple[str, ...] = ()
     #: the drivers of a constant, which hold their coordinate and do no work
     steady_drivers: frozenset[str] = frozenset()
+    #: the acceleration of gravity (m/s², ground axes)
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    #: the rigid bodies' frames (:meth:`body_poses`), in the order they were added
+    bodies: tuple[BodyFrame, ...] = ()
 
     def new_terms(self) -> Terms:
         """Terms whose scratch holds the time functions' (f, f', f'') and stack, then the extended
@@ -845,6 +863,32 @@ class SpatialEquations:
 
     def potential_energy(self, q: np.ndarray) -> float:
         return float(self.energy_parts(np.atleast_2d(q), np.zeros((1, self.n)))[1][0])
+
+    def body_poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Origins (..., bodies, 3) and rotation matrices (..., bodies, 3, 3) of the bodies at
+        coordinates ``q`` (..., n).
+
+        With X = [b₁ b₂ b₃] the basis elements at q, R = X X₀⁻¹ maps the body as built onto the
+        body at q: exact (and orthonormal, det +1) for a rigid motion, since every material point
+        is r = r_O + X c.  The constraint error that integration leaves makes X X₀⁻¹ slightly
+        non-orthonormal; R is its nearest rotation, the orthogonal factor of its polar
+        decomposition U Vᵀ (SVD X X₀⁻¹ = U S Vᵀ; the last column of U negated should det(U Vᵀ)
+        be -1).  Rows of q that are not finite give NaN."""
+        x = self._extended(np.asarray(q, dtype=float))
+        rows = x.reshape(-1, x.shape[-1])
+        count = len(self.bodies)
+        origins = np.empty((rows.shape[0], count, 3))
+        rotations = np.full((rows.shape[0], count, 3, 3), np.nan)
+        finite = np.all(np.isfinite(rows), axis=1)
+        for k, body in enumerate(self.bodies):
+            origins[:, k] = rows[:, body.origin:body.origin + 3]
+            X = np.stack([rows[finite, head:head + 3] - rows[finite, tail:tail + 3] for head, tail in body.basis],
+                         axis=-1)
+            U, _, Vt = np.linalg.svd(X @ body.start_inverse)
+            U[:, :, 2] *= np.sign(np.linalg.det(U @ Vt))[:, None]
+            rotations[finite, k] = U @ Vt
+        shape = x.shape[:-1]
+        return origins.reshape(*shape, count, 3), rotations.reshape(*shape, count, 3, 3)
 
     def point_positions(self, q: np.ndarray) -> np.ndarray:
         """(n_points, 3) positions of the model's points."""
