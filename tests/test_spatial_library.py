@@ -140,3 +140,18 @@ def test_the_flyball_governor_follows_exudyn_and_the_published_reference():
     assert inside.shape[0] >= 28
     difference = np.abs(np.interp(inside[:, 0], run.t, run["s"]) - inside[:, 1])
     assert difference.max() < 2e-3 and np.median(difference) < 5e-4
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_trial_stage_that_loses_rank_shortens_the_step_instead_of_ending_the_run(compiled):
+    """DOP853 at rtol 1e-12 on the stiff flyball governor: the first trial step (5.7 ms) put a
+    stage so far off the constraints that Lagrange's rank test failed, and the run ended at
+    t = 0.0057 s naming 'rigid shaft: z·v' as dependent, though A is well conditioned on the motion
+    (σ_min 0.43).  A singular stage now retries the step ten times shorter, as a non-finite one,
+    in the compiled and in the Python loop; the run goes on and stays on the constraints."""
+    model = cmbs.load("flyball-governor")
+    run = cmbs.simulate(model, t_end=0.01, dt=1e-3, integrator="dop853", rtol=1e-12, atol=1e-13, compiled=compiled)
+    assert run.info.get("compiled", False) is compiled        # the Python loop's note says why it ran
+    assert run.info["status"] == "success", run.info.get("message")
+    assert run.info["rejected"] >= 1
+    assert np.abs(model.constraints(run.q[-1], run.t[-1])).max() < 1e-12

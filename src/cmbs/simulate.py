@@ -438,7 +438,8 @@ def _run_explicit(model: Model, solver, inputs: Inputs, q0: np.ndarray, qd0: np.
     result = integrate_explicit(field, np.concatenate([q0, qd0]), grid if fixed else grid[::every], tableau=tableau,
                                 rtol=rtol, atol=atol, step=dt if fixed else None,
                                 after_step=after_step if project or solver.adjusts_state else None, progress=bar,
-                                stop_on=(CmbsError,), keep_every=every if fixed else 1, watch=BranchWatch(model))
+                                stop_on=(CmbsError,), retry_on=(SingularSystemError,), keep_every=every if fixed else 1,
+                                watch=BranchWatch(model))
     if project and tableau.b_error is not None:     # adaptive: outputs between steps are interpolated
         for row, t in zip(result.y, result.t):
             q, qd = project_state(model, row[:n], row[n:], float(t), tolerance=projection_tolerance)

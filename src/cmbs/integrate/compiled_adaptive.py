@@ -31,7 +31,7 @@ import numpy as np
 
 from typing import NamedTuple
 
-from cmbs.dynamics.base import NON_FINITE, OK
+from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
 from cmbs.dynamics.field import after_step, field, output_state, stage_state
 from cmbs.integrate.compiled_rk4 import record_constraints
 from cmbs.integrate.continuity import LEFT_BRANCH, jump_message, kept_records, left_branch, watch_array
@@ -300,7 +300,10 @@ def _steps(model, formulation, y, y_new, k1, stages, counts, where, records, buf
             if status != OK:
                 t_stop = t + c[i] * h_try
                 break
-        if status == NON_FINITE:        # retried with a smaller step below
+        if status == NON_FINITE or (status == SINGULAR and h_try > 1e-14 * max(1.0, abs(t))):
+            # retried with a smaller step below: a trial stage may leave the constraints far enough
+            # to lose rank (as the Python loop's retry_on); a singular stage of a step that would
+            # underflow ends the run
             status = OK
             finite = False
         elif status != OK:              # a singular stage, or its hook failed: the run ends

@@ -66,8 +66,8 @@ def _hermite(t0: float, y0: np.ndarray, f0: np.ndarray, t1: float, y1: np.ndarra
 def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tableau, rtol: float = 1e-6,
               atol: float = 1e-9, step: float | None = None, after_step: AfterStep | None = None,
               max_steps: int = 10_000_000, progress: Callable[[float], None] | None = None,
-              stop_on: tuple[type[Exception], ...] = (), keep_every: int = 1,
-              watch: Watch | None = None) -> Integration:
+              stop_on: tuple[type[Exception], ...] = (), retry_on: tuple[type[Exception], ...] = (),
+              keep_every: int = 1, watch: Watch | None = None) -> Integration:
     """Integrate from ``t_out[0]`` through ``t_out[-1]``.
 
     Parameters
@@ -83,6 +83,11 @@ def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tab
     stop_on
         Exception types raised by ``f`` or ``after_step`` that end the run with status
         ``"failed"`` and their message (the output computed so far is kept).
+    retry_on
+        Of those, the types that a stage of an adaptive step may raise because the step is too
+        long (a singular system: a trial stage can leave the constraints far enough to lose
+        rank): the step is tried again ten times shorter, as for a non-finite state, and the run
+        ends only when the step would underflow.
     keep_every
         With a fixed ``step``: of the instants ``t_out`` (which the steps hit), keep only
         ``t_out[::keep_every]`` (whose last must be ``t_out[-1]``); the others are stepped through
@@ -141,6 +146,10 @@ def integrate(f: VectorField, y0: np.ndarray, t_out: np.ndarray, *, tableau: Tab
         try:
             y_new = _step(field, tableau, t, y, h_try, k1, stages)
         except stop_on as error:
+            if adaptive and isinstance(error, retry_on) and h_try > 1e-14 * max(1.0, abs(t)):
+                h = h_try / 10.0
+                counters["rejected"] += 1
+                continue
             return fail(str(error))
         if not np.all(np.isfinite(y_new)):
             if adaptive and h_try > 1e-14 * max(1.0, abs(t)):
