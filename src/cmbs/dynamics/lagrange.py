@@ -120,17 +120,25 @@ class KKTSolver(StatelessSolver):
 
     def _singular_message(self, terms: Terms, t: float) -> str:
         """Why :func:`_solve` found the system singular, naming the dependent constraints (the
-        rank of the row-scaled A by SVD, the constraints by QR with column pivoting on Aᵀ)."""
+        rank of the row-scaled A by SVD, the constraints by QR with column pivoting on Aᵀ); of
+        full rank, within :data:`~cmbs.integrate.continuity.NEAR_SINGULAR` of rank loss, the
+        constraint nearest to dependence (an adaptive step that shortens towards a singular
+        position ends where the elimination fails, just outside the rank tolerance)."""
         A = terms.A
         scaled = A * self.row_scale[:, None]
         sigma = np.linalg.svd(scaled, compute_uv=False)
         cutoff = self.singular_tolerance * max(sigma[0], 1.0) if sigma.size else 0.0
+        from cmbs.integrate.continuity import NEAR_SINGULAR
+
         rank = int(np.sum(sigma > cutoff))
-        if rank == A.shape[0]:
-            return (f"model {self.model.name!r} at t={t:.6g}: the augmented system [M Aᵀ; A 0] is singular (a motion "
-                    "the constraints allow has no mass). Use formulation 'projection' or 'udwadia-kalaba', or "
-                    "least_squares=True")
         _, _, pivots = linalg.qr(scaled.T, pivoting=True, mode="economic")
+        if rank == A.shape[0]:
+            ratio = sigma[-1] / max(sigma[0], 1.0) if sigma.size else 1.0
+            why = (f"near a singular configuration (σ_min/σ_max of the constraint Jacobian {ratio:.2g}; nearly "
+                   f"dependent: {self.model.constraint_names[pivots[-1]]})" if ratio < NEAR_SINGULAR
+                   else "(a motion the constraints allow has no mass)")
+            return (f"model {self.model.name!r} at t={t:.6g}: the augmented system [M Aᵀ; A 0] is singular {why}. "
+                    "Use formulation 'projection' or 'udwadia-kalaba', or least_squares=True")
         dependent = [self.model.constraint_names[k] for k in sorted(pivots[rank:])]
         return (f"model {self.model.name!r} at t={t:.6g}: the constraint Jacobian has rank {rank} < {A.shape[0]} "
                 f"(redundant constraints or a singular configuration); dependent: {', '.join(dependent)}. "
