@@ -50,6 +50,9 @@ import numpy as np  # noqa: E402
 
 import cmbs  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from exudyn_runs import solve_generalized_alpha  # noqa: E402
+
 DATA = Path(__file__).resolve().parent.parent / "tests" / "data"
 REFERENCE = DATA / "flyball-exudyn.csv"
 DIGITIZED = DATA / "flyball-a05-digitized.csv"
@@ -112,18 +115,8 @@ def exudyn_flyball(step: float) -> tuple[np.ndarray, float, str]:
     sensor = mbs.AddSensor(SensorBody(bodyNumber=slider, outputVariableType=exu.OutputVariableType.Position,
                                       storeInternal=True))
     mbs.Assemble()
-    settings = exu.SimulationSettings()
-    settings.timeIntegration.numberOfSteps = int(round(T_END / step))
-    settings.timeIntegration.endTime = T_END
-    settings.timeIntegration.verboseMode = 0
-    settings.timeIntegration.newton.relativeTolerance = 1e-10
-    settings.timeIntegration.generalizedAlpha.spectralRadius = SPECTRAL_RADIUS
-    settings.timeIntegration.generalizedAlpha.computeInitialAccelerations = True
-    settings.solution.file.write = False
-    settings.solution.sensors.writePeriod = OUTPUT
-    start = time.perf_counter()
-    mbs.SolveDynamic(simulationSettings=settings)
-    wall = time.perf_counter() - start
+    wall = solve_generalized_alpha(exu, mbs, t_end=T_END, step=step, output=OUTPUT,
+                                   spectral_radius=SPECTRAL_RADIUS)
     data = np.asarray(mbs.GetSensorStoredData(sensor))
     return data[:, [0, 3]], wall, exu.__version__
 

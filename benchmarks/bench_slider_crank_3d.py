@@ -49,6 +49,9 @@ import numpy as np  # noqa: E402
 
 import cmbs  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from exudyn_runs import solve_generalized_alpha  # noqa: E402
+
 DATA = Path(__file__).resolve().parent.parent / "tests" / "data"
 REFERENCE = DATA / "slider-crank-3d-exudyn.csv"
 GONZALEZ = DATA / "slider-crank-3d-gonzalez.csv"
@@ -100,18 +103,8 @@ def exudyn_slider_crank(step: float) -> tuple[np.ndarray, float, float, str]:
                                   (crank, exu.OutputVariableType.RotationMatrix),
                                   (rod, exu.OutputVariableType.RotationMatrix))]
     mbs.Assemble()
-    settings = exu.SimulationSettings()
-    settings.timeIntegration.numberOfSteps = int(round(T_END / step))
-    settings.timeIntegration.endTime = T_END
-    settings.timeIntegration.verboseMode = 0
-    settings.timeIntegration.newton.relativeTolerance = 1e-10
-    settings.timeIntegration.generalizedAlpha.spectralRadius = SPECTRAL_RADIUS
-    settings.timeIntegration.generalizedAlpha.computeInitialAccelerations = True
-    settings.solution.file.write = False
-    settings.solution.sensors.writePeriod = OUTPUT
-    start = time.perf_counter()
-    mbs.SolveDynamic(simulationSettings=settings)
-    wall = time.perf_counter() - start
+    wall = solve_generalized_alpha(exu, mbs, t_end=T_END, step=step, output=OUTPUT,
+                                   spectral_radius=SPECTRAL_RADIUS)
     position, crank_rotation, rod_rotation = (np.asarray(mbs.GetSensorStoredData(s)) for s in sensors)
     # rotation matrices row by row: column j of R is entries 1 + j, 4 + j, 7 + j
     crank_direction = crank_rotation[:, [3, 6, 9]]                   # the crank's local z (A to B), global

@@ -161,3 +161,41 @@ def arm_on_slider_motion():
     q[:, 1] += 0.2 * np.sin(2 * t)
     q[:, 2] -= 0.1 * np.sin(3 * t)
     return arm, cmbs.Trajectory(t, q, np.zeros_like(q), np.zeros_like(q), arm.coordinate_names)
+
+
+def four_bar_builders(revolute_bodies: bool = False):
+    """Builders of the crank-rocker O-A-B-C in the plane y = 0 (planar, gravity -z) and in space
+    (gravity -z): rods with spherical ends kept in the plane by two products, or bodies with
+    revolute joints (each body carries the ground axis y, and a body-fixed unit vector n across
+    its bar): redundant constraints."""
+    from cmbs.model.natural import NaturalModelBuilder
+    from cmbs.model.spatial import SpatialModelBuilder
+
+    O, A, B, C = (0.0, 0.0), (0.0, 0.5), (1.0, 1.0), (1.0, 0.0)
+    bars = {"crank": ("O", "A", 1.0), "coupler": ("A", "B", 2.0), "rocker": ("C", "B", 1.5)}
+    points = {"O": O, "A": A, "B": B, "C": C}
+    planar = NaturalModelBuilder("four-bar-planar", gravity=(0.0, -9.81))
+    spatial = SpatialModelBuilder("four-bar-spatial", gravity=(0.0, 0.0, -9.81))
+    for name, (x, z) in points.items():
+        planar.add_point(name, x, z, fixed=name in "OC")
+        spatial.add_point(name, (x, 0.0, z), fixed=name in "OC")
+    spatial.add_vector("y", (0.0, 1.0, 0.0), fixed=True)
+    for name, (i, j, mass) in bars.items():
+        d = np.subtract(points[j], points[i])
+        length = float(np.hypot(*d))
+        inertia = mass * length**2 / 12.0
+        planar.add_segment(name, i, j, mass=mass, com=(0.5 * length, 0.0), inertia=inertia)
+        if not revolute_bodies:
+            spatial.add_rod(name, i, j, mass=mass, com=0.5, inertia=inertia)
+            continue
+        along = np.array([d[0], 0.0, d[1]]) / length
+        across = np.cross(along, (0.0, 1.0, 0.0))
+        spatial.add_vector(f"n_{name}", across)
+        rotation = np.column_stack([along, (0.0, 1.0, 0.0), across])
+        middle = 0.5 * (np.array([*points[i]]) + np.array([*points[j]]))
+        spatial.add_body(name, origin=i, basis=[j, "y", f"n_{name}"], mass=mass, com=(middle[0], 0.0, middle[1]),
+                         inertia=rotation @ np.diag([1e-4, inertia, inertia + 1e-4]) @ rotation.T)
+    if not revolute_bodies:
+        spatial.add_dot("crank in plane", ("A", "O"), "y")
+        spatial.add_dot("rocker in plane", ("B", "C"), "y")
+    return planar, spatial

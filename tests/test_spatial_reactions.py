@@ -8,8 +8,8 @@ import pytest
 import cmbs
 from cmbs.inverse.reactions import joint_reactions
 from cmbs.inverse.spatial_reactions import spatial_reactions
-from cmbs.model.natural import NaturalModelBuilder
 from cmbs.model.spatial import SpatialModelBuilder
+from helpers import four_bar_builders
 
 G = 9.81
 GRAVITY = np.array([0.3, -1.0, -G])
@@ -117,22 +117,7 @@ def test_a_planar_four_bar_in_space_has_the_planar_pin_forces():
     """The driven four-bar O-A-B-C in the plane y = 0, planar and in space (rods with spherical
     ends, the crank and rocker kept in the plane by products with y): inverse dynamics of the
     same motion, and each rod's forces at its ends equal the planar segment's (x, z), with no y."""
-    O, A, B, C = (0.0, 0.0), (0.0, 0.5), (1.0, 1.0), (1.0, 0.0)
-    bars = {"crank": ("O", "A", 1.0), "coupler": ("A", "B", 2.0), "rocker": ("C", "B", 1.5)}
-    points = {"O": O, "A": A, "B": B, "C": C}
-    planar = NaturalModelBuilder("four-bar-planar", gravity=(0.0, -G))
-    spatial = SpatialModelBuilder("four-bar-spatial", gravity=(0.0, 0.0, -G))
-    for name, (x, z) in points.items():
-        planar.add_point(name, x, z, fixed=name in "OC")
-        spatial.add_point(name, (x, 0.0, z), fixed=name in "OC")
-    spatial.add_vector("y", (0.0, 1.0, 0.0), fixed=True)
-    for name, (i, j, mass) in bars.items():
-        length = float(np.hypot(*np.subtract(points[j], points[i])))
-        inertia = mass * length**2 / 12.0
-        planar.add_segment(name, i, j, mass=mass, com=(0.5 * length, 0.0), inertia=inertia)
-        spatial.add_rod(name, i, j, mass=mass, com=0.5, inertia=inertia)
-    spatial.add_dot("crank in plane", ("A", "O"), "y")
-    spatial.add_dot("rocker in plane", ("B", "C"), "y")
+    planar, spatial = four_bar_builders()
     for builder in (planar, spatial):
         builder.add_driver("A.x", "-0.5*sin(t)")
     planar, spatial = planar.build(), spatial.build()

@@ -108,6 +108,19 @@ def _couple_rows(names: list[str], equations: NaturalEquations):
     return rows
 
 
+def extended_state(model: Model, equations, rows: np.ndarray, q: np.ndarray, qdd: np.ndarray,
+                   lam: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(q, x, ẍ, λ_base) of a natural-coordinate model's state: the extended coordinates
+    x = (q, constants) and accelerations (zero for the constants), and the multipliers of the
+    base equations' rows (:func:`~cmbs.model.model.base_multipliers`) from the model's ``lam``."""
+    q, qdd, lam = (np.asarray(value, dtype=float) for value in (q, qdd, lam))
+    if lam.shape != (model.m,):
+        raise CmbsError(f"lam has shape {lam.shape}, expected ({model.m},)")
+    constants = equations.constants
+    return (q, np.concatenate([q, constants]), np.concatenate([qdd, np.zeros(constants.size)]),
+            base_multipliers(lam, rows, equations.m))
+
+
 def joint_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, lam: np.ndarray,
                     t: float = 0.0) -> dict:
     """Reaction forces on every segment at its two points, joint torques and slider forces.
@@ -133,12 +146,7 @@ def joint_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
         locked segment.
     """
     equations, rows, names = _equations(model)
-    q, qdd, lam = (np.asarray(a, dtype=float) for a in (q, qdd, lam))
-    if lam.shape != (model.m,):
-        raise CmbsError(f"lam has shape {lam.shape}, expected ({model.m},)")
-    lam = base_multipliers(lam, rows, equations.m)
-    x = np.concatenate([q, equations.constants])
-    a = np.concatenate([qdd, np.zeros(equations.constants.size)])
+    q, x, a, lam = extended_state(model, equations, rows, q, qdd, lam)
 
     # couple rows: gradients with respect to each direction, their couples on segments
     segment_of = {}

@@ -44,7 +44,8 @@ from __future__ import annotations
 import numpy as np
 
 from cmbs.errors import CmbsError
-from cmbs.model.model import Model, base_equations, base_multipliers
+from cmbs.inverse.reactions import extended_state
+from cmbs.model.model import Model, base_equations
 from cmbs.model.packing import unpack
 from cmbs.model.spatial import _DOT, _LINEAR, _LINEAR_COEFFICIENTS, SpatialEquations
 
@@ -102,12 +103,7 @@ def spatial_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarr
         ``sliders``: {slide: (3,) array} — the force of the line on the sliding point.
     """
     equations, rows = _equations(model)
-    q, qdd, lam = (np.asarray(value, dtype=float) for value in (q, qdd, lam))
-    if lam.shape != (model.m,):
-        raise CmbsError(f"lam has shape {lam.shape}, expected ({model.m},)")
-    lam = base_multipliers(lam, rows, equations.m)
-    x = np.concatenate([q, equations.constants])
-    acceleration = np.concatenate([qdd, np.zeros(equations.constants.size)])
+    q, x, acceleration, lam = extended_state(model, equations, rows, q, qdd, lam)
     forces, couples = {}, {}
     for body in equations.free_bodies:
         extended = (body.slots[:, None] + np.arange(3)).ravel()
