@@ -57,12 +57,19 @@ def _equations(model: Model) -> tuple[SpatialEquations, np.ndarray]:
     return equations, rows
 
 
-def _own_row_forces(equations: SpatialEquations, x: np.ndarray, lam: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Σ A_rᵀ λ_r over ``rows`` (dot and further-element rows), in extended coordinates."""
+def _row_data(equations: SpatialEquations) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The dot rows' element indices (k, 4), the further-element rows' (k, 8) and their
+    coefficients (k, 3), from the packed kernel data."""
     int_sections, real_sections = unpack(equations.ints, equations.reals)
-    dots = int_sections[_DOT].reshape(-1, 4)
-    linear = int_sections[_LINEAR].reshape(-1, 8)
-    coefficients = real_sections[_LINEAR_COEFFICIENTS].reshape(-1, 3)
+    return (int_sections[_DOT].reshape(-1, 4), int_sections[_LINEAR].reshape(-1, 8),
+            real_sections[_LINEAR_COEFFICIENTS].reshape(-1, 3))
+
+
+def _own_row_forces(row_data: tuple[np.ndarray, np.ndarray, np.ndarray], x: np.ndarray, lam: np.ndarray,
+                    rows: np.ndarray) -> np.ndarray:
+    """Σ A_rᵀ λ_r over ``rows`` (dot and further-element rows, :func:`_row_data`), in extended
+    coordinates."""
+    dots, linear, coefficients = row_data
     force = np.zeros(x.size)
     for row in rows:
         if row < dots.shape[0]:
@@ -105,9 +112,10 @@ def spatial_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarr
     equations, rows = _equations(model)
     q, x, acceleration, lam = extended_state(model, equations, rows, q, qdd, lam)
     forces, couples = {}, {}
+    row_data = _row_data(equations)
     for body in equations.free_bodies:
         extended = (body.slots[:, None] + np.arange(3)).ravel()
-        own = _own_row_forces(equations, x, lam, body.rows)[extended]
+        own = _own_row_forces(row_data, x, lam, body.rows)[extended]
         moments = np.zeros(x.size)
         if body.name in equations.moment_bodies:
             moments[:equations.n] = equations.moment_loads(body.name, q, t)
