@@ -106,3 +106,29 @@ def test_a_batched_sweep_of_a_spatial_model_equals_its_single_simulations():
     for v, factor in enumerate(factors):
         run = cmbs.simulate(model, t_end=0.5, dt=1e-3, integrator="rk4", qd0=model.qd0 * factor)
         np.testing.assert_allclose(result.q[v], run.q[::10], rtol=0, atol=1e-12)
+
+
+def test_a_mass_fault_on_a_spatial_body_is_the_body_built_heavier(arm):
+    """`mass_fault(model, "arm", factor=1.5)` from t = 0 moves the undriven arm as the arm built
+    with 1.5 times its mass and inertia (its share of M and gravity scaled: FreeBody), and the
+    tracking CLI takes the fault by name."""
+    from cmbs.cli import main
+    from cmbs.control.faults import mass_fault
+
+    nominal = cmbs.load(arm).without_drivers()
+    start = np.zeros(nominal.n)
+    start[nominal.coordinate_index("theta")] = 1.0
+    start = cmbs.velocities(nominal, nominal.q0, qd=start, fixed=["theta"])
+    faulty = mass_fault(nominal, "arm", factor=1.5)
+    heavier_file = arm.parent / "heavier.toml"
+    heavier_file.write_text(ARM.replace("mass = 2.0", "mass = 3.0").replace("inertia = [0.05, 0.01, 0.05]",
+                                                                             "inertia = [0.075, 0.015, 0.075]"))
+    heavier = cmbs.load(heavier_file).without_drivers()
+    options = dict(t_end=1.0, dt=0.05, qd0=start, integrator="dop853", rtol=1e-11, atol=1e-12)
+    run, reference = cmbs.simulate(faulty, **options), cmbs.simulate(heavier, **options)
+    assert run.info["status"] == reference.info["status"] == "success"
+    np.testing.assert_allclose(run.q, reference.q, atol=1e-9)
+    assert np.ptp(run["theta"]) > 0.5
+    with pytest.raises(cmbs.CmbsError, match="no body 'ram' \\(did you mean 'arm'\\?\\); bodies and rods: arm"):
+        mass_fault(nominal, "ram", factor=1.5)
+    assert main(["track", str(arm), "--t-end", "0.5", "--fault", "mass:arm:1.2"]) == 0

@@ -19,6 +19,7 @@ import numpy as np
 from cmbs.errors import CmbsError, did_you_mean
 from cmbs.model.model import Model, Terms, WrappedEquations, assign_terms
 from cmbs.model.natural import NaturalEquations
+from cmbs.model.spatial import SpatialEquations
 
 Law = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
 
@@ -80,26 +81,33 @@ def check_mass_factor(segment: str, factor: float) -> None:
 
 def mass_fault(model: Model, segment: str, *, factor: float, t0: float = 0.0) -> Model:
     """``model`` whose segment ``segment`` has ``factor`` times its mass and inertia from ``t0``
-    (e.g. factor 1.025 for the thesis's 2.5 % fault).  Natural-coordinate models only.
-    Energies are reported with the nominal masses; :func:`mass_fault_energy_parts` gives what
-    the faulty masses add."""
+    (e.g. factor 1.025 for the thesis's 2.5 % fault).  Natural-coordinate models only, planar
+    (a segment or body) or spatial (a body or rod: its share of M and gravity,
+    :class:`~cmbs.model.spatial.FreeBody`).  Energies are reported with the nominal masses;
+    :func:`mass_fault_energy_parts` gives what the faulty masses add."""
     check_mass_factor(segment, factor)
     equations = model.equations
-    if not isinstance(equations, NaturalEquations):
-        raise CmbsError(f"mass faults need a natural-coordinate model; {model.name!r} is not one")
-    names = [s.name for s in equations.segments]
-    if segment not in names:
-        raise CmbsError(f"model {model.name!r} has no segment {segment!r}{did_you_mean(segment, names)}; "
-                        f"segments: {', '.join(names)}")
-    data = equations.segments[names.index(segment)]
+    if isinstance(equations, NaturalEquations):
+        shares = {s.name: (s.indices, s.mass_matrix, s.gravity) for s in equations.segments}
+        kind = "segment"
+    elif isinstance(equations, SpatialEquations):
+        shares = {b.name: ((b.slots[:, None] + np.arange(3)).ravel(), b.mass, b.gravity)
+                  for b in equations.free_bodies}
+        kind = "body"
+    else:
+        raise CmbsError(f"mass faults need a natural-coordinate model (planar or spatial); {model.name!r} is not one")
+    if segment not in shares:
+        raise CmbsError(f"model {model.name!r} has no {kind} {segment!r}{did_you_mean(segment, shares)}; "
+                        f"{'segments' if kind == 'segment' else 'bodies and rods'}: {', '.join(shares)}")
+    indices, mass_matrix, gravity = shares[segment]
     n = model.n
-    keep = data.indices < n
+    keep = indices < n
     local = np.flatnonzero(keep)
-    rows = data.indices[keep]
+    rows = indices[keep]
     delta_mass = np.zeros((n, n))
-    delta_mass[np.ix_(rows, rows)] = (factor - 1.0) * data.mass_matrix[np.ix_(local, local)]
+    delta_mass[np.ix_(rows, rows)] = (factor - 1.0) * mass_matrix[np.ix_(local, local)]
     delta_gravity = np.zeros(n)
-    delta_gravity[rows] = (factor - 1.0) * data.gravity[local]
+    delta_gravity[rows] = (factor - 1.0) * gravity[local]
     faulty = _MassFaultEquations(equations, delta_mass, delta_gravity, t0)
     return model.replace(name=f"{model.name} ({segment} mass x{factor:g} from t={t0:g})", equations=faulty,
                          constant_mass=False)
