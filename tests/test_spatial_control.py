@@ -132,3 +132,20 @@ def test_a_mass_fault_on_a_spatial_body_is_the_body_built_heavier(arm):
     with pytest.raises(cmbs.CmbsError, match="no body 'ram' \\(did you mean 'arm'\\?\\); bodies and rods: arm"):
         mass_fault(nominal, "ram", factor=1.5)
     assert main(["track", str(arm), "--t-end", "0.5", "--fault", "mass:arm:1.2"]) == 0
+
+
+def test_the_passive_joint_law_puts_the_whole_torque_on_the_spatial_arm_s_motor(arm):
+    """passive_joint_torque with θ the only actuated coordinate: zero on the unit vectors'
+    coordinates and, on θ, the pendulum torque I_O θ̈ + m g d cos θ of the driven motion."""
+    from cmbs.inverse import passive_joint_torque
+
+    driven = cmbs.load(arm)
+    motion = cmbs.kinematic_analysis(driven, np.linspace(0.0, 1.0, 6))
+    free = driven.without_drivers()
+    theta = free.coordinate_index("theta")
+    for k, t in enumerate(motion.t):
+        torque = passive_joint_torque(free, motion.q[k], motion.qd[k], motion.qdd[k], t, actuated=["theta"])
+        angle, acceleration = 0.5 * np.sin(2.0 * t), -2.0 * np.sin(2.0 * t)
+        expected = (INERTIA_X + MASS * ARM_LENGTH**2) * acceleration + MASS * G * ARM_LENGTH * np.cos(angle)
+        assert torque[theta] == pytest.approx(expected, abs=1e-9)
+        assert np.abs(np.delete(torque, theta)).max() < 1e-12          # zero up to rounding
