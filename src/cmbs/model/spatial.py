@@ -450,9 +450,8 @@ class _Assembler:
         if min(indices) >= self.n:
             raise ModelError("relates fixed elements only: it constrains no coordinate (remove it)", entry=entry)
 
-    def _frame(self, frames: dict[str, tuple[list[tuple[int, int]], np.ndarray]], body: object,
-               entry: str) -> tuple[list[tuple[int, int]], np.ndarray]:
-        """The basis (head, tail pairs) and its start matrix X₀ of body ``body``."""
+    def _frame(self, frames: dict[str, "BodyFrame"], body: object, entry: str) -> "BodyFrame":
+        """The :class:`BodyFrame` of body ``body`` (its basis and X₀⁻¹)."""
         if not isinstance(body, str) or body not in frames:
             raise ModelError(f"no body {body!r}{did_you_mean(str(body), frames)}", entry=entry)
         return frames[body]
@@ -466,10 +465,9 @@ class _Assembler:
         dots, dot_values, dot_names = [], [], []
         linear, coefficients, linear_names = [], [], []
         lines: list[tuple[str, str]] = []
-        frames: dict[str, tuple[list[tuple[int, int]], np.ndarray]] = {}
+        frames: dict[str, BodyFrame] = {}
         shared_products: set[frozenset[tuple[int, int]]] = set()
         owned: dict[str, tuple[list[str], list[int], list[int]]] = {}    # elements, dot rows, linear rows
-        bodies: list[BodyFrame] = []
         for body in b._bodies.values():
             entry = f"bodies.{body.name}"
             self.owner = body.name
@@ -503,9 +501,8 @@ class _Assembler:
                     dot_values.append(float(self._value(basis[k]) @ self._value(basis[l])))
                     dot_names.append(f"rigid {body.name}: {labels[k]}·{labels[l]}")
             self._body_mass(body, o, basis, X0)
-            frames[body.name] = (basis, X0)
+            frames[body.name] = BodyFrame(body.name, o, tuple(basis), np.linalg.inv(X0))
             elements += list(body.basis)
-            bodies.append(BodyFrame(body.name, o, tuple(basis), np.linalg.inv(X0)))
             for spec in body.points + body.vectors:
                 element = self._element(spec, entry, "point" if spec in body.points else "vector")
                 elements.append(element.name)
@@ -603,18 +600,19 @@ class _Assembler:
         for name, (point, components, body_name) in b._forces.items():
             entry = f"forces.{name}"
             p = self.index[self._element(point, entry, "point").name]
-            basis, X0 = self._frame(frames, body_name, entry) if body_name is not None else (None, None)
-            forces.append([p, *range(len(functions), len(functions) + 3), int(basis is not None),
-                           *([index for pair in basis for index in pair] if basis is not None else [0] * 6)])
-            force_frames.append(np.linalg.inv(X0).ravel() if X0 is not None else np.zeros(9))
+            frame = self._frame(frames, body_name, entry) if body_name is not None else None
+            forces.append([p, *range(len(functions), len(functions) + 3), int(frame is not None),
+                           *([index for pair in frame.basis for index in pair] if frame is not None else [0] * 6)])
+            force_frames.append(frame.start_inverse.ravel() if frame is not None else np.zeros(9))
             functions += components
             labels += [f"force {name} {axis}" for axis in "xyz"]
         moments, moment_values = [], []
         for name, (body_name, components, in_body) in b._moments.items():
-            basis, X0 = self._frame(frames, body_name, f"moments.{name}")
-            moments.append([*(index for pair in basis for index in pair), *range(len(functions), len(functions) + 3),
-                            int(in_body)])
-            moment_values.append(np.concatenate([np.linalg.inv(X0.T @ X0).ravel(), np.linalg.inv(X0).ravel()]))
+            frame = self._frame(frames, body_name, f"moments.{name}")
+            moments.append([*(index for pair in frame.basis for index in pair),
+                            *range(len(functions), len(functions) + 3), int(in_body)])
+            inverse = frame.start_inverse              # (X₀ᵀX₀)⁻¹ = X₀⁻¹ X₀⁻ᵀ
+            moment_values.append(np.concatenate([(inverse @ inverse.T).ravel(), inverse.ravel()]))
             functions += components
             labels += [f"moment {name} {axis}" for axis in "xyz"]
         rotational_springs, rotational_parameters = [], []
@@ -672,7 +670,7 @@ class _Assembler:
                                                                                      for k in own_linear for d in range(3))])
                                                        for name, (elements, own_dots, own_linear) in owned.items()),
                                      moment_bodies=tuple(body for body, _, _ in b._moments.values()),
-                                     gravity=tuple(float(g) for g in self.gravity), bodies=tuple(bodies),
+                                     gravity=tuple(float(g) for g in self.gravity), bodies=tuple(frames.values()),
                                      work_sources=tuple(f"force {name!r}" for name in b._forces)
                                      + tuple(f"moment {name!r}" for name in b._moments)
                                      + tuple(f"spring {name!r}" for name, s in b._springs.items() if s[3] > 0.0)
