@@ -38,7 +38,7 @@ from cmbs.dynamics.kkt import gram_bounds, has_structure, workspace_views
 from cmbs.dynamics.lagrange import LagrangeKernel
 from cmbs.dynamics.projection import PROJECTION_REGULAR, ProjectionKernel
 from cmbs.integrate.compiled_rk4 import _rk4_arrays, _rk4_steps, fresh
-from cmbs.integrate.continuity import watch_array
+from cmbs.integrate.continuity import left_branch, watch_array
 from cmbs.jit import borrow, interpreted, njit, prange
 from cmbs.model.natural import NaturalKernel, _evaluate
 
@@ -133,10 +133,11 @@ def rk4_lanes(model: NamedTuple, formulation: NamedTuple, inputs: NamedTuple, Q0
     method, parameters, schur, plan = lanes
     N, n = Q0.shape
     exits = (np.full(N, RUNNING, dtype=np.int64), np.zeros(N, dtype=np.int64), np.zeros(N, dtype=np.int64),
-             np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, 3)), np.zeros((N, m, n)))
+             np.zeros((N, n)), np.zeros((N, n)), np.zeros((N, 3)), np.zeros((N, m, n)),
+             np.zeros((N, interpreted(watch_array)(n, m).size)))
     _run_blocks(method, parameters, Q0, QD0, U0, h, steps, every, model.ints, model.reals, buffer_size,
                 np.ascontiguousarray(formulation.row_scale), m, schur, plan, Qs, QDs, PHIs, *exits)
-    states, left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0 = exits
+    states, left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0, resume_watch = exits
     records_total = steps // every + 1
     statuses[states != LEFT] = OK
     recorded[states != LEFT] = records_total
@@ -147,12 +148,16 @@ def rk4_lanes(model: NamedTuple, formulation: NamedTuple, inputs: NamedTuple, Q0
         own_schur = workspace_views(own.floats, own.integers, own.layout)
         own_schur[27][:] = resume_reference[v]
         own_schur[28][:, :] = resume_A0[v]
-        done, status, _, _ = _rk4_steps(model, own, inputs, h, steps, every, *single, work, records, left_at[v],
-                                        records_before[v], interpreted(watch_array)(n, m))
         first = records_before[v]
+        records[0][:first] = np.arange(first) * every * h     # the times of the lanes' records, for the watch
+        done, status, _, _ = _rk4_steps(model, own, inputs, h, steps, every, *single, work, records, left_at[v],
+                                        first, resume_watch[v].copy())
         Qs[v, first:done] = records[1][first:done]
         QDs[v, first:done] = records[2][first:done]
         PHIs[v, first:done] = records[6][first:done]
+        Qs[v, done:first] = np.nan                  # lanes' records after the start of a jump: not kept
+        QDs[v, done:first] = np.nan
+        PHIs[v, done:first] = np.nan
         statuses[v] = status
         recorded[v] = done
 
@@ -171,7 +176,8 @@ def _private_copy(schur):
 
 @njit(cache=True, parallel=True)
 def _run_blocks(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, buffer_size, row_scale, m, schur, plan,
-                Qs, QDs, PHIs, lanes, left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0):
+                Qs, QDs, PHIs, lanes, left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0,
+                resume_watch):
     """The lanes of :func:`rk4_lanes`, parallel over blocks of LANES variants: the records of
     every variant while it runs in its lanes, and per variant its lane state (RUNNING to the end,
     or LEFT) and, for a variant that left, its step, the records written before it and the state
@@ -191,7 +197,7 @@ def _run_blocks(method, parameters, Q0, QD0, U0, h, steps, every, ints, reals, b
             q[w] = Q0[v]
             qd[w] = QD0[v]
             U[w] = U0[v]
-        exits = (left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0)
+        exits = (left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0, resume_watch)
         _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, _private_copy(schur), plan, state,
                     work, block_lanes, exits, base, count, Qs, QDs, PHIs)
         lanes[base:base + count] = block_lanes[:count]
@@ -204,7 +210,8 @@ def _lane_arrays(n, m, n_p, n_a, n_u, buffer_size):
     stages, lane-major (lanes last) the terms (Q, Φ, A, γ, Φ_t in a terms buffer's order), the
     Schur workspace (X, y, the reduced matrix and right-hand side), c of Aq̈ = c, λ, q̈, the
     certificate's reference (valid, √λ_low, √λ_high) and A₀ with their values at the step's
-    start, the lanes' accumulators (5, LANES) and one lane's A."""
+    start, the lanes' accumulators (5, LANES) and one lane's A; per lane the branch watch
+    (:mod:`cmbs.integrate.continuity`) and its value at the step's start."""
     size = m + n_a
     W = LANES
     state = (np.zeros((W, n)), np.zeros((W, n)), np.zeros((W, n_u)))
@@ -212,7 +219,10 @@ def _lane_arrays(n, m, n_p, n_a, n_u, buffer_size):
             np.zeros((4, W, n)), np.zeros((4, W, n)), np.zeros((n + 3 * m + m * n, W)), np.zeros((m, n_p, W)),
             np.zeros((n_p, W)), np.zeros((size, size, W)), np.zeros((size, W)), np.zeros((m, W)), np.zeros((m, W)),
             np.zeros((n, W)), np.zeros((3, W)), np.zeros((m, n, W)), np.zeros((3, W)), np.zeros((m, n, W)),
-            np.zeros((5, W)), np.zeros((m, n)))
+            np.zeros((5, W)), np.zeros((m, n)), np.zeros((W, watch_array(n, m).shape[0])),
+            np.zeros((W, watch_array(n, m).shape[0])))
+    for w in range(W):
+        work[19][w] = watch_array(n, m)
     return state, work, np.zeros(W, dtype=np.int64)
 
 
@@ -228,7 +238,7 @@ def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, sch
         (parameters, ints, reals, row_scale, schur, plan, state, work, lanes, exits))
     q, qd, U = state
     (buffer, sq, sv, kq, kv, terms, X, y, reduced, z, c, lam, qdd, reference, A0, start_reference, start_A0,
-     scratch, single_A) = work
+     scratch, single_A, watches, start_watches) = work
     n = q.shape[1]
     m = lam.shape[0]
     rows = terms.shape[0]
@@ -245,6 +255,7 @@ def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, sch
         before = recorded
         _copy(reference, start_reference)
         _copy(A0.reshape((m * n, LANES)), start_A0.reshape((m * n, LANES)))
+        _copy(watches, start_watches)
         for stage in range(4):
             if stage == 0:
                 _copy(q, sq)
@@ -279,9 +290,12 @@ def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, sch
             for w in range(LANES):
                 for i in range(n):
                     kv[stage, w, i] = qdd[i, w]
-            if _leave(lanes, exits, step, q, qd, start_reference, start_A0, before, base, count):
+            if _leave(lanes, exits, step, q, qd, start_reference, start_A0, start_watches, before, base, count):
                 return
             if stage == 0:
+                _watch_lanes(watches, t, qd, kv[0], A, single_A, lanes)
+                if _leave(lanes, exits, step, q, qd, start_reference, start_A0, start_watches, before, base, count):
+                    return
                 if step % every == 0:
                     for w in range(count):
                         if lanes[w] == RUNNING:
@@ -301,6 +315,23 @@ def _lane_steps(method, parameters, h, steps, every, ints, reals, row_scale, sch
             for i in range(n):
                 q[w, i] += (h / 6.0) * (kq[0, w, i] + 2.0 * kq[1, w, i] + 2.0 * kq[2, w, i] + kq[3, w, i])
                 qd[w, i] += (h / 6.0) * (kv[0, w, i] + 2.0 * kv[1, w, i] + 2.0 * kv[2, w, i] + kv[3, w, i])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _watch_lanes(watches, t, qd, qdd, A, single_A, lanes):
+    """The branch watch of each running lane at its accepted state (t, q̇, q̈ = ``qdd`` (LANES, n),
+    the lane-major ``A``), as the one-variant loop keeps it: a lane whose run left its branch
+    leaves (its one-variant run, resumed from the step's start with the watch as it was there,
+    finds the same jump and ends as that loop does).  ``single_A``: one lane's A."""
+    m, n, _ = A.shape
+    for w in range(LANES):
+        if lanes[w] != RUNNING:
+            continue
+        for i in range(m):
+            for j in range(n):
+                single_A[i, j] = A[i, j, w]
+        if left_branch(watches[w], t, qd[w], qdd[w], single_A):
+            lanes[w] = LEAVING
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -546,13 +577,13 @@ def _finite_lanes(values, lanes, bad):
 
 
 @njit(cache=True, error_model="numpy")
-def _leave(lanes, exits, step, q, qd, start_reference, start_A0, records_before_step, base, count):
+def _leave(lanes, exits, step, q, qd, start_reference, start_A0, start_watches, records_before_step, base, count):
     """Lanes LEAVING at a stage of ``step`` become LEFT (computed on, never read); for those of
     the block's ``count`` variants, what their one-variant run resumes from goes into the
-    per-variant ``exits`` at row ``base + w``: the step, the records written before it, the state
-    and certificate reference at the step's start.  True when none of the ``count`` variants
-    runs any more."""
-    left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0 = exits
+    per-variant ``exits`` at row ``base + w``: the step, the records written before it, the state,
+    certificate reference and branch watch at the step's start.  True when none of the ``count``
+    variants runs any more."""
+    left_at, records_before, resume_q, resume_qd, resume_reference, resume_A0, resume_watch = exits
     running = False
     for w in range(LANES):
         if lanes[w] == LEAVING:
@@ -569,5 +600,7 @@ def _leave(lanes, exits, step, q, qd, start_reference, start_A0, records_before_
                 for i in range(start_A0.shape[0]):
                     for j in range(start_A0.shape[1]):
                         resume_A0[v, i, j] = start_A0[i, j, w]
+                for i in range(start_watches.shape[1]):
+                    resume_watch[v, i] = start_watches[w, i]
         running = running or (w < count and lanes[w] == RUNNING)
     return not running
