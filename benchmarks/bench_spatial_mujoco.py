@@ -3,7 +3,7 @@
 (and Exudyn): µs per forward-dynamics evaluation, and whole runs at equal accuracy (needs the
 ``[bench]`` extra for MuJoCo; Exudyn is optional).
 
-    python benchmarks/bench_spatial_mujoco.py [--quick] [--plot FILE]   # about 1.5 min; --quick: no h = 1e-5
+    python benchmarks/bench_spatial_mujoco.py [--quick] [--plot FILE]   # about 2 min; --quick: no h = 1e-5
 
 MuJoCo models (MJCF below, written from the cmbs models' docstrings; the script checks that the
 start energy equals cmbs's):
@@ -22,7 +22,7 @@ start energy equals cmbs's):
 MuJoCo's constraints are soft.  Each run uses Newton's solver (tolerance 1e-12, 100 iterations),
 no contact, no friction loss, no damping or armature, and the stiffest softness MuJoCo takes at the
 step: solref (2h, 1) (time constant 2h, the smallest allowed with ``refsafe``), solimp
-(0.9999, 0.9999, 0.001, 0.5, 2) (0.9999 is its largest impedance); RK4 at h = 1e-3, 1e-4, 1e-5
+(0.9999, 0.9999, 0.001, 0.5, 2) (0.9999 is its largest impedance); RK4 at h = 3e-3, 1e-3, 1e-4, 1e-5
 and implicitfast (its recommended integrator) at 1e-4.  One RK4 row at h = 1e-3 keeps
 MuJoCo's default softness (solref 0.02 1, solimp 0.9 0.95 0.001).
 
@@ -33,14 +33,19 @@ evaluations; the state moves on from call to call).  Exudyn is timed per step on
 of its h = 1e-3 run, Newton iterations included, by the functions of bench_bricard.py and
 bench_slider_crank_3d.py).
 
-cmbs: Bricard with the projection formulation (its A has a redundant row: Lagrange is singular)
-and DOP853 at rtol 1e-10, the slider-crank with Lagrange and DOP853 at rtol 1e-10, and both with
-compiled RK4 at h = 1e-3 and 1e-4 (drift projection after each step).  Errors: max |P3 - P3_ref|
-over the 201 outputs (tests/data/bricard-exudyn-p3.csv, Exudyn at h = 1e-4: ~1e-7 m from
-converged) and max |x - x_ref| of the slider over the 501 outputs
-(tests/data/slider-crank-3d-exudyn.csv, Exudyn at h = 5e-5: ~1e-7 m); the end energy error
-|E(t_end) - E0| and the end constraint violation (MuJoCo: distance between the connected points;
-cmbs: max |Φ|).  Wall times are single runs after a warm-up, on a machine that may be shared.
+cmbs: Bricard with the projection formulation (its A has a redundant row: Lagrange is singular;
+the projection solves without an SVD where it certifies the row dependent,
+cmbs.dynamics.dependent_rows), the slider-crank with Lagrange; both with DOP853 at rtol 1e-5,
+1e-7, 1e-9, 1e-11 (atol = rtol / 100) and compiled RK4 at h = 1e-3 and 1e-4 (drift projection
+after each step).  Errors: max |P3 - P3_ref| over the 201 outputs
+(tests/data/bricard-exudyn-p3.csv, Exudyn at h = 1e-4: ~1e-7 m from converged) and max |x - x_ref|
+of the slider over the 501 outputs (tests/data/slider-crank-3d-exudyn.csv, Exudyn at h = 5e-5:
+~1e-7 m); "vs converged": the same against cmbs's DOP853 at rtol 1e-13, which resolves errors
+below the files' accuracy (it is itself within the files' ~1e-7 m of them, the "max error" of
+the finest runs); the end energy error |E(t_end) - E0| and the end constraint violation (MuJoCo:
+distance between the connected points; cmbs: max |Φ|).  Then, for each accuracy level 1e-3 ...
+1e-9 against the converged run, each tool's least wall time to reach it and cmbs's ratio to the
+fastest other.  Wall times are single runs after a warm-up, on a machine that may be shared.
 """
 
 from __future__ import annotations
@@ -251,14 +256,28 @@ def exudyn_per_step() -> dict[str, tuple[float, float, np.ndarray]]:
     return result
 
 
+#: cmbs's DOP853 tolerances (atol = rtol / 100) for the work-precision front, and the converged run's.
+TOLERANCES, CONVERGED_RTOL = (1e-5, 1e-7, 1e-9, 1e-11), 1e-13
+
+
+def converged(name: str) -> np.ndarray:
+    """The compared quantity at every output from cmbs's DOP853 at rtol 1e-13 (atol 1e-15): the
+    reference errors below the published file's own accuracy (~1e-7 m) are measured against."""
+    spec = MECHANISMS[name]
+    model = cmbs.load(name)
+    run = cmbs.simulate(model, t_end=spec["t_end"], formulation=spec["formulation"], integrator="dop853",
+                        rtol=CONVERGED_RTOL, atol=CONVERGED_RTOL / 100, dt=spec["output"])
+    return run.q[:, [model.coordinate_index(c) for c in spec["coordinates"]]]
+
+
 def cmbs_runs(name: str) -> list[dict]:
-    """cmbs: DOP853 rtol 1e-10 and compiled RK4 (projection after each step) at h = 1e-3, 1e-4."""
+    """cmbs: DOP853 at each of TOLERANCES and compiled RK4 (projection after each step) at h = 1e-3, 1e-4."""
     spec = MECHANISMS[name]
     model = cmbs.load(name)
     columns = [model.coordinate_index(c) for c in spec["coordinates"]]
-    configurations = [(f"cmbs {spec['formulation']} dop853 rtol 1e-10",
-                       dict(formulation=spec["formulation"], integrator="dop853", rtol=1e-10, atol=1e-12,
-                            dt=spec["output"]))]
+    configurations = [(f"cmbs {spec['formulation']} dop853 rtol {rtol:g}",
+                       dict(formulation=spec["formulation"], integrator="dop853", rtol=rtol, atol=rtol / 100,
+                            dt=spec["output"])) for rtol in TOLERANCES]
     for h in (1e-3, 1e-4):
         configurations.append((f"cmbs {spec['formulation']} rk4 h = {h:g} + projection",
                                dict(formulation=spec["formulation"], integrator="rk4", dt=h, project=True,
@@ -304,18 +323,37 @@ def check_start_energy(name: str) -> None:
     assert abs(cmbs_energy - mech.E0) < 1e-9 * max(1.0, abs(cmbs_energy)), "the MuJoCo model is not cmbs's"
 
 
-def print_table(name: str, rows: list[dict]) -> None:
+def print_table(name: str, rows: list[dict], finest: np.ndarray) -> None:
     spec = MECHANISMS[name]
     print(f"\n{name}, {spec['t_end']:g} s: work-precision, sorted by wall time")
-    print(f"  {'run':<46} {'wall s':>7} {'µs/step':>8} {'max error ' + spec['unit']:>22} {'vs cmbs dop853':>15} "
+    print(f"  {'run':<46} {'wall s':>7} {'µs/step':>8} {'max error ' + spec['unit']:>22} {'vs converged':>13} "
           f"{'|ΔE| end J':>11} {'gap end':>9}")
-    finest = rows[0]["values"]           # cmbs DOP853 rtol 1e-10: resolves errors below the file's ~1e-7 m
     for row in sorted(rows, key=lambda r: r["wall"]):
+        row["converged"] = error(row["values"], finest)
         per_step = f"{row['per_step']:.3g}" if row.get("per_step") else "-"
         gap = f"{row['gap']:.1e}" if row.get("gap") is not None else "-"
         dE = f"{row['dE']:.1e}" if row.get("dE") is not None else "-"
         print(f"  {row['label']:<46} {row['wall']:>7.3g} {per_step:>8} {row['error']:>22.2e} "
-              f"{error(row['values'], finest):>15.2e} {dE:>11} {gap:>9}")
+              f"{row['converged']:>13.2e} {dE:>11} {gap:>9}")
+
+
+def print_levels(name: str, rows: list[dict]) -> None:
+    """At each accuracy level 1e-3 ... 1e-9 (max error against the converged run), each tool's
+    fastest run that reaches it, and cmbs's wall time over the fastest other tool's."""
+    print(f"\n{name}: least wall time to reach each accuracy (error vs converged)")
+    tools = sorted({row["label"].split()[0] for row in rows})
+    print("  level   " + "".join(f"{tool:>22}" for tool in tools) + "   cmbs / fastest other")
+    for level in (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9):
+        best = {}
+        for tool in tools:
+            reaching = [row["wall"] for row in rows
+                        if row["label"].split()[0] == tool and row["converged"] <= level]
+            best[tool] = min(reaching) if reaching else None
+        others = [wall for tool, wall in best.items() if tool != "cmbs" and wall is not None]
+        ratio = (f"{best['cmbs'] / min(others):.2f}" if best.get("cmbs") and others else
+                 "only cmbs" if best.get("cmbs") else "-")
+        cells = "".join(f"{(f'{wall:.3g} s' if wall is not None else 'not reached'):>22}" for wall in best.values())
+        print(f"  {level:<7.0e} {cells}   {ratio}")
 
 
 def plot(path: str, tables: dict[str, list[dict]]) -> None:
@@ -371,12 +409,13 @@ def main() -> int:
     for name in MECHANISMS:
         rows = cmbs_runs(name)
         if have_mujoco:
-            rows += mujoco_runs(name, (1e-3, 1e-4) if args.quick else (1e-3, 1e-4, 1e-5))
+            rows += mujoco_runs(name, (3e-3, 1e-3, 1e-4) if args.quick else (3e-3, 1e-3, 1e-4, 1e-5))
         if name in exudyn:
             per_step, wall, values = exudyn[name]
             rows.append(dict(label="Exudyn gen.-alpha h = 0.001", wall=wall, per_step=per_step, values=values,
                              error=error(values, reference(name)), dE=None, gap=None))
-        print_table(name, rows)
+        print_table(name, rows, converged(name))
+        print_levels(name, rows)
         tables[name] = rows
     if args.plot:
         plot(args.plot, tables)

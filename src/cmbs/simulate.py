@@ -123,7 +123,8 @@ def project_state(model: Model, q: np.ndarray, qd: np.ndarray, t: float, *, tole
     rows = np.flatnonzero(model.holonomic).astype(np.int64)
     run = drift.project if kernel is not None else interpreted(drift.project)
     run(kernel if kernel is not None else PythonEquations(model, terms), q, qd, float(t), np.zeros(model.n),
-        np.zeros(model.n_u), terms.buffer, model.m, rows, float(tolerance), int(max_iterations), float(threshold))
+        np.zeros(model.n_u), terms.buffer, model.m, rows, float(tolerance), int(max_iterations), float(threshold),
+        drift.drift_work(model))
     return q, qd
 
 

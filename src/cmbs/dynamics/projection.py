@@ -33,6 +33,7 @@ from typing import ClassVar, NamedTuple
 import numpy as np
 
 from cmbs.dynamics.base import OK, SINGULAR, Accelerations, StatelessSolver, check_parameters
+from cmbs.dynamics.dependent_rows import KEPT_LOW, RESIDUAL, TRACE, dependent_rows, solve_dependent_rows
 from cmbs.dynamics.field import unchanged
 from cmbs.dynamics.kkt import band_kkt, banded, bounds_meeting, packed_workspace, schur_solve, solve_in_place, \
     unpack_workspace
@@ -127,7 +128,8 @@ class ProjectionSolver(StatelessSolver):
         kind = BandProjectionKernel if banded(*workspace) else ProjectionKernel
         mu = self.scale if parameters.mu is None else parameters.mu
         self.kernel = kind(INERTIAS.index(parameters.inertia), float(mu), float(parameters.threshold), self.scale,
-                           self.semi_definite, np.ascontiguousarray(self.row_scale, dtype=float), *workspace)
+                           self.semi_definite, np.ascontiguousarray(self.row_scale, dtype=float), *workspace,
+                           *dependent_rows(model, M0, not self.semi_definite))
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
         """Accelerations, multipliers and f_c = -Aᵀλ at one state; raises
@@ -154,7 +156,8 @@ class ProjectionKernel(NamedTuple):
     """The projection as :func:`_solve` takes it: the constraint inertia (an index into
     INERTIAS) and μ of the parameterised one, the SVD threshold, the mass-regularisation scale s
     and whether M is semi-definite, the row scale and the packed
-    :func:`cmbs.dynamics.kkt.schur_workspace`."""
+    :func:`cmbs.dynamics.kkt.schur_workspace`; and what the path of dependent rows needs
+    (:func:`cmbs.dynamics.dependent_rows.dependent_rows`)."""
 
     inertia: int
     mu: float
@@ -165,6 +168,10 @@ class ProjectionKernel(NamedTuple):
     floats: np.ndarray
     integers: np.ndarray
     layout: np.ndarray
+    mass_low: float
+    dependent_floats: np.ndarray
+    dependent_order: np.ndarray
+    last_path: np.ndarray
 
 
 class BandProjectionKernel(ProjectionKernel):
@@ -178,13 +185,44 @@ class BandProjectionKernel(ProjectionKernel):
 def _solve(kernel, terms, t, qd, qdd, lam):
     """Aghili's projection with the kernel's constraint inertia at the terms (Q, Φ, A, γ, Φ_t, M):
     by the augmented system where A is certified regular (:func:`_by_schur`, the same solution
-    there for every inertia), else by the SVD (:func:`_by_svd`); SINGULAR only when the
+    there for every inertia), by the augmented system without the dependent rows where they are
+    certified to be what the SVD discards (:func:`_by_dependent_rows`; tried first after an
+    evaluation that took it), else by the SVD (:func:`_by_svd`); SINGULAR only when the
     constraint inertia matrix is exactly singular."""
     Q, phi, A, gamma, phi_t, M = terms
     schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
+    dependent_first = kernel.last_path[0] == 1
+    if dependent_first and _by_dependent_rows(kernel, Q, A, gamma, schur, qdd, lam):
+        return OK
     if _by_schur(kernel, M, Q, A, gamma, schur, qdd, lam):
+        kernel.last_path[0] = 0
+        return OK
+    if not dependent_first and _by_dependent_rows(kernel, Q, A, gamma, schur, qdd, lam):
+        kernel.last_path[0] = 1
         return OK
     return _svd_status(kernel, M, Q, A, gamma, qdd, lam)
+
+
+@njit(cache=True, inline="always")
+def _by_dependent_rows(kernel, Q, A, gamma, schur, qdd, lam):
+    """Aghili's projection solution where rows of A depend on the others (redundant
+    constraints), by the augmented system of the independent rows
+    (:func:`cmbs.dynamics.dependent_rows.solve_dependent_rows`), for each of the three inertias
+    as in :func:`_by_schur`.  Taken only where its certificate shows that the SVD of the
+    row-scaled A discards exactly the dependent rows' singular values: those are at most ρ ≤
+    ``threshold``, and the kept ones at least σ_min(A'_I) ≥ PROJECTION_REGULAR·max(σ_max, 1)
+    and above ``threshold``; the solutions then differ by about ρ/σ_min(A'_I).  Needs M⁻¹
+    (constant M, no massless coordinates: ``kernel.mass_low`` > 0); returns False otherwise."""
+    if kernel.mass_low <= 0.0 or schur[1] != 1:
+        return False
+    certificate = solve_dependent_rows(kernel.mass_low, kernel.dependent_floats, kernel.dependent_order, schur[0], Q,
+                                       A, gamma, kernel.row_scale, schur[2], schur[5], schur[6], qdd, lam)
+    if certificate.shape[0] == 0:
+        return False
+    threshold = kernel.threshold
+    low = certificate[KEPT_LOW]
+    return (low >= PROJECTION_REGULAR * PROJECTION_REGULAR * max(certificate[TRACE], 1.0)
+            and low > threshold * threshold and certificate[RESIDUAL] <= threshold * threshold)
 
 
 @njit(cache=True)
@@ -308,7 +346,9 @@ def _by_svd(M, Q, A, gamma, row_scale, threshold, inertia, mu, scale, semi_defin
 def _fresh(kernel):
     """A copy of ``kernel`` with work arrays of its own (for runs beside each other)."""
     return same_kind(kernel, (kernel.inertia, kernel.mu, kernel.threshold, kernel.scale, kernel.semi_definite,
-                              kernel.row_scale, kernel.floats.copy(), kernel.integers.copy(), kernel.layout))
+                              kernel.row_scale, kernel.floats.copy(), kernel.integers.copy(), kernel.layout,
+                              kernel.mass_low, kernel.dependent_floats.copy(), kernel.dependent_order.copy(),
+                              kernel.last_path.copy()))
 
 
 ProjectionKernel.solve = staticmethod(_solve)

@@ -35,6 +35,7 @@ import numpy as np
 from cmbs.dynamics.base import OK, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.dense import NOT_POSITIVE_DEFINITE, add_scaled_gram, all_finite, fill_nan, multiply, \
     multiply_transposed
+from cmbs.dynamics.dependent_rows import KEPT_LOW, RESIDUAL, TRACE, dependent_rows, solve_dependent_rows
 from cmbs.dynamics.field import unchanged
 from cmbs.dynamics.kkt import DENSE, band_kkt, banded, bounds_meeting, cholesky_in_place, packed_workspace, \
     schur_solve, solve_lower, solve_lower_transposed, unpack_workspace
@@ -93,7 +94,8 @@ class UdwadiaKalabaSolver(StatelessSolver):
         self.kernel = kind(
             self.augmentation, self.factored, self.threshold, self.row_scale, float(self.mass_scale), self.factor,
             self.work_matrix, self.vectors_n, self.vectors_m, np.zeros(model.n), self.no_nonideal,
-            workspace is not None, *(workspace or (np.zeros(0), np.zeros(0, dtype=np.int64), NO_WORKSPACE)))
+            workspace is not None, *(workspace or (np.zeros(0), np.zeros(0, dtype=np.int64), NO_WORKSPACE)),
+            *dependent_rows(model, M0, self.factored and workspace is not None))
 
     def accelerations(self, terms: Terms, q: np.ndarray, qd: np.ndarray, t: float) -> Accelerations:
         """Udwadia-Kalaba's accelerations at one state.
@@ -265,7 +267,8 @@ class UdwadiaKalabaKernel(NamedTuple):
     """Udwadia-Kalaba as its solver and the compiled loops (:mod:`cmbs.dynamics.field`) take it:
     the arguments and work arrays of :func:`udwadia_kalaba_solve`, the constraint force it
     writes, and (``regular_path``, for models with a compiled kernel) the packed
-    :func:`cmbs.dynamics.kkt.schur_workspace` of :func:`_regular`."""
+    :func:`cmbs.dynamics.kkt.schur_workspace` of :func:`_regular`; what the path of dependent
+    rows needs (:func:`cmbs.dynamics.dependent_rows.dependent_rows`)."""
 
     augmentation: float
     factored: bool
@@ -282,6 +285,10 @@ class UdwadiaKalabaKernel(NamedTuple):
     floats: np.ndarray
     integers: np.ndarray
     layout: np.ndarray
+    mass_low: float
+    dependent_floats: np.ndarray
+    dependent_order: np.ndarray
+    last_path: np.ndarray
 
 
 class BandUdwadiaKalabaKernel(UdwadiaKalabaKernel):
@@ -299,11 +306,50 @@ NO_WORKSPACE = np.zeros((29, 5), dtype=np.int64)
 def _solve_with(kernel, M, Q, A, gamma, c, qdd, lam):
     """Udwadia-Kalaba's q̈, λ and constraint force (into ``kernel.force``) with the non-ideal
     vector ``c`` (empty for none): the Schur complement where :func:`_regular` proves it applies,
-    else :func:`udwadia_kalaba_solve`.  Returns OK, NOT_POSITIVE_DEFINITE or NON_FINITE."""
+    the Schur complement of the independent rows where :func:`_by_dependent_rows` proves that
+    (tried first after an evaluation that took it), else :func:`udwadia_kalaba_solve`.  Returns
+    OK, NOT_POSITIVE_DEFINITE or NON_FINITE."""
+    last_path = kernel.last_path
+    dependent_first = last_path[0] == 1
+    if dependent_first and _by_dependent_rows(kernel, M, Q, A, gamma, c, qdd, lam):
+        return OK
     proven, schur = _regular(kernel, M, A, c)
     if proven and schur_solve(M, Q, A, gamma, schur, qdd, lam) and _regular_force(kernel, M, Q, qdd, lam):
+        last_path[0] = 0
+        return OK
+    if not dependent_first and _by_dependent_rows(kernel, M, Q, A, gamma, c, qdd, lam):
+        last_path[0] = 1
         return OK
     return _by_svds(kernel, M, Q, A, gamma, c, qdd, lam)
+
+
+@njit(cache=True, inline="always")
+def _by_dependent_rows(kernel, M, Q, A, gamma, c, qdd, lam):
+    """Udwadia-Kalaba's ideal solution where rows of A depend on the others (redundant
+    constraints): the augmented system of the independent rows
+    (:func:`cmbs.dynamics.dependent_rows.solve_dependent_rows`), whose q̈ Gauss's principle gives
+    when both pseudo-inverses discard exactly the dependent rows' singular values.  With
+    λ_min(M) = μ, D = mass_scale·S and B = A L⁻ᵀ (L Lᵀ = M), the certificate proves it: the
+    discarded singular values of DB are at most mass_scale·ρ/√μ (Eckart-Young with
+    ‖L⁻¹‖₂ = 1/√μ), the kept ones at least mass_scale (σ_min(A'_I)²/μ)^{1/2}, as DB DBᵀ =
+    mass_scale² A' M⁻¹ A'ᵀ; for the λ pseudo-inverse of the row-scaled A the projection's test
+    (:func:`cmbs.dynamics.projection._by_dependent_rows`).  Needs a constant, definite M and no
+    non-ideal term; returns False otherwise."""
+    if c.size != 0 or kernel.mass_low <= 0.0:
+        return False
+    schur = unpack_workspace(kernel.floats, kernel.integers, kernel.layout)
+    if schur[1] != 1:
+        return False
+    certificate = solve_dependent_rows(kernel.mass_low, kernel.dependent_floats, kernel.dependent_order, schur[0], Q,
+                                       A, gamma, kernel.row_scale, schur[2], schur[5], schur[6], qdd, lam)
+    if certificate.shape[0] == 0:
+        return False
+    threshold, low, residual = kernel.threshold, certificate[KEPT_LOW], certificate[RESIDUAL]
+    weight = kernel.mass_scale * kernel.mass_scale / kernel.mass_low
+    return (low >= PROJECTION_REGULAR * PROJECTION_REGULAR * max(certificate[TRACE], 1.0)
+            and low > threshold * threshold and residual <= threshold * threshold
+            and weight * low > threshold * threshold and weight * residual <= threshold * threshold
+            and _regular_force(kernel, M, Q, qdd, lam))
 
 
 @njit(cache=True, inline="always")
@@ -388,7 +434,8 @@ def _fresh(kernel):
                               kernel.mass_scale, kernel.factor.copy(), kernel.work_matrix.copy(),
                               kernel.vectors_n.copy(), kernel.vectors_m.copy(), kernel.force.copy(),
                               kernel.no_nonideal, kernel.regular_path, kernel.floats.copy(), kernel.integers.copy(),
-                              kernel.layout))
+                              kernel.layout, kernel.mass_low, kernel.dependent_floats.copy(),
+                              kernel.dependent_order.copy(), kernel.last_path.copy()))
 
 
 UdwadiaKalabaKernel.solve = staticmethod(_kernel_solve)

@@ -1,0 +1,281 @@
+"""The constrained equations of motion when rows of the constraint Jacobian depend on the others
+(redundant constraints, e.g. Bricard's mechanism), solved without an SVD and certified against
+the SVD pseudo-inverse that the projection and Udwadia-Kalaba define them by.
+
+For a constant, positive definite M (natural coordinates without massless coordinates) and the
+rows scaled once, A' = D A, γ' = D γ, λ = D μ (D = diag(row_scale)):
+
+1. X = A' M⁻¹ (row r: M⁻¹a'_r), y = M⁻¹Q, the Schur complement S = A' M⁻¹ A'ᵀ, z = A' y - γ'.
+2. Cholesky factorisation of S with diagonal pivoting (Higham, *Accuracy and Stability of
+   Numerical Algorithms*, 2nd ed., 2002, §10.3; LAPACK ``dpstrf``): each step takes the row of
+   the largest remaining diagonal and the factorisation stops, at rank r, when the remaining
+   diagonals sum to at most ``STOP`` times the largest diagonal of S.  The first r pivots I are
+   kept; the others, R, are the dependent rows.
+3. μ_I = S_II⁻¹ z_I and q̈ = y - X_Iᵀ μ_I: M q̈ + A'_Iᵀ μ_I = Q and A'_I q̈ = γ'_I.
+4. The dependent rows in terms of the kept ones, a'_k ≈ Σ_j C_kj a'_j with C = S_RI S_II⁻¹
+   = L_RI L_II⁻¹, and the minimum-norm multipliers, as the pseudo-inverse (A'ᵀ)⁺ gives them:
+   every μ with A'ᵀμ = A'_Iᵀμ_I is μ_basic + N v, N = [-Cᵀ; I], and the shortest one has
+   v = (I + C Cᵀ)⁻¹ C μ_I (μ_I then less Cᵀv).
+
+Certificate (what the caller compares with its SVD threshold):
+
+- ρ = ‖A'_R - C A'_I‖_F bounds the singular values that the SVD would find below the r-th:
+  (σ²_{r+1} + … + σ²_m)^{1/2} ≤ ρ (Eckart-Young: rows I with C A'_I for rows R are a rank-r
+  matrix).  ρ is computed from the rows themselves, so it resolves singular values down to the
+  rounding level of A, not of its square.
+- σ_r(A')² ≥ σ_min(A'_I)² ≥ λ_min(M) / trace(S_II⁻¹) (removing rows does not raise singular
+  values; S_II ≼ A'_I A'_Iᵀ / λ_min(M)), with trace(S_II⁻¹) = ‖L_II⁻¹‖_F²;
+- σ_max(A')² ≤ trace(A'A'ᵀ).
+
+When ρ is at most the threshold and σ_r above it, the SVD keeps exactly the r largest singular
+values, and its solution differs from this one only by the angle between the row space of A'_I
+and the SVD's leading right singular vectors, at most about ρ / σ_r (Wedin's theorem).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cmbs.jit import njit
+from cmbs.model.model import Model
+
+#: The pivoted factorisation stops when the remaining diagonals of S sum to at most this times
+#: S's largest diagonal: above the rounding of a dependent row (about m·ε), below any row the
+#: certificate could keep (σ_r ≥ 1e-4 σ_max squares to 1e-8).
+STOP = 1e-12
+
+#: Indices of :func:`solve_dependent_rows`'s certificate: (σ_min(A'_I)² lower bound,
+#: trace(A'A'ᵀ), ρ², rank r).
+KEPT_LOW, TRACE, RESIDUAL, RANK = range(4)
+
+
+def dependent_rows(model: Model, M0: np.ndarray, definite: bool) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+    """What :func:`solve_dependent_rows` needs besides the terms, for ``model`` whose mass matrix at
+    q0 is ``M0`` (``definite``: positive definite, no massless coordinates): λ_min(M) (0 when M is
+    not constant and definite: the path is not taken), the work floats (S, L⁻¹ and C, each m × m,
+    then y (n), z (m), a residual row (n) and the certificate (4)), the pivot order (m), and the
+    path of a formulation's last evaluation (1: dependent rows, which it then tries first).  A
+    formulation's kernel carries the four as fields (numba's parallel loops take no tuple nested
+    in a kernel's)."""
+    m, n = model.m, model.n
+    mass_low = float(np.linalg.eigvalsh(M0)[0]) if model.constant_mass and definite and m else 0.0
+    return mass_low, *dependent_rows_arrays(m, n)
+
+
+def dependent_rows_arrays(m: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The work floats, pivot order and last path of :func:`dependent_rows` for m rows, n coordinates."""
+    return np.zeros(3 * m * m + 2 * n + m + 4), np.zeros(m, dtype=np.int64), np.zeros(1, dtype=np.int64)
+
+
+@njit(cache=True)
+def solve_dependent_rows(mass_low, floats, order, inverse_mass, Q, A, gamma, row_scale, X, columns, counts, qdd,
+                         lam):
+    """q̈ and the minimum-norm λ of [M Aᵀ; A 0][q̈; λ] = [Q; γ] by the pivoted Schur complement
+    of the module docstring, with λ_min(M) (``mass_low``) and M⁻¹ (``inverse_mass``) given.
+
+    ``floats`` and ``order`` (:func:`dependent_rows_arrays`), ``X`` (m, n), ``columns`` (m, n)
+    and ``counts`` (m,) are work arrays.  Returns the certificate (a view into ``floats``:
+    σ_min(A'_I)² lower bound, trace(A'A'ᵀ), ρ², r), or an empty view when a pivot is not
+    positive or a result is not finite (nothing is certified then)."""
+    m, n = A.shape
+    S = floats[:m * m].reshape((m, m))
+    T = floats[m * m:2 * m * m].reshape((m, m))
+    C = floats[2 * m * m:3 * m * m].reshape((m, m))
+    y = floats[3 * m * m:3 * m * m + n]
+    z = floats[3 * m * m + n:3 * m * m + n + m]
+    residual = floats[3 * m * m + n + m:3 * m * m + 2 * n + m]
+    certificate = floats[3 * m * m + 2 * n + m:3 * m * m + 2 * n + m + 4]
+    trace_gram = 0.0
+    for r in range(m):                      # A's row non-zeros; X = A' M⁻¹
+        count = 0
+        for j in range(n):
+            value = A[r, j]
+            if value != 0.0:
+                columns[r, count] = j
+                count += 1
+                trace_gram += value * value * row_scale[r] * row_scale[r]
+        counts[r] = count
+        for i in range(n):
+            total = 0.0
+            for t in range(count):
+                total += inverse_mass[i, columns[r, t]] * A[r, columns[r, t]]
+            X[r, i] = total * row_scale[r]
+    for i in range(n):
+        total = 0.0
+        for j in range(n):
+            total += inverse_mass[i, j] * Q[j]
+        y[i] = total
+    largest = 0.0
+    for a in range(m):                      # S and z, lower triangle
+        order[a] = a
+        total = -gamma[a]
+        for t in range(counts[a]):
+            total += A[a, columns[a, t]] * y[columns[a, t]]
+        z[a] = total * row_scale[a]
+        for b in range(a + 1):
+            value = 0.0
+            for t in range(counts[a]):
+                value += A[a, columns[a, t]] * X[b, columns[a, t]]
+            S[a, b] = value * row_scale[a]
+        largest = max(largest, S[a, a])
+    rank = _pivoted_cholesky(S, z, order, STOP * largest)
+    if rank < 0:
+        return certificate[:0]
+    _solve_kept(S, rank, z)
+    kept_low = mass_low / _inverse_frobenius_squared(S, rank, T)
+    dependent = m - rank
+    for k in range(dependent):              # C_k = L_II⁻ᵀ l_k (l_k: row rank + k of L)
+        for j in range(rank):
+            total = 0.0
+            for i in range(j, rank):
+                total += T[i, j] * S[rank + k, i]
+            C[k, j] = total
+    residual_squared = _dependency_residual(A, row_scale, columns, counts, order, C, rank, residual)
+    for i in range(n):                      # q̈ from the basic multipliers: A'_I q̈ = γ'_I exactly
+        total = y[i]
+        for k in range(rank):
+            total -= X[order[k], i] * z[k]
+        qdd[i] = total
+    _minimum_norm(C, rank, dependent, z, T)
+    for k in range(m):
+        lam[order[k]] = z[k] * row_scale[order[k]]
+    for i in range(n):
+        if not math.isfinite(qdd[i]):
+            return certificate[:0]
+    certificate[KEPT_LOW] = kept_low
+    certificate[TRACE] = trace_gram
+    certificate[RESIDUAL] = residual_squared
+    certificate[RANK] = rank
+    return certificate
+
+
+@njit(cache=True)
+def _pivoted_cholesky(S, z, order, stop):
+    """Lower Cholesky factor of the symmetric positive semi-definite S (lower triangle) with
+    diagonal pivoting, in place, until the remaining diagonals sum to at most ``stop``; rows
+    and columns are swapped in S, and alike in ``z`` and ``order``.  Returns the rank reached,
+    or -1 when a pivot is not positive (S not semi-definite to rounding)."""
+    m = S.shape[0]
+    for k in range(m):
+        pivot, remaining = k, 0.0
+        for j in range(k, m):
+            remaining += S[j, j]
+            if S[j, j] > S[pivot, pivot]:
+                pivot = j
+        if remaining <= stop:
+            return k
+        if S[pivot, pivot] <= 0.0:
+            return -1
+        if pivot != k:
+            _swap_symmetric(S, k, pivot)
+            z[k], z[pivot] = z[pivot], z[k]
+            order[k], order[pivot] = order[pivot], order[k]
+        diagonal = math.sqrt(S[k, k])
+        S[k, k] = diagonal
+        for i in range(k + 1, m):
+            S[i, k] /= diagonal
+        for j in range(k + 1, m):
+            factor = S[j, k]
+            for i in range(j, m):
+                S[i, j] -= S[i, k] * factor
+    return m
+
+
+@njit(cache=True, inline="always")
+def _swap_symmetric(S, k, p):
+    """Swap rows and columns k < p of the symmetric matrix held in S's lower triangle, together
+    with rows k and p of the factor's columns before k."""
+    for j in range(k):
+        S[k, j], S[p, j] = S[p, j], S[k, j]
+    S[k, k], S[p, p] = S[p, p], S[k, k]
+    for j in range(k + 1, p):
+        S[j, k], S[p, j] = S[p, j], S[j, k]
+    for i in range(p + 1, S.shape[0]):
+        S[i, k], S[i, p] = S[i, p], S[i, k]
+
+
+@njit(cache=True)
+def _solve_kept(L, rank, z):
+    """z[:rank] ← S_II⁻¹ z[:rank] with S_II = L Lᵀ, L the leading rank × rank block of ``L``."""
+    for i in range(rank):
+        total = z[i]
+        for k in range(i):
+            total -= L[i, k] * z[k]
+        z[i] = total / L[i, i]
+    for i in range(rank - 1, -1, -1):
+        z[i] /= L[i, i]
+        for k in range(i):
+            z[k] -= L[i, k] * z[i]
+
+
+@njit(cache=True)
+def _inverse_frobenius_squared(L, rank, T):
+    """‖L⁻¹‖_F² = trace(S_II⁻¹) of the leading rank × rank block of the lower factor ``L``, with
+    L⁻¹ left in ``T``'s lower triangle."""
+    total = 0.0
+    for j in range(rank):
+        T[j, j] = 1.0 / L[j, j]
+        total += T[j, j] * T[j, j]
+        for i in range(j + 1, rank):
+            value = 0.0
+            for k in range(j, i):
+                value -= L[i, k] * T[k, j]
+            T[i, j] = value / L[i, i]
+            total += T[i, j] * T[i, j]
+    return total
+
+
+@njit(cache=True)
+def _dependency_residual(A, row_scale, columns, counts, order, C, rank, residual):
+    """ρ² = Σ_k ‖a'_k - Σ_j C_kj a'_j‖² over the dependent rows k (pivot positions ≥ rank) from the
+    rows of A themselves (``residual``: an n-vector of scratch)."""
+    m = A.shape[0]
+    total = 0.0
+    for k in range(m - rank):
+        row = order[rank + k]
+        for i in range(residual.shape[0]):
+            residual[i] = 0.0
+        for t in range(counts[row]):
+            residual[columns[row, t]] = A[row, columns[row, t]] * row_scale[row]
+        for j in range(rank):
+            coefficient = C[k, j]
+            kept = order[j]
+            for t in range(counts[kept]):
+                residual[columns[kept, t]] -= coefficient * A[kept, columns[kept, t]] * row_scale[kept]
+        for i in range(residual.shape[0]):
+            total += residual[i] * residual[i]
+    return total
+
+
+@njit(cache=True)
+def _minimum_norm(C, rank, dependent, z, G):
+    """The minimum-norm multipliers from the basic ones μ_I = z[:rank] (μ_R = 0): v = (I + C Cᵀ)⁻¹
+    C μ_I into z[rank:], then z[:rank] -= Cᵀ v (``G``: dependent × dependent scratch)."""
+    if dependent == 0:
+        return
+    for a in range(dependent):
+        total = 0.0
+        for j in range(rank):
+            total += C[a, j] * z[j]
+        z[rank + a] = total
+        for b in range(a + 1):
+            value = 1.0 if a == b else 0.0
+            for j in range(rank):
+                value += C[a, j] * C[b, j]
+            G[a, b] = value
+    for k in range(dependent):              # I + C Cᵀ ≥ I: Cholesky without pivoting
+        G[k, k] = math.sqrt(G[k, k])
+        for i in range(k + 1, dependent):
+            G[i, k] /= G[k, k]
+        for j in range(k + 1, dependent):
+            for i in range(j, dependent):
+                G[i, j] -= G[i, k] * G[j, k]
+    tail = z[rank:rank + dependent]
+    _solve_kept(G, dependent, tail)
+    for j in range(rank):
+        total = 0.0
+        for a in range(dependent):
+            total += C[a, j] * tail[a]
+        z[j] -= total
