@@ -136,3 +136,11 @@ def test_drift_projection_steps_match_the_svd(name):
         _subtract_minimum_norm(work, A, b, 1e-9, fast, row_space)
         _subtract_pseudo_inverse(A, b, 1e-9, svd, row_space)
         np.testing.assert_allclose(fast, svd, rtol=0, atol=1e-9 * max(np.abs(svd).max(), np.abs(x).max()))
+
+
+def test_zero_rows_certify_nothing_and_the_svd_decides():
+    """A Jacobian without a non-zero row has no row to keep: no certificate (the callers then
+    take their SVD path, which keeps nothing either)."""
+    M, Q = np.diag([2.0, 3.0, 4.0]), np.array([1.0, -1.0, 0.5])
+    _, _, certificate = _solve(M, Q, np.zeros((2, 3)), np.zeros(2), np.ones(2))
+    assert certificate.size == 0

@@ -121,7 +121,7 @@ def solve_dependent_rows(mass_low, floats, order, inverse_mass, Q, A, gamma, row
             S[a, b] = value * row_scale[a]
         largest = max(largest, S[a, a])
     rank = _pivoted_cholesky(S, z, order, STOP * largest)
-    if rank < 0:
+    if rank <= 0:                           # not semi-definite, or no row to keep: nothing certified
         return certificate[:0]
     _solve_kept(S, rank, z)
     kept_low = mass_low / _inverse_frobenius_squared(S, rank, T)
