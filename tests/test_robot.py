@@ -1,0 +1,318 @@
+"""Spatial joint-coordinate trees from URDF files against Pinocchio loaded from the same files:
+mass matrix (CRBA), bias forces, forward (ABA) and inverse (RNEA) dynamics, frame placements and
+Jacobians; energy conservation of a free swing; one-line errors on bad files.
+
+Pinocchio's coordinates: a revolute or prismatic joint has one (at ``idx_q``); a continuous joint
+(Pinocchio's unbounded revolute, kinova's joints 1, 4 and 6) has two, (cos θ, sin θ), and one
+velocity (at ``idx_v``): :func:`_pinocchio_state` converts.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cmbs
+from cmbs.errors import CmbsError
+from cmbs.model.robot import frame_jacobian, frame_placement
+
+try:
+    import pinocchio
+except ImportError:
+    pinocchio = None
+
+
+def _robots_directory() -> Path | None:
+    """example-robot-data's robots directory (its URDF files), None when it is not installed."""
+    try:
+        distribution = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError:
+        return None
+    path = Path(str(distribution.locate_file("cmeel.prefix/share/example-robot-data/robots")))
+    return path if path.is_dir() else None
+
+
+ROBOTS = _robots_directory()
+needs_pinocchio = pytest.mark.skipif(pinocchio is None or ROBOTS is None,
+                                     reason="the comparisons need pinocchio (pip 'pin') and example-robot-data")
+URDFS = {
+    "ur5": "ur_description/urdf/ur5_robot.urdf",                 # 6 revolute
+    "panda": "panda_description/urdf/panda.urdf",                # 7 revolute, 2 prismatic fingers, fixed joints
+    "z1": "z1_description/urdf/z1.urdf",                         # 7 revolute about x, y and z axes
+    "kinova": "kinova_description/robots/kinova.urdf",           # 3 continuous, 3 revolute
+}
+SAMPLES = 100
+
+
+def _pair(robot: str) -> tuple[cmbs.Model, object, object]:
+    path = str(ROBOTS / URDFS[robot])
+    model = cmbs.load(path)
+    reference = pinocchio.buildModelFromUrdf(path)
+    return model, reference, reference.createData()
+
+
+def _pinocchio_state(model: cmbs.Model, reference: object, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray,
+                                                                                                   np.ndarray]:
+    """Pinocchio's (q, v) for the model's (q, q̇), joint by joint by name (module docstring)."""
+    q_pin, v_pin = np.zeros(reference.nq), np.zeros(reference.nv)
+    for k, name in enumerate(model.coordinate_names):
+        joint = reference.joints[reference.getJointId(name)]
+        assert joint.nv == 1
+        if joint.nq == 2:
+            q_pin[joint.idx_q:joint.idx_q + 2] = np.cos(q[k]), np.sin(q[k])
+        else:
+            q_pin[joint.idx_q] = q[k]
+        v_pin[joint.idx_v] = v[k]
+    return q_pin, v_pin
+
+
+def _velocity_indices(model: cmbs.Model, reference: object) -> np.ndarray:
+    return np.array([reference.joints[reference.getJointId(name)].idx_v for name in model.coordinate_names])
+
+
+def _states(model: cmbs.Model, seed: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """SAMPLES random (q, q̇, τ, q̈), seeded."""
+    rng = np.random.default_rng(seed)
+    n = model.n
+    return [(rng.uniform(-np.pi, np.pi, n), rng.normal(0.0, 2.0, n), rng.normal(0.0, 10.0, n),
+             rng.normal(0.0, 5.0, n)) for _ in range(SAMPLES)]
+
+
+def _relative(value: np.ndarray, reference: np.ndarray) -> float:
+    return float(np.linalg.norm(value - reference) / np.linalg.norm(reference))
+
+
+@needs_pinocchio
+@pytest.mark.parametrize("robot", list(URDFS))
+def test_dynamics_match_pinocchio(robot: str) -> None:
+    """M(q) vs crba, Q(q, q̇, 0) vs -rnea(q, q̇, 0), q̈ from M q̈ = Q(q, q̇, τ) (Lagrange, m = 0)
+    vs aba, and τ = M q̈ - Q(q, q̇, 0) vs rnea(q, q̇, q̈): each to 1e-10 of the reference's norm."""
+    model, reference, data = _pair(robot)
+    rows = _velocity_indices(model, reference)
+    assert model.m == 0 and model.n_u == model.n == rows.size
+    solver = cmbs.formulation("lagrange").bind(model)
+    worst = dict(mass=0.0, bias=0.0, forward=0.0, inverse=0.0)
+    for q, qd, tau, qdd in _states(model, seed=len(robot)):
+        q_pin, v_pin = _pinocchio_state(model, reference, q, qd)
+        mass = pinocchio.crba(reference, data, q_pin)
+        mass = np.triu(mass) + np.triu(mass, 1).T
+        terms = model.evaluate(q, qd, 0.0, tau)
+        M, Q = terms.M.copy(), terms.Q.copy()
+        worst["mass"] = max(worst["mass"], _relative(M, mass[np.ix_(rows, rows)]))
+        bias = pinocchio.rnea(reference, data, q_pin, v_pin, np.zeros(reference.nv))[rows]
+        Q0 = model.forces(q, qd)
+        worst["bias"] = max(worst["bias"], _relative(Q0, -bias))
+        tau_pin = np.zeros(reference.nv)
+        tau_pin[rows] = tau
+        forward = pinocchio.aba(reference, data, q_pin, v_pin, tau_pin)[rows]
+        worst["forward"] = max(worst["forward"], _relative(solver.accelerations(terms, q, qd, 0.0).qdd, forward))
+        qdd_pin = np.zeros(reference.nv)
+        qdd_pin[rows] = qdd
+        inverse = pinocchio.rnea(reference, data, q_pin, v_pin, qdd_pin)[rows]
+        worst["inverse"] = max(worst["inverse"], _relative(M @ qdd - Q0, inverse))
+    print(f"{robot}: worst relative errors vs Pinocchio over {SAMPLES} states: "
+          + ", ".join(f"{key} {value:.1e}" for key, value in worst.items()))
+    assert max(worst.values()) < 1e-10, worst
+
+
+@needs_pinocchio
+@pytest.mark.parametrize("robot", list(URDFS))
+def test_frames_match_pinocchio(robot: str) -> None:
+    """Every link frame's rotation and origin vs framesForwardKinematics, its 6 x n Jacobian vs
+    getFrameJacobian(LOCAL_WORLD_ALIGNED), to 1e-12."""
+    model, reference, data = _pair(robot)
+    rows = _velocity_indices(model, reference)
+    links = model.point_names
+    assert set(links) == {frame.name for frame in reference.frames if frame.type == pinocchio.BODY}
+    worst_pose = worst_jacobian = 0.0
+    for q, qd, _, _ in _states(model, seed=10 + len(robot))[:25]:
+        q_pin, _ = _pinocchio_state(model, reference, q, qd)
+        pinocchio.computeJointJacobians(reference, data, q_pin)
+        pinocchio.framesForwardKinematics(reference, data, q_pin)
+        origins = model.point_positions(q)
+        for i, link in enumerate(links):
+            frame = reference.getFrameId(link, pinocchio.BODY)
+            rotation, origin = frame_placement(model, q, link)
+            placement = data.oMf[frame]
+            assert np.array_equal(origins[i], origin)
+            worst_pose = max(worst_pose, np.abs(rotation - placement.rotation).max(),
+                             np.abs(origin - placement.translation).max())
+            jacobian = pinocchio.getFrameJacobian(reference, data, frame, pinocchio.LOCAL_WORLD_ALIGNED)[:, rows]
+            worst_jacobian = max(worst_jacobian, np.abs(frame_jacobian(model, q, link) - jacobian).max())
+    print(f"{robot}: worst frame errors vs Pinocchio: placement {worst_pose:.1e}, Jacobian {worst_jacobian:.1e}")
+    assert worst_pose < 1e-12 and worst_jacobian < 1e-12
+
+
+@needs_pinocchio
+def test_gravity_is_a_parameter() -> None:
+    """A tilted gravity vector: Q(q, 0, 0) vs -rnea with Pinocchio's gravity set alike; no gravity:
+    no force at rest."""
+    from cmbs.model.urdf import load_urdf
+
+    path = str(ROBOTS / URDFS["panda"])
+    gravity = np.array([1.5, -2.0, -9.0])
+    model = load_urdf(path, gravity=gravity)
+    reference = pinocchio.buildModelFromUrdf(path)
+    reference.gravity.linear = gravity
+    data = reference.createData()
+    rows = _velocity_indices(model, reference)
+    for q, _, _, _ in _states(model, seed=3)[:10]:
+        q_pin, v_pin = _pinocchio_state(model, reference, q, np.zeros(model.n))
+        expected = -pinocchio.rnea(reference, data, q_pin, v_pin, np.zeros(reference.nv))[rows]
+        assert _relative(model.forces(q, np.zeros(model.n)), expected) < 1e-10
+    weightless = load_urdf(path, gravity=(0.0, 0.0, 0.0))
+    assert np.array_equal(weightless.forces(np.full(model.n, 0.3), np.zeros(model.n)), np.zeros(model.n))
+
+
+@needs_pinocchio
+def test_energies() -> None:
+    """T = ½ q̇ᵀ M q̇ (body by body vs the CRBA's M) and -∂V/∂q = Q(q, 0, 0) (central differences)."""
+    model = cmbs.load(str(ROBOTS / URDFS["panda"]))
+    for q, qd, _, _ in _states(model, seed=4)[:10]:
+        M = model.mass_matrix(q)
+        assert abs(model.kinetic_energy(q, qd) - 0.5 * qd @ M @ qd) <= 1e-12 * (0.5 * qd @ M @ qd)
+        h = 1e-6
+        gradient = np.array([(model.potential_energy(q + h * e) - model.potential_energy(q - h * e)) / (2 * h)
+                             for e in np.eye(model.n)])
+        assert np.allclose(-gradient, model.forces(q, np.zeros(model.n)), rtol=0, atol=1e-7)
+
+
+@needs_pinocchio
+def test_free_swing_conserves_energy() -> None:
+    """10 s of UR5 swinging freely (zero torques) with DOP853 at rtol 1e-10: T + V drifts by at most
+    1e-6 of its value."""
+    model = cmbs.load(str(ROBOTS / URDFS["ur5"]))
+    q0 = np.array([0.3, -1.0, 1.2, -0.5, 0.8, 0.1])
+    qd0 = np.array([0.5, -0.3, 0.8, 1.0, -0.6, 0.4])
+    run = cmbs.simulate(model, t_end=10.0, dt=0.01, q0=q0, qd0=qd0, integrator="dop853", rtol=1e-10, atol=1e-12)
+    energy = model.energy_history(run.q, run.qd)
+    assert run.t[-1] == pytest.approx(10.0)
+    assert np.ptp(run.q[:, 1]) > 1.0          # it does swing
+    drift = np.abs(energy - energy[0]).max() / abs(energy[0])
+    print(f"ur5: relative energy drift over 10 s: {drift:.1e}")
+    assert drift <= 1e-6
+
+
+FALLBACK = """
+import sys
+import numpy as np
+import cmbs, cmbs.jit
+from cmbs.model.robot import frame_jacobian
+assert not cmbs.jit.COMPILED
+model = cmbs.load(sys.argv[1])
+q, qd, u = np.linspace(-2.0, 2.0, model.n), np.linspace(1.0, -1.0, model.n), np.linspace(0.0, 3.0, model.n)
+terms = model.evaluate(q, qd, 0.0, u)
+np.savez(sys.argv[2], M=terms.M, Q=terms.Q, J=frame_jacobian(model, q, model.point_names[-1]),
+         E=np.array([model.kinetic_energy(q, qd), model.potential_energy(q)]))
+"""
+
+
+@needs_pinocchio
+def test_interpreted_kernels_match(tmp_path: Path) -> None:
+    """Without numba (CMBS_DISABLE_NUMBA=1) the same kernels give the same terms to 1e-12."""
+    path = str(ROBOTS / URDFS["panda"])
+    out = tmp_path / "fallback.npz"
+    environment = dict(os.environ, CMBS_DISABLE_NUMBA="1")
+    subprocess.run([sys.executable, "-c", FALLBACK, path, str(out)], check=True, env=environment)
+    model = cmbs.load(path)
+    q, qd, u = np.linspace(-2.0, 2.0, model.n), np.linspace(1.0, -1.0, model.n), np.linspace(0.0, 3.0, model.n)
+    terms = model.evaluate(q, qd, 0.0, u)
+    interpreted = np.load(out)
+    assert np.allclose(interpreted["M"], terms.M, rtol=0, atol=1e-12)
+    assert np.allclose(interpreted["Q"], terms.Q, rtol=0, atol=1e-12)
+    assert np.allclose(interpreted["J"], frame_jacobian(model, q, model.point_names[-1]), rtol=0, atol=1e-12)
+    assert np.allclose(interpreted["E"], [model.kinetic_energy(q, qd), model.potential_energy(q)], rtol=0,
+                       atol=1e-12)
+
+
+# ------------------------------------------------------------------ bad input
+ARM = """<?xml version="1.0"?>
+<robot name="arm">
+  <link name="base"/>
+  <link name="upper">
+    <inertial><origin xyz="0 0 0.25" rpy="0 0 0"/><mass value="{mass}"/>
+      <inertia ixx="0.02" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.001"/></inertial>
+  </link>
+  <link name="tool"/>
+  <joint name="shoulder" type="{type}">
+    <parent link="base"/><child link="upper"/>
+    <origin xyz="{xyz}" rpy="0 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-2" upper="2" effort="10" velocity="3"/><dynamics damping="0.1"/>
+  </joint>
+  <joint name="wrist" type="{wrist}">
+    <parent link="upper"/><child link="tool"/><origin xyz="0 0 0.5" rpy="0 0 0"/><axis xyz="1 0 0"/>
+  </joint>
+</robot>
+"""
+
+
+def _arm(tmp_path: Path, *, type: str = "revolute", xyz: str = "0 0 0.1", mass: str = "2.0",
+         wrist: str = "fixed") -> Path:
+    path = tmp_path / "arm.urdf"
+    path.write_text(ARM.format(type=type, xyz=xyz, mass=mass, wrist=wrist))
+    return path
+
+
+def _error(path: Path | str) -> str:
+    with pytest.raises(CmbsError) as caught:
+        cmbs.load(str(path))
+    message = str(caught.value)
+    assert "\n" not in message and str(path) in message
+    return message
+
+
+def test_small_arm_closed_form(tmp_path: Path) -> None:
+    """One rod about y, upright at q = 0: M = I_yy + m d², Q = u + m g d sin q (d = 0.25 from the
+    axis; the massless tool on a fixed joint adds nothing); limits and damping kept as data."""
+    model = cmbs.load(str(_arm(tmp_path)))
+    assert model.coordinate_names == ("shoulder",) and model.actuator_names == ("shoulder",)
+    q = np.array([0.7])
+    assert model.mass_matrix(q)[0, 0] == pytest.approx(0.02 + 2.0 * 0.25**2, rel=1e-14)
+    assert model.forces(q, np.array([3.0]), u=np.array([1.5]))[0] == pytest.approx(
+        1.5 + 2.0 * 9.81 * 0.25 * np.sin(0.7), rel=1e-14)
+    assert frame_placement(model, q, "tool")[1] == pytest.approx([0.5 * np.sin(0.7), 0.0, 0.1 + 0.5 * np.cos(0.7)])
+    joint = model.equations.joints[0]
+    assert (joint.lower, joint.upper, joint.effort, joint.velocity, joint.damping) == (-2.0, 2.0, 10.0, 3.0, 0.1)
+
+
+def test_floating_joint_is_refused(tmp_path: Path) -> None:
+    message = _error(_arm(tmp_path, type="floating"))
+    assert "joint 'shoulder'" in message and "floating" in message and "docs/spatial.md" in message
+
+
+def test_planar_joint_is_refused(tmp_path: Path) -> None:
+    message = _error(_arm(tmp_path, type="planar"))
+    assert "joint 'shoulder'" in message and "planar" in message and "docs/spatial.md" in message
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    assert "no such file" in _error(tmp_path / "missing.urdf")
+
+
+def test_malformed_number(tmp_path: Path) -> None:
+    message = _error(_arm(tmp_path, xyz="0 zero 0.1"))
+    assert "joint 'shoulder'" in message and "xyz='0 zero 0.1'" in message
+    message = _error(_arm(tmp_path, mass="2,5"))
+    assert "link 'upper'" in message and "value='2,5'" in message
+
+
+def test_unknown_joint_type(tmp_path: Path) -> None:
+    message = _error(_arm(tmp_path, type="screw"))
+    assert "joint 'shoulder'" in message and "unknown joint type 'screw'" in message
+
+
+def test_movable_joint_without_inertial(tmp_path: Path) -> None:
+    message = _error(_arm(tmp_path, wrist="revolute"))
+    assert "joint 'wrist'" in message and "'tool'" in message and "inertial" in message
+
+
+def test_not_xml(tmp_path: Path) -> None:
+    path = tmp_path / "broken.urdf"
+    path.write_text("<robot name='x'><link name='a'>")
+    assert "not well-formed XML" in _error(path)
