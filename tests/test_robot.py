@@ -281,6 +281,48 @@ def test_small_arm_closed_form(tmp_path: Path) -> None:
     assert (joint.lower, joint.upper, joint.effort, joint.velocity, joint.damping) == (-2.0, 2.0, 10.0, 3.0, 0.1)
 
 
+TWO_LINKS = """<?xml version="1.0"?>
+<robot name="two-links">
+  <joint name="elbow" type="continuous">
+    <parent link="upper"/><child link="lower"/><origin xyz="0 0 0.5" rpy="0 0 0"/><axis xyz="0 1 0"/>
+  </joint>
+  <joint name="shoulder" type="revolute">
+    <parent link="base"/><child link="upper"/><origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" effort="50" velocity="2"/>
+  </joint>
+  <link name="base"/>
+  <link name="upper"><inertial><origin xyz="0 0 0.25"/><mass value="2.0"/>
+    <inertia ixx="0.05" ixy="0" ixz="0" iyy="0.04" iyz="0" izz="0.01"/></inertial></link>
+  <link name="lower"><inertial><origin xyz="0 0 0.2"/><mass value="1.5"/>
+    <inertia ixx="0.03" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.01"/></inertial></link>
+</robot>
+"""
+
+
+def test_two_links_closed_form(tmp_path: Path) -> None:
+    """A two-link arm in the x-z plane whose joints are listed elbow first: the coordinates follow
+    the file (elbow, shoulder); M and the gravity forces are the textbook double pendulum's
+    (links upright at q = 0, θ = shoulder, φ = elbow, a = 0.5, c1 = 0.25, c2 = 0.2)::
+
+        M_θθ = I1 + I2 + m1 c1² + m2 (a² + c2² + 2 a c2 cos φ),  M_θφ = I2 + m2 (c2² + a c2 cos φ),
+        M_φφ = I2 + m2 c2²,  Q_θ = g (m1 c1 + m2 a) sin θ + m2 g c2 sin(θ + φ),  Q_φ = m2 g c2 sin(θ + φ)."""
+    path = tmp_path / "two.urdf"
+    path.write_text(TWO_LINKS)
+    model = cmbs.load(str(path))
+    assert model.coordinate_names == ("elbow", "shoulder")
+    m1, m2, I1, I2, a, c1, c2, g = 2.0, 1.5, 0.04, 0.02, 0.5, 0.25, 0.2, 9.81
+    for elbow, shoulder in ((0.0, 0.0), (0.4, -1.1), (2.5, 0.7)):
+        q = np.array([elbow, shoulder])
+        mss = I1 + I2 + m1 * c1**2 + m2 * (a**2 + c2**2 + 2 * a * c2 * np.cos(elbow))
+        mse = I2 + m2 * (c2**2 + a * c2 * np.cos(elbow))
+        mee = I2 + m2 * c2**2
+        assert np.allclose(model.mass_matrix(q), [[mee, mse], [mse, mss]], rtol=1e-14, atol=0)
+        expected = [m2 * g * c2 * np.sin(shoulder + elbow),
+                    g * (m1 * c1 + m2 * a) * np.sin(shoulder) + m2 * g * c2 * np.sin(shoulder + elbow)]
+        assert np.allclose(model.forces(q, np.zeros(2)), expected, rtol=1e-13, atol=1e-14)
+    assert [joint.type for joint in model.equations.joints] == ["continuous", "revolute"]
+
+
 def test_floating_joint_is_refused(tmp_path: Path) -> None:
     message = _error(_arm(tmp_path, type="floating"))
     assert "joint 'shoulder'" in message and "floating" in message and "docs/spatial.md" in message

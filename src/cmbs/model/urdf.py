@@ -44,7 +44,8 @@ def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81))
         robot = yourdfpy.URDF.load(source, build_scene_graph=False, load_meshes=False,
                                    build_collision_scene_graph=False, load_collision_meshes=False).robot
     except Exception as error:  # yourdfpy raises bare ValueError, KeyError, AttributeError on bad input
-        raise ModelError(f"not a valid URDF robot: {type(error).__name__}: {error}", source=source) from None
+        raise ModelError(f"not a valid URDF robot: {type(error).__name__}: {' '.join(str(error).split())}",
+                         source=source) from None
     links = [TreeLink(link.name, None if link.inertial is None else _inertial(link.inertial))
              for link in robot.links]
     joints = []
