@@ -358,3 +358,13 @@ def test_not_xml(tmp_path: Path) -> None:
     path = tmp_path / "broken.urdf"
     path.write_text("<robot name='x'><link name='a'>")
     assert "not well-formed XML" in _error(path)
+
+
+def test_command_line_error_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``cmbs describe`` of a bad URDF file: exit status 2 and one line, no traceback."""
+    from cmbs.cli import main
+
+    path = _arm(tmp_path, type="floating")
+    assert main(["describe", str(path)]) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("cmbs: error: ") and "joint 'shoulder'" in lines[0]

@@ -1,7 +1,7 @@
 """Compiled dynamics of a spatial joint-coordinate tree: CRBA for M(q), RNEA for the bias forces.
 
 Spatial vectors are Plücker coordinates in world axes about the world origin (Featherstone,
-*Rigid Body Dynamics Algorithms*, Springer 2008, §2.2-2.9): a motion ``v = (ω, v_O)`` (angular
+*Rigid Body Dynamics Algorithms*, Springer 2008, ch. 2): a motion ``v = (ω, v_O)`` (angular
 velocity, velocity of the body point at the world origin), a force ``f = (n_O, f)`` (moment about
 the world origin, resultant).  In these coordinates no transform is needed between bodies, and
 every body's quantities are written once per evaluation (the algorithms in ground coordinates,
@@ -16,20 +16,21 @@ of the joint frame in the parent body's frame and unit axis ``a_k`` (joint frame
     S_k = (z_k, o_k × z_k) (revolute),  S_k = (0, z_k) (prismatic)      (motion subspace),
 
 ``Rot(a, θ) = 1 + sin θ [a]× + (1 - cos θ) [a]×²`` (Rodrigues).  Recursive Newton-Euler with
-q̈ = 0 and the base accelerating at -g (Featherstone §5.3, eq. 5.7-5.9; the gravity trick of §5.3)::
+q̈ = 0 and the base accelerating at -g instead of gravity acting on each body (Featherstone §5.3)::
 
     v_k = v_p + S_k q̇_k,      a_k = a_p + v_k ×ₘ S_k q̇_k,      a_ground = (0, -g),
     f_k = I_k a_k + v_k ×_f I_k v_k,      f_p += f_k,      b_k = S_kᵀ f_k,
 
 so ``b = C(q, q̇) q̇ + g(q)`` and ``Q = u - b`` (joint torques u, one per joint).  The
-composite-rigid-body algorithm (Featherstone §6.2, Table 6.2)::
+composite-rigid-body algorithm (Featherstone §6.2)::
 
     I^c_k = I_k + Σ_children I^c_c,     M_kk = S_kᵀ I^c_k S_k,     M_jk = M_kj = S_jᵀ I^c_k S_k
     for every ancestor j of k.
 
 A spatial inertia about the world origin is held as (m, h = m c, Ī = I_G + m (|c|² 1 - c cᵀ))
-with c the centre of mass and I_G the inertia about it, both in world axes (Featherstone eq. 2.63);
-``I v = (Ī ω + h × v_O, m v_O - h × ω)``, and composite inertias are sums of the ten numbers.
+with c the centre of mass and I_G the inertia about it, both in world axes (Featherstone ch. 2: the
+rigid-body inertia moved to the origin); ``I v = (Ī ω + h × v_O, m v_O - h × ω)``, and composite
+inertias are sums of the ten numbers.
 """
 
 from __future__ import annotations
