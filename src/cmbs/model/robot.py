@@ -34,8 +34,8 @@ import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.model import Model, Terms
-from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, WORK, RobotKernel, _dynamics, \
-    body_poses, energies
+from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, WORK, RobotKernel, body_poses, \
+    energies, evaluate_terms
 
 __all__ = ["Inertial", "TreeLink", "TreeJoint", "RobotEquations", "build_robot", "frame_placement",
            "frame_jacobian"]
@@ -44,7 +44,7 @@ MOVABLE = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
 JOINT_TYPES = (*MOVABLE, "fixed")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Inertial:
     """Mass, centre-of-mass frame (4 x 4, in the link frame) and inertia (3 x 3, about the centre
     of mass, in that frame's axes) of a link."""
@@ -54,7 +54,7 @@ class Inertial:
     inertia: np.ndarray
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class TreeLink:
     """A link: its name and inertial (None: massless)."""
 
@@ -62,7 +62,7 @@ class TreeLink:
     inertial: Inertial | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class TreeJoint:
     """A joint: type (:data:`JOINT_TYPES`), parent and child link, placement ``origin`` (4 x 4,
     the joint frame in the parent link frame), axis (joint frame), and the data kept unenforced:
@@ -115,7 +115,7 @@ class RobotEquations:
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
         """M(q) (CRBA) and Q = u - C(q, q̇) q̇ - g(q) (RNEA with q̈ = 0) into ``terms``."""
         k = self.kernel
-        _dynamics(k.parent, k.order, k.kind, k.placement, k.axis, k.inertia, k.gravity, q, qd, u, terms.buffer)
+        evaluate_terms(k.parent, k.order, k.kind, k.placement, k.axis, k.inertia, k.gravity, q, qd, u, terms.buffer)
 
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
         """T = ½ q̇ᵀ M(q) q̇, summed body by body (½ vᵀ I v)."""

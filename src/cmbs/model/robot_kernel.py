@@ -173,7 +173,7 @@ def _inertia_times(W, w, ox, oy, oz, vx, vy, vz):
 
 
 @njit(cache=True)
-def _dynamics(parent, order, kind, placement, axis, inertia, gravity, q, qd, u, buf):
+def evaluate_terms(parent, order, kind, placement, axis, inertia, gravity, q, qd, u, buf):
     """Q = u - (C q̇ + g) into buf[0:n], M into buf[n:n + n²]; the work from buf[n + n²:]
     (module docstring).  Its arguments are borrowed (:func:`cmbs.jit.borrow`)."""
     parent, order, kind, placement, axis, inertia, gravity, q, qd, u, buf = borrow(
@@ -251,8 +251,8 @@ def _dynamics(parent, order, kind, placement, axis, inertia, gravity, q, qd, u, 
 
 @njit(cache=True, inline="always")
 def _evaluate_robot(kernel, q, qd, t, u, buffer):
-    """:func:`_dynamics` for a :class:`RobotKernel` (no constraints: the buffer is Q, M, work)."""
-    _dynamics(kernel.parent, kernel.order, kernel.kind, kernel.placement, kernel.axis, kernel.inertia,
+    """:func:`evaluate_terms` for a :class:`RobotKernel` (no constraints: the buffer is Q, M, work)."""
+    evaluate_terms(kernel.parent, kernel.order, kernel.kind, kernel.placement, kernel.axis, kernel.inertia,
               kernel.gravity, q, qd, u, buffer)
 
 
