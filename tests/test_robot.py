@@ -49,9 +49,60 @@ URDFS = {
 }
 SAMPLES = 100
 
+# A branching tree made to exercise what the robots above do not: inertial frames turned by rpy with
+# full inertia tensors, fixed joints with rpy between movable ones (their masses merged), a mass
+# fixed to the ground, oblique revolute and prismatic axes, a continuous joint, a massless end
+# frame, and joints listed out of tree order.
+TREE = """<?xml version="1.0"?>
+<robot name="tree">
+  <link name="world"/>
+  <link name="pedestal"><inertial><origin xyz="0 0 0.1"/><mass value="5"/>
+    <inertia ixx="0.2" ixy="0" ixz="0" iyy="0.2" iyz="0" izz="0.1"/></inertial></link>
+  <link name="torso"><inertial><origin xyz="0.01 0.02 0.1" rpy="0.3 0.5 -0.7"/><mass value="3"/>
+    <inertia ixx="0.1" ixy="0.01" ixz="-0.02" iyy="0.12" iyz="0.015" izz="0.08"/></inertial></link>
+  <link name="plate"><inertial><origin xyz="0.03 -0.01 0.02" rpy="-0.2 0.1 0.9"/><mass value="0.7"/>
+    <inertia ixx="0.01" ixy="0.001" ixz="0" iyy="0.02" iyz="-0.002" izz="0.015"/></inertial></link>
+  <link name="left"><inertial><origin xyz="0 0.05 0" rpy="0.5 0 0"/><mass value="0.4"/>
+    <inertia ixx="0.002" ixy="0" ixz="0.0003" iyy="0.003" iyz="0" izz="0.0025"/></inertial></link>
+  <link name="right"><inertial><origin xyz="0.1 0 0" rpy="0 0.4 0.2"/><mass value="1.2"/>
+    <inertia ixx="0.004" ixy="0.0005" ixz="0" iyy="0.02" iyz="0.001" izz="0.02"/></inertial></link>
+  <link name="hand"><inertial><origin xyz="0.02 0.01 0" rpy="1.0 -0.3 0.1"/><mass value="0.5"/>
+    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.0012" iyz="0.0001" izz="0.0009"/></inertial></link>
+  <link name="finger"><inertial><origin xyz="0 0 0.03" rpy="0 0 0.3"/><mass value="0.1"/>
+    <inertia ixx="0.0001" ixy="0" ixz="0" iyy="0.0001" iyz="0" izz="0.00005"/></inertial></link>
+  <link name="marker"/>
+  <joint name="finger_joint" type="revolute"><parent link="hand"/><child link="finger"/>
+    <origin xyz="0.05 0 0.01" rpy="0.2 0.3 0.1"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+  <joint name="mount" type="fixed"><parent link="world"/><child link="pedestal"/>
+    <origin xyz="0.1 -0.2 0.3" rpy="0.2 -0.1 0.4"/></joint>
+  <joint name="waist" type="revolute"><parent link="pedestal"/><child link="torso"/>
+    <origin xyz="0 0 0.2" rpy="0.1 0.2 0.3"/><axis xyz="0.6 0 0.8"/>
+    <limit lower="-3" upper="3" effort="100" velocity="2"/></joint>
+  <joint name="plate_mount" type="fixed"><parent link="torso"/><child link="plate"/>
+    <origin xyz="0.05 0 0.3" rpy="0 1.0 0.5"/></joint>
+  <joint name="left_slide" type="prismatic"><parent link="plate"/><child link="left"/>
+    <origin xyz="0 0.1 0" rpy="0.4 0 0"/><axis xyz="0 0.6 -0.8"/>
+    <limit lower="-0.5" upper="0.5" effort="10" velocity="1"/></joint>
+  <joint name="right_turn" type="continuous"><parent link="plate"/><child link="right"/>
+    <origin xyz="0 -0.1 0.05" rpy="0 0 -0.6"/><axis xyz="1 0 0"/></joint>
+  <joint name="wrist_fixed" type="fixed"><parent link="right"/><child link="hand"/>
+    <origin xyz="0.2 0 0" rpy="-0.5 0.2 0.7"/></joint>
+  <joint name="marker_mount" type="fixed"><parent link="finger"/><child link="marker"/>
+    <origin xyz="0 0 0.06" rpy="0.3 0 0"/></joint>
+</robot>
+"""
 
-def _pair(robot: str) -> tuple[cmbs.Model, object, object]:
-    path = str(ROBOTS / URDFS[robot])
+
+@pytest.fixture(scope="module")
+def tree_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("tree") / "tree.urdf"
+    path.write_text(TREE)
+    return path
+
+
+def _pair(robot: str, tree_file: Path) -> tuple[cmbs.Model, object, object]:
+    path = str(tree_file if robot == "tree" else ROBOTS / URDFS[robot])
     model = cmbs.load(path)
     reference = pinocchio.buildModelFromUrdf(path)
     return model, reference, reference.createData()
@@ -89,11 +140,11 @@ def _relative(value: np.ndarray, reference: np.ndarray) -> float:
 
 
 @needs_pinocchio
-@pytest.mark.parametrize("robot", list(URDFS))
-def test_dynamics_match_pinocchio(robot: str) -> None:
+@pytest.mark.parametrize("robot", [*URDFS, "tree"])
+def test_dynamics_match_pinocchio(robot: str, tree_file: Path) -> None:
     """M(q) vs crba, Q(q, q̇, 0) vs -rnea(q, q̇, 0), q̈ from M q̈ = Q(q, q̇, τ) (Lagrange, m = 0)
     vs aba, and τ = M q̈ - Q(q, q̇, 0) vs rnea(q, q̇, q̈): each to 1e-10 of the reference's norm."""
-    model, reference, data = _pair(robot)
+    model, reference, data = _pair(robot, tree_file)
     rows = _velocity_indices(model, reference)
     assert model.m == 0 and model.n_u == model.n == rows.size
     solver = cmbs.formulation("lagrange").bind(model)
@@ -122,11 +173,11 @@ def test_dynamics_match_pinocchio(robot: str) -> None:
 
 
 @needs_pinocchio
-@pytest.mark.parametrize("robot", list(URDFS))
-def test_frames_match_pinocchio(robot: str) -> None:
+@pytest.mark.parametrize("robot", [*URDFS, "tree"])
+def test_frames_match_pinocchio(robot: str, tree_file: Path) -> None:
     """Every link frame's rotation and origin vs framesForwardKinematics, its 6 x n Jacobian vs
     getFrameJacobian(LOCAL_WORLD_ALIGNED), to 1e-12."""
-    model, reference, data = _pair(robot)
+    model, reference, data = _pair(robot, tree_file)
     rows = _velocity_indices(model, reference)
     links = model.point_names
     assert set(links) == {frame.name for frame in reference.frames if frame.type == pinocchio.BODY}
