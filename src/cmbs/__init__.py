@@ -44,7 +44,8 @@ def __getattr__(name: str) -> object:
 
 
 def load(name_or_path: str | _Path, **parameters: object) -> Model:
-    """A model by library name (``cmbs models`` lists them) or from a TOML model file.
+    """A model by library name (``cmbs models`` lists them), from a TOML model file or from a URDF
+    robot file (``*.urdf``, :func:`cmbs.model.urdf.load_urdf`).
 
     The returned model is assembled: ``model.q0`` satisfies Φ(q0, 0) = 0 and ``model.qd0`` the
     velocity constraints.  ``parameters`` go to library builders (e.g. ``links=14``).
@@ -58,6 +59,10 @@ def load(name_or_path: str | _Path, **parameters: object) -> Model:
     if parameters:
         raise ModelError(f"parameters {sorted(parameters)} apply to library models only, not to files",
                          source=text)
+    if text.lower().endswith(".urdf"):
+        from cmbs.model.urdf import load_urdf
+
+        return load_urdf(text)
     if text.endswith(".toml") or _Path(text).exists():
         return load_model_file(text)
     raise ModelError(f"no library model or file {text!r}{_did_you_mean(text, names())}; library models: "

@@ -1,0 +1,340 @@
+"""Spatial joint-coordinate trees (robots): links joined by revolute, prismatic and fixed joints.
+
+A tree is a root link fixed to the ground and links each hanging from one parent link by one
+joint with a fixed placement (the joint frame in the parent link's frame) and an axis in the
+joint frame (URDF's kinematics, https://wiki.ros.org/urdf/XML/joint):
+
+- revolute (or continuous: revolute without limits): the child frame is the joint frame turned
+  by ``q`` about the axis;
+- prismatic: the joint frame moved by ``q`` along the axis;
+- fixed: the joint frame itself, no coordinate.
+
+Coordinates: one per revolute, continuous or prismatic joint, named by the joint, in the order
+the joints are given.  No constraints (m = 0).  Actuators: the joints themselves, ``u_k`` the
+torque (revolute) or force (prismatic) of joint k on its child, so ``Q = u - C(q, q̇) q̇ - g(q)``.
+
+For the dynamics each movable joint carries one rigid body: its child link and every link
+fixed to it by fixed joints, their inertias combined exactly (masses added, centres of mass
+averaged, inertias moved to the common centre of mass by the parallel-axis theorem
+``I_G = Σ_i R_i J_i R_iᵀ + m_i (|d_i|² 1 - d_i d_iᵀ)``, d_i = c_i - c).  Links fixed to the root
+are part of the ground.  Every link keeps its own frame for the kinematics
+(:func:`frame_placement`, :func:`frame_jacobian`).  M(q) and Q are computed by the compiled
+composite-rigid-body and recursive Newton-Euler algorithms of :mod:`cmbs.model.robot_kernel`.
+Joint limits, effort and velocity limits, damping and friction are kept as data
+(:attr:`RobotEquations.joints`), not enforced.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from cmbs.errors import ModelError, did_you_mean
+from cmbs.model.model import Model, Terms
+from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, WORK, RobotKernel, body_poses, \
+    energies, evaluate_terms
+
+__all__ = ["Inertial", "TreeLink", "TreeJoint", "RobotEquations", "build_robot", "frame_placement",
+           "frame_jacobian"]
+
+MOVABLE = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
+JOINT_TYPES = (*MOVABLE, "fixed")
+
+
+@dataclass(frozen=True, eq=False)
+class Inertial:
+    """Mass, centre-of-mass frame (4 x 4, in the link frame) and inertia (3 x 3, about the centre
+    of mass, in that frame's axes) of a link."""
+
+    mass: float
+    origin: np.ndarray
+    inertia: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class TreeLink:
+    """A link: its name and inertial (None: massless)."""
+
+    name: str
+    inertial: Inertial | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class TreeJoint:
+    """A joint: type (:data:`JOINT_TYPES`), parent and child link, placement ``origin`` (4 x 4,
+    the joint frame in the parent link frame), axis (joint frame), and the data kept unenforced:
+    position limits ``lower``/``upper``, ``effort`` and ``velocity`` limits (None: not given),
+    ``damping`` and ``friction``."""
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    origin: np.ndarray
+    axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    lower: float | None = None
+    upper: float | None = None
+    effort: float | None = None
+    velocity: float | None = None
+    damping: float = 0.0
+    friction: float = 0.0
+
+
+class RobotEquations:
+    """Evaluator of a spatial tree (the :class:`~cmbs.model.model.ModelEquations` protocol).
+
+    ``kernel`` is the compiled data (:class:`~cmbs.model.robot_kernel.RobotKernel`); link ``i``
+    of ``link_names`` is fixed to body ``link_body[i]`` (-1: the ground) with the placement
+    ``link_offset[i]`` (4 x 4) in that body's frame (in the world for the ground).
+    """
+
+    #: nothing but gravity and the joint torques does work: damping and friction are not applied
+    work_sources: tuple[str, ...] = ()
+
+    def __init__(self, kernel: RobotKernel, link_names: tuple[str, ...], link_body: np.ndarray,
+                 link_offset: np.ndarray, joints: tuple[TreeJoint, ...]):
+        self.kernel = kernel
+        self.n = int(kernel.parent.shape[0])
+        self.link_names = link_names
+        self.link_body = link_body
+        self.link_offset = link_offset
+        #: the movable joints, in coordinate order, with their limits, damping and friction
+        self.joints = joints
+
+    def new_terms(self) -> Terms:
+        """A workspace sized for this model (its scratch holds the per-body work)."""
+        return Terms(self.n, 0, scratch=WORK * self.n)
+
+    def compiled_kernel(self) -> RobotKernel:
+        """The model's data for the compiled loops."""
+        return self.kernel
+
+    def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
+        """M(q) (CRBA) and Q = u - C(q, q̇) q̇ - g(q) (RNEA with q̈ = 0) into ``terms``."""
+        k = self.kernel
+        evaluate_terms(k.parent, k.order, k.kind, k.placement, k.axis, k.inertia, k.gravity, q, qd, u, terms.buffer)
+
+    def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
+        """T = ½ q̇ᵀ M(q) q̇, summed body by body (½ vᵀ I v)."""
+        return energies(self.kernel, q, qd)[0]
+
+    def potential_energy(self, q: np.ndarray) -> float:
+        """V = -Σ_k m_k g·c_k over the bodies (c_k the centre of mass)."""
+        return energies(self.kernel, q, np.zeros(self.n))[1]
+
+    def link_index(self, link: str) -> int:
+        """Index of ``link`` in :attr:`link_names` (ModelError naming the choices otherwise)."""
+        try:
+            return self.link_names.index(link)
+        except ValueError:
+            raise ModelError(f"no link {link!r}{did_you_mean(link, self.link_names)}; links: "
+                             f"{', '.join(self.link_names)}") from None
+
+    def link_placements(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World rotations (L, 3, 3) and origins (L, 3) of every link frame at ``q``."""
+        R, o, _ = body_poses(self.kernel, q)
+        rotations = np.empty((len(self.link_names), 3, 3))
+        origins = np.empty((len(self.link_names), 3))
+        for i, (body, offset) in enumerate(zip(self.link_body, self.link_offset)):
+            if body < 0:
+                rotations[i], origins[i] = offset[:3, :3], offset[:3, 3]
+            else:
+                rotations[i] = R[body] @ offset[:3, :3]
+                origins[i] = o[body] + R[body] @ offset[:3, 3]
+        return rotations, origins
+
+    def point_positions(self, q: np.ndarray) -> np.ndarray:
+        """(L, 3): the origins of the link frames, in the order of :attr:`link_names`."""
+        return self.link_placements(q)[1]
+
+    def frame_jacobian(self, q: np.ndarray, link: str) -> np.ndarray:
+        """J (6, n) with ``(ṗ, ω) = J q̇``: rows 0-2 the velocity of the link frame's origin p,
+        rows 3-5 the link's angular velocity, both in world axes (Pinocchio's
+        LOCAL_WORLD_ALIGNED).  Column j, for joint j between the link and the ground:
+        ``(z_j × (p - o_j), z_j)`` (revolute), ``(z_j, 0)`` (prismatic); 0 for the others."""
+        index = self.link_index(link)
+        R, o, S = body_poses(self.kernel, q)
+        body = int(self.link_body[index])
+        J = np.zeros((6, self.n))
+        if body < 0:
+            return J
+        p = o[body] + R[body] @ self.link_offset[index][:3, 3]
+        parent = self.kernel.parent
+        j = body
+        while j >= 0:
+            # S_j = (ω, v_O) about the world origin; the velocity of point p is v_O + ω × p
+            J[0:3, j] = S[j, 3:6] + np.cross(S[j, 0:3], p)
+            J[3:6, j] = S[j, 0:3]
+            j = int(parent[j])
+        return J
+
+
+def frame_placement(model: Model, q: np.ndarray, link: str) -> tuple[np.ndarray, np.ndarray]:
+    """World rotation (3, 3) and origin (3,) of ``link``'s frame of a robot ``model`` at ``q``."""
+    equations = _robot_equations(model)
+    rotations, origins = equations.link_placements(np.asarray(q, dtype=float))
+    index = equations.link_index(link)
+    return rotations[index], origins[index]
+
+
+def frame_jacobian(model: Model, q: np.ndarray, link: str) -> np.ndarray:
+    """The 6 x n Jacobian of ``link``'s frame (:meth:`RobotEquations.frame_jacobian`: linear
+    velocity of its origin, then angular velocity, both in world axes)."""
+    return _robot_equations(model).frame_jacobian(np.asarray(q, dtype=float), link)
+
+
+def _robot_equations(model: Model) -> RobotEquations:
+    if not isinstance(model.equations, RobotEquations):
+        raise ModelError(f"model {model.name!r} is not a robot (spatial joint-coordinate tree)")
+    return model.equations
+
+
+def _finite(values: Sequence[float], entry: str, label: str, source: str | None) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    if not np.all(np.isfinite(array)):
+        raise ModelError(f"{label} must be finite numbers, got {array.tolist()}", source=source, entry=entry)
+    return array
+
+
+def _combined_inertia(parts: list[tuple[float, np.ndarray, np.ndarray]]) -> np.ndarray:
+    """(m, c, I_G) of rigidly joined parts (mass, centre of mass, inertia about it, one frame's
+    axes) as the ten numbers of :data:`~cmbs.model.robot_kernel.INERTIA` (module docstring)."""
+    mass = sum(m for m, _, _ in parts)
+    centre = sum((m * c for m, c, _ in parts), np.zeros(3)) / mass if mass > 0 else np.zeros(3)
+    inertia = np.zeros((3, 3))
+    for m, c, I in parts:
+        d = c - centre
+        inertia += I + m * (d @ d * np.eye(3) - np.outer(d, d))
+    return np.array([mass, *centre, inertia[0, 0], inertia[0, 1], inertia[0, 2], inertia[1, 1], inertia[1, 2],
+                     inertia[2, 2]])
+
+
+def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint], *,
+                gravity: Sequence[float] = (0.0, 0.0, -9.81), source: str | None = None,
+                description: str = "") -> Model:
+    """The :class:`~cmbs.model.model.Model` of the tree of ``links`` and ``joints`` (module
+    docstring); ``source`` names the file it came from in errors and on the model.
+
+    Raises
+    ------
+    ModelError
+        Naming the joint or link: an unknown type, an unknown or repeated link, a link with two
+        parents, a tree without exactly one root, a zero axis, non-finite numbers, a negative mass,
+        or a movable joint that carries no mass nor inertia.
+    """
+    g = _finite(gravity, f"model {name!r}", "gravity", source)
+    if g.shape != (3,):
+        raise ModelError(f"gravity must be 3 numbers, got {list(gravity)}", source=source, entry=f"model {name!r}")
+    by_name: dict[str, TreeLink] = {}
+    for link in links:
+        if link.name in by_name:
+            raise ModelError("duplicate link name", source=source, entry=f"link {link.name!r}")
+        by_name[link.name] = link
+        if link.inertial is not None:
+            entry = f"link {link.name!r} inertial"
+            if not math.isfinite(link.inertial.mass) or link.inertial.mass < 0:
+                raise ModelError(f"mass must be a finite number >= 0, got {link.inertial.mass!r}", source=source,
+                                 entry=entry)
+            _finite(link.inertial.origin, entry, "origin", source)
+            _finite(link.inertial.inertia, entry, "inertia", source)
+    children: dict[str, list[TreeJoint]] = {link: [] for link in by_name}
+    parent_joint: dict[str, TreeJoint] = {}
+    for joint in joints:
+        entry = f"joint {joint.name!r}"
+        if joint.type not in JOINT_TYPES:
+            raise ModelError(f"unknown joint type {joint.type!r}; types: {', '.join(JOINT_TYPES)}", source=source,
+                             entry=entry)
+        for role, link in (("parent", joint.parent), ("child", joint.child)):
+            if link not in by_name:
+                raise ModelError(f"unknown {role} link {link!r}{did_you_mean(link, by_name)}", source=source,
+                                 entry=entry)
+        if joint.child in parent_joint:
+            raise ModelError(f"link {joint.child!r} is already the child of joint {parent_joint[joint.child].name!r}",
+                             source=source, entry=entry)
+        _finite(joint.origin, entry, "origin", source)
+        if joint.type in MOVABLE and not np.linalg.norm(_finite(joint.axis, entry, "axis", source)) > 0:
+            raise ModelError(f"axis must be nonzero, got {list(joint.axis)}", source=source, entry=entry)
+        parent_joint[joint.child] = joint
+        children[joint.parent].append(joint)
+    roots = [link for link in by_name if link not in parent_joint]
+    if len(roots) != 1:
+        raise ModelError(f"a tree has one root link (no parent joint), found {len(roots)}: {', '.join(roots)}",
+                         source=source, entry=f"model {name!r}")
+    movable = [joint for joint in joints if joint.type in MOVABLE]
+    coordinate = {joint.name: k for k, joint in enumerate(movable)}
+    n = len(movable)
+    # walk the tree from the root: each link's body (-1: the ground) and placement in the body frame
+    link_body: dict[str, int] = {roots[0]: -1}
+    link_offset: dict[str, np.ndarray] = {roots[0]: np.eye(4)}
+    parent, order = np.full(n, -1, np.int64), []
+    kind, placement, axis = np.zeros(n, np.int64), np.zeros((n, PLACEMENT)), np.zeros((n, 3))
+    queue = [roots[0]]
+    while queue:
+        link = queue.pop(0)
+        for joint in children[link]:
+            placed = link_offset[link] @ np.asarray(joint.origin, dtype=float)
+            if joint.type == "fixed":
+                link_body[joint.child], link_offset[joint.child] = link_body[link], placed
+            else:
+                k = coordinate[joint.name]
+                parent[k], kind[k] = link_body[link], MOVABLE[joint.type]
+                placement[k] = np.concatenate([placed[:3, :3].ravel(), placed[:3, 3]])
+                axis[k] = np.asarray(joint.axis, dtype=float) / np.linalg.norm(joint.axis)
+                order.append(k)
+                link_body[joint.child], link_offset[joint.child] = k, np.eye(4)
+            queue.append(joint.child)
+    if len(link_body) != len(by_name):
+        unreached = [link for link in by_name if link not in link_body]
+        raise ModelError(f"links not connected to the root {roots[0]!r} (a closed chain of joints): "
+                         f"{', '.join(unreached)}", source=source, entry=f"model {name!r}")
+    parts: list[list[tuple[float, np.ndarray, np.ndarray]]] = [[] for _ in range(n)]
+    for link in by_name.values():
+        body = link_body[link.name]
+        if body >= 0 and link.inertial is not None:
+            frame = link_offset[link.name] @ np.asarray(link.inertial.origin, dtype=float)
+            rotation = frame[:3, :3]
+            parts[body].append((link.inertial.mass, frame[:3, 3],
+                                rotation @ np.asarray(link.inertial.inertia, dtype=float) @ rotation.T))
+    inertia = np.array([_combined_inertia(p) for p in parts]).reshape(n, INERTIA)
+    carried = inertia[:, 0] + np.abs(inertia[:, 4:]).sum(axis=1)
+    for k in reversed(order):
+        if parent[k] >= 0:
+            carried[parent[k]] += carried[k]
+    for k, joint in enumerate(movable):
+        if not carried[k] > 0:
+            raise ModelError(f"link {joint.child!r} and the links it carries have no <inertial> (no mass, no inertia): "
+                             "the joint would move nothing; give the link an inertial or make the joint fixed",
+                             source=source, entry=f"joint {joint.name!r}")
+    kernel = RobotKernel(parent, np.array(order, np.int64), kind, placement, axis, np.ascontiguousarray(inertia),
+                         g.copy(), np.zeros((0, 0)))
+    for array in kernel:
+        array.setflags(write=False)
+    link_names = tuple(by_name)
+    equations = RobotEquations(kernel, link_names, np.array([link_body[l] for l in link_names], np.int64),
+                               np.array([link_offset[l] for l in link_names]), tuple(movable))
+    names = tuple(joint.name for joint in movable)
+    index = {link: i for i, link in enumerate(link_names)}
+    return Model(
+        name=name,
+        coordinate_names=names,
+        coordinate_kinds=tuple("distance" if joint.type == "prismatic" else "angle" for joint in movable),
+        constraint_names=(),
+        drivers=np.zeros(0, dtype=bool),
+        actuator_names=names,
+        q0=np.zeros(n),
+        qd0=np.zeros(n),
+        point_names=link_names,
+        lines=tuple((index[joint.parent], index[joint.child]) for joint in joints),
+        equations=equations,
+        description=description,
+        source=source or "",
+        parameters={"builder": "robot", "gravity": tuple(float(x) for x in g),
+                    "joints": [{"name": j.name, "type": j.type, "lower": j.lower, "upper": j.upper, "effort": j.effort,
+                                "velocity": j.velocity, "damping": j.damping, "friction": j.friction}
+                               for j in movable]},
+        segment_masses=tuple((link.name, float(link.inertial.mass)) for link in by_name.values()
+                             if link.inertial is not None and link.inertial.mass > 0),
+    )

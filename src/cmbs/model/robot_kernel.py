@@ -1,0 +1,315 @@
+"""Compiled dynamics of a spatial joint-coordinate tree: CRBA for M(q), RNEA for the bias forces.
+
+Spatial vectors are Plücker coordinates in world axes about the world origin (Featherstone,
+*Rigid Body Dynamics Algorithms*, Springer 2008, ch. 2): a motion ``v = (ω, v_O)`` (angular
+velocity, velocity of the body point at the world origin), a force ``f = (n_O, f)`` (moment about
+the world origin, resultant).  In these coordinates no transform is needed between bodies, and
+every body's quantities are written once per evaluation (the algorithms in ground coordinates,
+Featherstone §5.3 and §6.2 with every transform the identity).
+
+Per body k (one per movable joint), with parent p (-1: the ground), fixed placement ``(E_k, r_k)``
+of the joint frame in the parent body's frame and unit axis ``a_k`` (joint frame)::
+
+    revolute:   R_k = R_p E_k Rot(a_k, q_k),   o_k = o_p + R_p r_k,
+    prismatic:  R_k = R_p E_k,                 o_k = o_p + R_p r_k + q_k z_k,
+    z_k = R_p E_k a_k (the world axis),
+    S_k = (z_k, o_k × z_k) (revolute),  S_k = (0, z_k) (prismatic)      (motion subspace),
+
+``Rot(a, θ) = 1 + sin θ [a]× + (1 - cos θ) [a]×²`` (Rodrigues).  Recursive Newton-Euler with
+q̈ = 0 and the base accelerating at -g instead of gravity acting on each body (Featherstone §5.3)::
+
+    v_k = v_p + S_k q̇_k,      a_k = a_p + v_k ×ₘ S_k q̇_k,      a_ground = (0, -g),
+    f_k = I_k a_k + v_k ×_f I_k v_k,      f_p += f_k,      b_k = S_kᵀ f_k,
+
+so ``b = C(q, q̇) q̇ + g(q)`` and ``Q = u - b`` (joint torques u, one per joint).  The
+composite-rigid-body algorithm (Featherstone §6.2)::
+
+    I^c_k = I_k + Σ_children I^c_c,     M_kk = S_kᵀ I^c_k S_k,     M_jk = M_kj = S_jᵀ I^c_k S_k
+    for every ancestor j of k.
+
+A spatial inertia about the world origin is held as (m, h = m c, Ī = I_G + m (|c|² 1 - c cᵀ))
+with c the centre of mass and I_G the inertia about it, both in world axes (Featherstone ch. 2: the
+rigid-body inertia moved to the origin); ``I v = (Ī ω + h × v_O, m v_O - h × ω)``, and composite
+inertias are sums of the ten numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from cmbs.jit import borrow, njit
+
+REVOLUTE, PRISMATIC = 0, 1
+#: per body in ``placement``: E (3 x 3, row-major), then r (3)
+PLACEMENT = 12
+#: per body in ``inertia``: mass, centre of mass (3, body frame), inertia about it (xx, xy, xz, yy, yz, zz; body axes)
+INERTIA = 10
+# work per body: R (9), o (3), S (6), v (6), a (6), f (6), composite inertia (m, h (3), Ī (xx, xy, xz, yy, yz, zz))
+_R, _O, _S, _V, _A, _F, _I = 0, 9, 12, 18, 24, 30, 36
+WORK = 46
+
+
+class RobotKernel(NamedTuple):
+    """A spatial tree as the compiled loops take it (:mod:`cmbs.model.compiled`); ``mass`` is
+    empty (M depends on q and is written into the terms buffer)."""
+
+    parent: np.ndarray       # (n,) int64, -1 for the ground
+    order: np.ndarray        # (n,) int64, parents before children
+    kind: np.ndarray         # (n,) int64, REVOLUTE or PRISMATIC
+    placement: np.ndarray    # (n, PLACEMENT)
+    axis: np.ndarray         # (n, 3) unit axes in the joint frames
+    inertia: np.ndarray      # (n, INERTIA)
+    gravity: np.ndarray      # (3,)
+    mass: np.ndarray         # (0, 0)
+
+
+@njit(cache=True, inline="always")
+def _pose(parent, kind, placement, axis, q, k, W, w0):
+    """R_k, o_k and S_k of body k into its work slots, from its parent's (module docstring)."""
+    p = parent[k]
+    base = w0 + WORK * k
+    E = placement[k]
+    ax, ay, az = axis[k, 0], axis[k, 1], axis[k, 2]
+    if p >= 0:
+        pb = w0 + WORK * p
+        opx, opy, opz = W[pb + _O], W[pb + _O + 1], W[pb + _O + 2]
+    else:
+        pb = -1
+        opx, opy, opz = 0.0, 0.0, 0.0
+    # world rotation of the joint frame, G = R_p E, element by element into W[base + _R:]
+    for i in range(3):
+        for j in range(3):
+            if pb >= 0:
+                W[base + _R + 3 * i + j] = (W[pb + _R + 3 * i] * E[j] + W[pb + _R + 3 * i + 1] * E[3 + j]
+                                            + W[pb + _R + 3 * i + 2] * E[6 + j])
+            else:
+                W[base + _R + 3 * i + j] = E[3 * i + j]
+    rx, ry, rz = E[9], E[10], E[11]
+    if pb >= 0:
+        ox = opx + W[pb + _R] * rx + W[pb + _R + 1] * ry + W[pb + _R + 2] * rz
+        oy = opy + W[pb + _R + 3] * rx + W[pb + _R + 4] * ry + W[pb + _R + 5] * rz
+        oz = opz + W[pb + _R + 6] * rx + W[pb + _R + 7] * ry + W[pb + _R + 8] * rz
+    else:
+        ox, oy, oz = opx + rx, opy + ry, opz + rz
+    g = base + _R
+    zx = W[g] * ax + W[g + 1] * ay + W[g + 2] * az
+    zy = W[g + 3] * ax + W[g + 4] * ay + W[g + 5] * az
+    zz = W[g + 6] * ax + W[g + 7] * ay + W[g + 8] * az
+    s = base + _S
+    if kind[k] == REVOLUTE:
+        # R_k = G Rot(a, q) with Rot = 1 + sin [a]x + (1 - cos) [a]x²
+        c, sn = math.cos(q[k]), math.sin(q[k])
+        t = 1.0 - c
+        r00, r01, r02 = 1.0 + t * (ax * ax - 1.0), t * ax * ay - sn * az, t * ax * az + sn * ay
+        r10, r11, r12 = t * ax * ay + sn * az, 1.0 + t * (ay * ay - 1.0), t * ay * az - sn * ax
+        r20, r21, r22 = t * ax * az - sn * ay, t * ay * az + sn * ax, 1.0 + t * (az * az - 1.0)
+        for i in range(3):
+            g0, g1, g2 = W[g + 3 * i], W[g + 3 * i + 1], W[g + 3 * i + 2]
+            W[g + 3 * i] = g0 * r00 + g1 * r10 + g2 * r20
+            W[g + 3 * i + 1] = g0 * r01 + g1 * r11 + g2 * r21
+            W[g + 3 * i + 2] = g0 * r02 + g1 * r12 + g2 * r22
+        W[s], W[s + 1], W[s + 2] = zx, zy, zz
+        W[s + 3] = oy * zz - oz * zy
+        W[s + 4] = oz * zx - ox * zz
+        W[s + 5] = ox * zy - oy * zx
+    else:
+        ox += q[k] * zx
+        oy += q[k] * zy
+        oz += q[k] * zz
+        W[s], W[s + 1], W[s + 2] = 0.0, 0.0, 0.0
+        W[s + 3], W[s + 4], W[s + 5] = zx, zy, zz
+    W[base + _O], W[base + _O + 1], W[base + _O + 2] = ox, oy, oz
+
+
+@njit(cache=True, inline="always")
+def _body_inertia(inertia, k, W, w0):
+    """Body k's own spatial inertia (m, h, Ī) about the world origin into its composite slots
+    (module docstring), from its mass, centre of mass and inertia in the body frame."""
+    base = w0 + WORK * k
+    R = base + _R
+    m = inertia[k, 0]
+    bx, by, bz = inertia[k, 1], inertia[k, 2], inertia[k, 3]
+    cx = W[base + _O] + W[R] * bx + W[R + 1] * by + W[R + 2] * bz
+    cy = W[base + _O + 1] + W[R + 3] * bx + W[R + 4] * by + W[R + 5] * bz
+    cz = W[base + _O + 2] + W[R + 6] * bx + W[R + 7] * by + W[R + 8] * bz
+    # I_G in world axes: R J Rᵀ, J symmetric from (xx, xy, xz, yy, yz, zz)
+    j00, j01, j02, j11, j12, j22 = inertia[k, 4], inertia[k, 5], inertia[k, 6], inertia[k, 7], inertia[k, 8], \
+        inertia[k, 9]
+    w = base + _I
+    W[w] = m
+    W[w + 1], W[w + 2], W[w + 3] = m * cx, m * cy, m * cz
+    c2 = cx * cx + cy * cy + cz * cz
+    slot = w + 4
+    for i in range(3):
+        # row i of R J
+        a0 = W[R + 3 * i] * j00 + W[R + 3 * i + 1] * j01 + W[R + 3 * i + 2] * j02
+        a1 = W[R + 3 * i] * j01 + W[R + 3 * i + 1] * j11 + W[R + 3 * i + 2] * j12
+        a2 = W[R + 3 * i] * j02 + W[R + 3 * i + 1] * j12 + W[R + 3 * i + 2] * j22
+        ci = cx if i == 0 else (cy if i == 1 else cz)
+        for j in range(i, 3):
+            cj = cx if j == 0 else (cy if j == 1 else cz)
+            value = a0 * W[R + 3 * j] + a1 * W[R + 3 * j + 1] + a2 * W[R + 3 * j + 2] - m * ci * cj
+            if i == j:
+                value += m * c2
+            W[slot] = value
+            slot += 1
+
+
+@njit(cache=True, inline="always")
+def _inertia_times(W, w, ox, oy, oz, vx, vy, vz):
+    """I v for the spatial inertia (m, h, Ī) at W[w:] and the motion (ω, v_O)."""
+    m, hx, hy, hz = W[w], W[w + 1], W[w + 2], W[w + 3]
+    i00, i01, i02, i11, i12, i22 = W[w + 4], W[w + 5], W[w + 6], W[w + 7], W[w + 8], W[w + 9]
+    nx = i00 * ox + i01 * oy + i02 * oz + hy * vz - hz * vy
+    ny = i01 * ox + i11 * oy + i12 * oz + hz * vx - hx * vz
+    nz = i02 * ox + i12 * oy + i22 * oz + hx * vy - hy * vx
+    fx = m * vx - (hy * oz - hz * oy)
+    fy = m * vy - (hz * ox - hx * oz)
+    fz = m * vz - (hx * oy - hy * ox)
+    return nx, ny, nz, fx, fy, fz
+
+
+@njit(cache=True)
+def evaluate_terms(parent, order, kind, placement, axis, inertia, gravity, q, qd, u, buf):
+    """Q = u - (C q̇ + g) into buf[0:n], M into buf[n:n + n²]; the work from buf[n + n²:]
+    (module docstring).  Its arguments are borrowed (:func:`cmbs.jit.borrow`)."""
+    parent, order, kind, placement, axis, inertia, gravity, q, qd, u, buf = borrow(
+        (parent, order, kind, placement, axis, inertia, gravity, q, qd, u, buf))
+    n = parent.shape[0]
+    o_M = n
+    w0 = n + n * n
+    if buf.shape[0] != w0 + WORK * n:
+        raise ValueError("terms workspace does not belong to this model (use model.new_terms())")
+    if q.shape[0] != n or qd.shape[0] != n or u.shape[0] != n:
+        raise ValueError("q, qd or u has the wrong size for this model")
+    W = buf
+    for idx in range(n):
+        k = order[idx]
+        _pose(parent, kind, placement, axis, q, k, W, w0)
+        _body_inertia(inertia, k, W, w0)
+        base = w0 + WORK * k
+        p = parent[k]
+        s, v, a = base + _S, base + _V, base + _A
+        for i in range(6):
+            if p >= 0:
+                W[v + i] = W[w0 + WORK * p + _V + i] + W[s + i] * qd[k]
+                W[a + i] = W[w0 + WORK * p + _A + i]
+            else:
+                W[v + i] = W[s + i] * qd[k]
+                W[a + i] = 0.0 if i < 3 else -gravity[i - 3]
+        # a += v ×ₘ (S q̇): (ω × sω, ω × sv + v_O × sω)
+        wx, wy, wz, vx, vy, vz = W[v], W[v + 1], W[v + 2], W[v + 3], W[v + 4], W[v + 5]
+        sx, sy, sz = W[s] * qd[k], W[s + 1] * qd[k], W[s + 2] * qd[k]
+        tx, ty, tz = W[s + 3] * qd[k], W[s + 4] * qd[k], W[s + 5] * qd[k]
+        W[a] += wy * sz - wz * sy
+        W[a + 1] += wz * sx - wx * sz
+        W[a + 2] += wx * sy - wy * sx
+        W[a + 3] += wy * tz - wz * ty + vy * sz - vz * sy
+        W[a + 4] += wz * tx - wx * tz + vz * sx - vx * sz
+        W[a + 5] += wx * ty - wy * tx + vx * sy - vy * sx
+        # f = I a + v ×_f (I v), v ×_f (n, f) = (ω × n + v_O × f, ω × f)
+        w = base + _I
+        n0, n1, n2, f0, f1, f2 = _inertia_times(W, w, W[a], W[a + 1], W[a + 2], W[a + 3], W[a + 4], W[a + 5])
+        m0, m1, m2, g0, g1, g2 = _inertia_times(W, w, wx, wy, wz, vx, vy, vz)
+        f = base + _F
+        W[f] = n0 + wy * m2 - wz * m1 + vy * g2 - vz * g1
+        W[f + 1] = n1 + wz * m0 - wx * m2 + vz * g0 - vx * g2
+        W[f + 2] = n2 + wx * m1 - wy * m0 + vx * g1 - vy * g0
+        W[f + 3] = f0 + wy * g2 - wz * g1
+        W[f + 4] = f1 + wz * g0 - wx * g2
+        W[f + 5] = f2 + wx * g1 - wy * g0
+    for i in range(n * n):
+        buf[o_M + i] = 0.0
+    for idx in range(n - 1, -1, -1):
+        k = order[idx]
+        base = w0 + WORK * k
+        s, f, w = base + _S, base + _F, base + _I
+        bias = 0.0
+        for i in range(6):
+            bias += W[s + i] * W[f + i]
+        buf[k] = u[k] - bias
+        # F = I^c_k S_k, then M_jk = S_jᵀ F along the path to the ground
+        F0, F1, F2, F3, F4, F5 = _inertia_times(W, w, W[s], W[s + 1], W[s + 2], W[s + 3], W[s + 4], W[s + 5])
+        j = k
+        while j >= 0:
+            sj = w0 + WORK * j + _S
+            value = W[sj] * F0 + W[sj + 1] * F1 + W[sj + 2] * F2 + W[sj + 3] * F3 + W[sj + 4] * F4 + W[sj + 5] * F5
+            buf[o_M + j * n + k] = value
+            buf[o_M + k * n + j] = value
+            j = parent[j]
+        p = parent[k]
+        if p >= 0:
+            pbase = w0 + WORK * p
+            for i in range(6):
+                W[pbase + _F + i] += W[f + i]
+            for i in range(10):
+                W[pbase + _I + i] += W[w + i]
+
+
+@njit(cache=True, inline="always")
+def _evaluate_robot(kernel, q, qd, t, u, buffer):
+    """:func:`evaluate_terms` for a :class:`RobotKernel` (no constraints: the buffer is Q, M, work)."""
+    evaluate_terms(kernel.parent, kernel.order, kernel.kind, kernel.placement, kernel.axis, kernel.inertia,
+              kernel.gravity, q, qd, u, buffer)
+
+
+RobotKernel.evaluate = staticmethod(_evaluate_robot)
+
+
+@njit(cache=True)
+def _energy_kernel(parent, order, kind, placement, axis, inertia, gravity, q, qd):
+    """(T, V): T = ½ Σ_k v_kᵀ I_k v_k (= ½ q̇ᵀ M q̇), V = -Σ_k m_k g·c_k (c_k the centre of mass)."""
+    n = parent.shape[0]
+    W = np.zeros(WORK * n)
+    kinetic = 0.0
+    potential = 0.0
+    for idx in range(n):
+        k = order[idx]
+        _pose(parent, kind, placement, axis, q, k, W, 0)
+        _body_inertia(inertia, k, W, 0)
+        base = WORK * k
+        p = parent[k]
+        for i in range(6):
+            W[base + _V + i] = W[base + _S + i] * qd[k] + (W[WORK * p + _V + i] if p >= 0 else 0.0)
+        v, w = base + _V, base + _I
+        n0, n1, n2, f0, f1, f2 = _inertia_times(W, w, W[v], W[v + 1], W[v + 2], W[v + 3], W[v + 4], W[v + 5])
+        kinetic += 0.5 * (W[v] * n0 + W[v + 1] * n1 + W[v + 2] * n2 + W[v + 3] * f0 + W[v + 4] * f1 + W[v + 5] * f2)
+        potential -= gravity[0] * W[w + 1] + gravity[1] * W[w + 2] + gravity[2] * W[w + 3]
+    return kinetic, potential
+
+
+def energies(kernel: RobotKernel, q: np.ndarray, qd: np.ndarray) -> tuple[float, float]:
+    """Kinetic and potential energy (T, V) of the tree at (q, q̇) (:func:`_energy_kernel`)."""
+    kinetic, potential = _energy_kernel(kernel.parent, kernel.order, kernel.kind, kernel.placement, kernel.axis,
+                                        kernel.inertia, kernel.gravity, np.ascontiguousarray(q, dtype=float),
+                                        np.ascontiguousarray(qd, dtype=float))
+    return float(kinetic), float(potential)
+
+
+@njit(cache=True)
+def _poses_kernel(parent, order, kind, placement, axis, q, R, o, S):
+    """World rotation R (n, 3, 3), origin o (n, 3) and motion subspace S (n, 6) of every body."""
+    n = parent.shape[0]
+    W = np.zeros(WORK * n)
+    for idx in range(n):
+        k = order[idx]
+        _pose(parent, kind, placement, axis, q, k, W, 0)
+        for i in range(3):
+            o[k, i] = W[WORK * k + _O + i]
+            for j in range(3):
+                R[k, i, j] = W[WORK * k + _R + 3 * i + j]
+        for i in range(6):
+            S[k, i] = W[WORK * k + _S + i]
+
+
+def body_poses(kernel: RobotKernel, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(R, o, S): each body's world rotation (n, 3, 3), frame origin (n, 3) and motion subspace
+    (n, 6) in world Plücker coordinates (module docstring) at ``q``."""
+    n = kernel.parent.shape[0]
+    R, o, S = np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros((n, 6))
+    _poses_kernel(kernel.parent, kernel.order, kernel.kind, kernel.placement, kernel.axis,
+                  np.ascontiguousarray(q, dtype=float), R, o, S)
+    return R, o, S
