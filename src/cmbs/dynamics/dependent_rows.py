@@ -38,6 +38,7 @@ import math
 
 import numpy as np
 
+from cmbs.dynamics.kkt import DENSE, solve_lower, solve_lower_transposed
 from cmbs.jit import njit
 from cmbs.model.model import Model
 
@@ -196,18 +197,12 @@ def _swap_symmetric(S, k, p):
         S[i, k], S[i, p] = S[i, p], S[i, k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _solve_kept(L, rank, z):
     """z[:rank] ← S_II⁻¹ z[:rank] with S_II = L Lᵀ, L the leading rank × rank block of ``L``."""
-    for i in range(rank):
-        total = z[i]
-        for k in range(i):
-            total -= L[i, k] * z[k]
-        z[i] = total / L[i, i]
-    for i in range(rank - 1, -1, -1):
-        z[i] /= L[i, i]
-        for k in range(i):
-            z[k] -= L[i, k] * z[i]
+    block, head = L[:rank, :rank], z[:rank]
+    solve_lower(block, DENSE, head)
+    solve_lower_transposed(block, DENSE, head)
 
 
 @njit(cache=True)
