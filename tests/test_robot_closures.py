@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import cmbs
 from cmbs.library.spatial import BRICARD_AXES, BRICARD_POINTS
 from cmbs.model.robot import Inertial, TreeJoint, TreeLink, build_robot, frame_placement
 from cmbs.model.robot_closures import Closure, rpy_rotation
@@ -129,3 +130,97 @@ def test_point_rows_are_the_frames_points():
     (Ra, oa), (Rb, ob) = frame_placement(model, q, "l2"), frame_placement(model, q, "l4")
     expected = (oa + Ra @ [0.1, 0.2, 0.3]) - (ob + Rb @ [0.3, -0.1, 0.2])
     np.testing.assert_allclose(model.constraints(q), expected, atol=1e-15)
+
+
+# ------------------------------------------------------------------ Bricard's mechanism
+@pytest.fixture(scope="module")
+def bricard(tmp_path_factory):
+    return cmbs.load(write_bricard(tmp_path_factory.mktemp("bricard")))
+
+
+def test_bricard_has_one_degree_of_freedom_and_one_redundant_row(bricard):
+    """Five joint angles, five closure rows of rank 4: DOF 1 and one redundant row named, as the
+    natural-coordinate Bricard (24 coordinates, 24 rows of rank 23); the start closes (Φ = 0)."""
+    report = cmbs.constraint_report(bricard, bricard.q0)
+    natural = cmbs.constraint_report(cmbs.load("bricard"), cmbs.load("bricard").q0)
+    assert (bricard.n, bricard.m, report.rank, report.dof) == (5, 5, 4, 1)
+    assert report.dof == natural.dof and len(report.redundant) == len(natural.redundant) == 1
+    assert report.redundant[0] in bricard.constraint_names
+    np.testing.assert_allclose(bricard.constraints(bricard.q0), 0.0, atol=1e-15)
+
+
+def test_bricard_moves_as_the_natural_coordinate_model(bricard):
+    """Released at rest, 2 s with the projection formulation and DOP853 (rtol 1e-11): point P3
+    (rod 3's frame origin) follows the natural-coordinate model's P3 to 1e-8 m, and T + V is
+    kept to 1e-8 J."""
+    natural = cmbs.load("bricard")
+    options = dict(t_end=2.0, dt=0.05, formulation="projection", integrator="dop853", rtol=1e-11, atol=1e-12)
+    run, reference = cmbs.simulate(bricard, **options), cmbs.simulate(natural, **options)
+    assert run.info["status"] == reference.info["status"] == "success"
+    P3 = np.array([frame_placement(bricard, q, "rod3")[1] for q in run.q])
+    P3_natural = reference.q[:, [natural.coordinate_index(f"P3.{c}") for c in "xyz"]]
+    assert np.abs(P3 - P3_natural).max() < 1e-8                     # measured 2.0e-10
+    assert np.ptp(P3_natural[:, 1]) > 0.5                             # it falls and swings
+    energy = bricard.energy_history(run.q, run.qd)
+    assert np.abs(energy - energy[0]).max() < 1e-8                   # measured 3.4e-11
+    np.testing.assert_allclose([bricard.constraints(q) for q in run.q], 0.0, atol=1e-9)
+
+
+# ------------------------------------------------------------------ a four-bar in joint coordinates
+def four_bar_urdf() -> tuple[str, dict[str, np.ndarray]]:
+    """The library four-bar (crank A-P1 1 kg, coupler P1-P2 5 kg, rocker B-P2 3 kg, uniform
+    bars) as a URDF tree in the plane y = 0 at ``four-bar-3d``'s start, joints about y: the crank
+    and the coupler from A, the rocker from B (the coupler-rocker joint is the closure); link
+    frames at their joints with the world's axes at q = 0.  Its start points by name."""
+    natural = cmbs.load("four-bar-3d")
+    start = {name: natural.point_positions(natural.q0)[natural.point_names.index(name)] for name in
+             ("A", "B", "P1", "P2")}
+    parts = ['<?xml version="1.0"?>', '<robot name="four-bar">', '  <link name="ground"/>']
+    for link, parent, origin, i, j, mass in (("crank", "ground", start["A"], "A", "P1", 1.0),
+                                             ("coupler", "crank", start["P1"] - start["A"], "P1", "P2", 5.0),
+                                             ("rocker", "ground", start["B"], "B", "P2", 3.0)):
+        along = start[j] - start[i]
+        length = np.linalg.norm(along)
+        I = mass * length**2 / 12.0 * (np.eye(3) - np.outer(along, along) / length**2)
+        parts += [f'  <link name="{link}"><inertial><origin xyz="{_vector(0.5 * along)}"/><mass value="{mass}"/>',
+                  f'    <inertia ixx="{I[0, 0]:.17g}" ixy="{I[0, 1]:.17g}" ixz="{I[0, 2]:.17g}" '
+                  f'iyy="{I[1, 1]:.17g}" iyz="{I[1, 2]:.17g}" izz="{I[2, 2]:.17g}"/></inertial></link>',
+                  f'  <joint name="{link}-joint" type="continuous"><parent link="{parent}"/><child link="{link}"/>',
+                  f'    <origin xyz="{_vector(origin)}"/><axis xyz="0 1 0"/></joint>']
+    parts.append("</robot>")
+    return "\n".join(parts) + "\n", start
+
+
+@pytest.mark.parametrize("formulation", ["projection", "udwadia-kalaba"])
+def test_four_bar_in_joint_coordinates_moves_as_four_bar_3d(tmp_path, formulation):
+    """Three joint angles closed by a revolute joint between the coupler's end and the rocker's
+    (5 rows of rank 2: the out-of-plane rows are identically zero) move as the natural-coordinate
+    ``four-bar-3d`` from rest: P1 and P2 to 1e-8 m over 2 s (DOP853, rtol 1e-11)."""
+    text, start = four_bar_urdf()
+    (tmp_path / "four-bar.urdf").write_text(text)
+    (tmp_path / "four-bar.toml").write_text(f"""\
+[model]
+urdf = "four-bar.urdf"
+
+[closures.P2]
+kind = "revolute"
+link_a = "coupler"
+point_a = [{', '.join(map(repr, (start['P2'] - start['P1']).tolist()))}]
+link_b = "rocker"
+point_b = [{', '.join(map(repr, (start['P2'] - start['B']).tolist()))}]
+axis_a = [0.0, 1.0, 0.0]
+axis_b = [0.0, 1.0, 0.0]
+""")
+    model, natural = cmbs.load(tmp_path / "four-bar.toml"), cmbs.load("four-bar-3d")
+    report = cmbs.constraint_report(model, model.q0)
+    assert (model.n, model.m, report.rank, report.dof) == (3, 5, 2, 1)
+    options = dict(t_end=2.0, dt=0.05, integrator="dop853", rtol=1e-11, atol=1e-12)
+    run = cmbs.simulate(model, formulation=formulation, **options)
+    reference = cmbs.simulate(natural, formulation="lagrange", **options)
+    assert run.info["status"] == reference.info["status"] == "success"
+    for point, link, local in (("P1", "coupler", np.zeros(3)), ("P2", "rocker", start["P2"] - start["B"])):
+        placed = np.array([frame_placement(model, q, link)[0] @ local + frame_placement(model, q, link)[1]
+                           for q in run.q])
+        expected = reference.q[:, [natural.coordinate_index(f"{point}.{c}") for c in "xyz"]]
+        assert np.abs(placed - expected).max() < 1e-8, point            # measured below 1e-10
+    assert np.ptp(reference.q[:, natural.coordinate_index("P1.x")]) > 0.5
