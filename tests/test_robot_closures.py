@@ -1,7 +1,8 @@
 """Loop closures of spatial joint-coordinate trees (robots): the closure rows' Jacobian and γ
-against central finite differences, Bricard's mechanism (IFToMM A04) and a four-bar in joint
-coordinates against the natural-coordinate models, robot files (TOML naming a URDF and its
-closures) and their errors, inverse dynamics of a driven UR5 against Pinocchio's RNEA."""
+against central finite differences, Bricard's mechanism (IFToMM A04; its robot file is
+docs/robots.md's example) and a four-bar in joint coordinates against the natural-coordinate
+models, robot files (TOML naming a URDF and its closures) and their errors, inverse dynamics of a
+driven UR5 against Pinocchio's RNEA."""
 
 from __future__ import annotations
 
@@ -16,22 +17,9 @@ from cmbs.model.robot import Inertial, TreeJoint, TreeLink, build_robot, frame_p
 from cmbs.model.robot_closures import Closure, rpy_rotation
 from test_robot import ROBOTS, URDFS, needs_pinocchio, pinocchio
 
-BRICARD_TOML = """\
-[model]
-name = "bricard-joints"
-urdf = "bricard.urdf"
-gravity = [0.0, -9.81, 0.0]
-
-# the sixth revolute joint: rod 4's end P5 on the ground's P5, about the ground axis x
-[closures.J5]
-kind = "revolute"
-link_a = "rod4"
-point_a = [0.0, 1.0, 0.0]
-link_b = "ground"
-point_b = [0.0, 0.0, 1.0]
-axis_a = [1.0, 0.0, 0.0]
-axis_b = [1.0, 0.0, 0.0]
-"""
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "robots.md"
+#: Bricard's robot file: docs/robots.md's first TOML example (so the documented example loads)
+BRICARD_TOML = DOCS.read_text().split("```toml\n")[1].split("```")[0]
 
 
 def _vector(values) -> str:

@@ -1,6 +1,7 @@
 """Loop closures of a spatial joint-coordinate tree: constraints between frames of its links.
 
-A closure joins link a and link b (or the ground: ``"ground"``, the world frame) at a point given
+A closure joins link a and link b (or the ground: ``"ground"``, the world frame, to which the
+tree's root link is fixed too; a moving link of that name is refused) at a point given
 in each link's frame (``point_a``, ``point_b``; for the ground in world coordinates).  Kinds and
 their rows (Φ = 0; A, γ in :mod:`cmbs.model.robot_kernel`):
 
@@ -124,13 +125,16 @@ def closure_elements(closures: Sequence[Closure], link_names: Sequence[str], lin
             raise ModelError(f"link_a and link_b are the same link {closure.link_a!r}", source=source, entry=entry)
         frames = []
         for field, link in (("link_a", closure.link_a), ("link_b", closure.link_b)):
+            if link == GROUND and link in link_names and link_body[list(link_names).index(link)] >= 0:
+                raise ModelError(f"{field}: {GROUND!r} names the world frame, but the tree has a moving link of "
+                                 "that name; rename the link", source=source, entry=entry)
             if link == GROUND:
                 frames.append((-1, np.eye(4)))
             elif link in link_names:
                 index = list(link_names).index(link)
                 frames.append((int(link_body[index]), np.asarray(link_offset[index], dtype=float)))
             else:
-                choices = (GROUND, *link_names)
+                choices = (GROUND, *(name for name in link_names if name != GROUND))
                 raise ModelError(f"{field}: unknown link {link!r}{did_you_mean(link, choices)}; links: "
                                  f"{', '.join(choices)}", source=source, entry=entry)
         (body_a, offset_a), (body_b, offset_b) = frames
