@@ -13,7 +13,7 @@ import pytest
 
 import cmbs
 from cmbs.library.spatial import BRICARD_AXES, BRICARD_POINTS
-from cmbs.model.robot import Inertial, TreeJoint, TreeLink, build_robot, frame_placement
+from cmbs.model.robot import Inertial, JointDriver, TreeJoint, TreeLink, build_robot, frame_placement
 from cmbs.model.robot_closures import Closure, rpy_rotation
 from test_robot import ROBOTS, URDFS, needs_pinocchio, pinocchio
 
@@ -317,3 +317,23 @@ def test_cmbs_inverse_command_on_a_driven_ur5(tmp_path, capsys):
     with np.load(out) as saved:
         expected = _rnea_along_ur5_motion(saved["t"])
         assert np.abs(saved["driver_forces"] - expected).max() < 1e-9 * np.abs(expected).max()
+
+
+def test_a_python_function_driver_gives_the_expressions_rows():
+    """A driver given as a Python callable (evaluated before the kernel call; the model then has
+    no compiled kernel) writes the same Φ, Φ_t and γ as the same function as an expression."""
+    def driven(function):
+        return build_robot("driven", [TreeLink("base"), TreeLink("arm", Inertial(1.0, np.eye(4), np.eye(3)))],
+                           [TreeJoint("hinge", "revolute", "base", "arm", np.eye(4), (0.0, 0.0, 1.0))],
+                           drivers=[JointDriver("turn", "hinge", function)])
+
+    expression = driven("0.5 * sin(2 * t)")
+    python = driven(cmbs.PythonFunction(lambda t: 0.5 * np.sin(2 * t), first=lambda t: np.cos(2 * t),
+                                        second=lambda t: -2.0 * np.sin(2 * t)))
+    assert python.equations.compiled_kernel() is None and expression.equations.compiled_kernel() is not None
+    q, qd = np.array([0.3]), np.array([0.2])
+    for model in (expression, python):
+        terms = model.evaluate(q, qd, 0.7)
+        np.testing.assert_allclose([terms.phi[0], terms.phi_t[0], terms.gamma[0]],
+                                   [0.3 - 0.5 * np.sin(1.4), -np.cos(1.4), -2.0 * np.sin(1.4)], rtol=1e-14)
+        assert terms.A.tolist() == [[1.0]]

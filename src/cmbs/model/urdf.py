@@ -34,9 +34,10 @@ def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81),
               drivers: Sequence[JointDriver] = ()) -> Model:
     """The robot of the URDF file ``path`` (module docstring), gravity ``gravity`` (m/s², world
     axes), closed by ``closures`` and driven by ``drivers`` (:func:`~cmbs.model.robot.build_robot`;
-    not assembled: a robot file does that, :mod:`cmbs.model.robot_files`).  Every problem is a one-line :class:`~cmbs.errors.ModelError` naming the file and the
-    element: a missing file, XML that is not well formed, a number that is not one, an unknown,
-    floating or planar joint type, a movable joint that carries no inertial."""
+    not assembled: a robot file does that, :mod:`cmbs.model.robot_files`).  Every problem of the
+    URDF is a one-line :class:`~cmbs.errors.ModelError` naming the file and the element: a missing
+    file, XML that is not well formed, a number that is not one, an unknown, floating or planar
+    joint type, a movable joint that carries no inertial."""
     import yourdfpy
 
     source = str(path)
