@@ -1,5 +1,6 @@
 """TOML model files for natural-coordinate models (format: docs/model-format.md): planar ones
-here, spatial ones (``[model] dimension = 3``) in :mod:`cmbs.model.spatial_files`.
+here, spatial ones (``[model] dimension = 3``) in :mod:`cmbs.model.spatial_files`; robot files
+(``[model] urdf = ...``, a URDF robot and its loop closures) in :mod:`cmbs.model.robot_files`.
 
 A file is data: it is parsed with :mod:`tomllib`, every table and key is checked against the
 format (unknown keys are errors, so typos do not pass silently), driver and force expressions go
@@ -451,6 +452,11 @@ def load_model_file(path: str | Path) -> Model:
         raise ModelError("not a text file", source=source) from None
     except OSError as error:
         raise ModelError(f"cannot be read ({_reason(error)})", source=source) from None
+    header = document.get("model")
+    if isinstance(header, dict) and "urdf" in header:
+        from cmbs.model.robot_files import read_robot_file
+
+        return read_robot_file(document, path)
     try:
         entry_of = None
         if _dimension(document) == 3:

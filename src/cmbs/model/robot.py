@@ -10,8 +10,10 @@ joint frame (URDF's kinematics, https://wiki.ros.org/urdf/XML/joint):
 - fixed: the joint frame itself, no coordinate.
 
 Coordinates: one per revolute, continuous or prismatic joint, named by the joint, in the order
-the joints are given.  No constraints (m = 0).  Actuators: the joints themselves, ``u_k`` the
-torque (revolute) or force (prismatic) of joint k on its child, so ``Q = u - C(q, q̇) q̇ - g(q)``.
+the joints are given.  Constraints: the rows of the loop closures (:mod:`cmbs.model.robot_closures`),
+then one per driver, ``q_c - f(t) = 0`` on joint c (:class:`JointDriver`).  Actuators: the joints
+themselves, ``u_k`` the torque (revolute) or force (prismatic) of joint k on its child, so
+``Q = u - C(q, q̇) q̇ - g(q)``.
 
 For the dynamics each movable joint carries one rigid body: its child link and every link
 fixed to it by fixed joints, their inertias combined exactly (masses added, centres of mass
@@ -33,11 +35,13 @@ from typing import Sequence
 import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
+from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, is_constant
 from cmbs.model.model import Model, Terms
-from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, WORK, RobotKernel, body_poses, \
-    energies, evaluate_terms
+from cmbs.model.robot_closures import Closure, closure_elements
+from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, RobotKernel, body_poses, energies, \
+    evaluate_terms, scratch_size
 
-__all__ = ["Inertial", "TreeLink", "TreeJoint", "RobotEquations", "build_robot", "frame_placement",
+__all__ = ["Inertial", "TreeLink", "TreeJoint", "JointDriver", "RobotEquations", "build_robot", "frame_placement",
            "frame_jacobian"]
 
 MOVABLE = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
@@ -83,6 +87,17 @@ class TreeJoint:
     friction: float = 0.0
 
 
+@dataclass(frozen=True)
+class JointDriver:
+    """A driver: the constraint ``name``, ``q_joint - f(t) = 0`` (Φ_t = -f', γ = f''), ``function``
+    anything :func:`cmbs.model.drivers.as_time_function` takes (number, expression, table,
+    callable)."""
+
+    name: str
+    joint: str
+    function: object
+
+
 class RobotEquations:
     """Evaluator of a spatial tree (the :class:`~cmbs.model.model.ModelEquations` protocol).
 
@@ -91,31 +106,41 @@ class RobotEquations:
     ``link_offset[i]`` (4 x 4) in that body's frame (in the world for the ground).
     """
 
-    #: nothing but gravity and the joint torques does work: damping and friction are not applied
+    #: nothing but gravity, the joint torques and the drivers does work: damping and friction are
+    #: not applied, the closures are workless
     work_sources: tuple[str, ...] = ()
 
     def __init__(self, kernel: RobotKernel, link_names: tuple[str, ...], link_body: np.ndarray,
-                 link_offset: np.ndarray, joints: tuple[TreeJoint, ...]):
+                 link_offset: np.ndarray, joints: tuple[TreeJoint, ...],
+                 time_functions: TimeFunctionPack | None = None, steady_drivers: frozenset[str] = frozenset()):
         self.kernel = kernel
         self.n = int(kernel.parent.shape[0])
+        self.m = int(kernel.sizes[0])
         self.link_names = link_names
         self.link_body = link_body
         self.link_offset = link_offset
         #: the movable joints, in coordinate order, with their limits, damping and friction
         self.joints = joints
+        #: the drivers' functions of time; the (index, function) pairs evaluated in Python
+        self.time_functions = time_functions or TimeFunctionPack.build(())
+        self.python: tuple[tuple[int, TimeFunction], ...] = self.time_functions.python
+        #: the drivers of a constant, which hold their joint and do no work
+        self.steady_drivers = steady_drivers
 
     def new_terms(self) -> Terms:
-        """A workspace sized for this model (its scratch holds the per-body work)."""
-        return Terms(self.n, 0, scratch=WORK * self.n)
+        """A workspace sized for this model (its scratch holds the time functions and the per-body work)."""
+        return Terms(self.n, self.m, scratch=scratch_size(self.kernel))
 
-    def compiled_kernel(self) -> RobotKernel:
-        """The model's data for the compiled loops."""
-        return self.kernel
+    def compiled_kernel(self) -> RobotKernel | None:
+        """The model's data for the compiled loops, or None when a driver is a Python callable."""
+        return None if self.python else self.kernel
 
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
-        """M(q) (CRBA) and Q = u - C(q, q̇) q̇ - g(q) (RNEA with q̈ = 0) into ``terms``."""
-        k = self.kernel
-        evaluate_terms(k.parent, k.order, k.kind, k.placement, k.axis, k.inertia, k.gravity, q, qd, u, terms.buffer)
+        """M(q) (CRBA), Q = u - C(q, q̇) q̇ - g(q) (RNEA with q̈ = 0) and the closure and driver rows
+        into ``terms``."""
+        for k, function in self.python:
+            terms.scratch[3 * k:3 * k + 3] = function(t)
+        evaluate_terms(self.kernel, q, qd, t, u, terms.buffer)
 
     def kinetic_energy(self, q: np.ndarray, qd: np.ndarray) -> float:
         """T = ½ q̇ᵀ M(q) q̇, summed body by body (½ vᵀ I v)."""
@@ -214,16 +239,21 @@ def _combined_inertia(parts: list[tuple[float, np.ndarray, np.ndarray]]) -> np.n
 
 def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint], *,
                 gravity: Sequence[float] = (0.0, 0.0, -9.81), source: str | None = None,
-                description: str = "") -> Model:
-    """The :class:`~cmbs.model.model.Model` of the tree of ``links`` and ``joints`` (module
-    docstring); ``source`` names the file it came from in errors and on the model.
+                description: str = "", closures: Sequence[Closure] = (),
+                drivers: Sequence[JointDriver] = ()) -> Model:
+    """The :class:`~cmbs.model.model.Model` of the tree of ``links`` and ``joints`` closed by
+    ``closures`` and driven by ``drivers`` (module docstring); ``source`` names the file it came
+    from in errors and on the model.  ``model.q0`` is zero (not assembled:
+    :func:`cmbs.kinematics.assemble`).
 
     Raises
     ------
     ModelError
-        Naming the joint or link: an unknown type, an unknown or repeated link, a link with two
-        parents, a tree without exactly one root, a zero axis, non-finite numbers, a negative mass,
-        or a movable joint that carries no mass nor inertia.
+        Naming the joint, link, closure or driver: an unknown type, an unknown or repeated link, a
+        link with two parents, a tree without exactly one root, a zero axis, non-finite numbers, a
+        negative mass, a movable joint that carries no mass nor inertia, a closure's mistakes
+        (:func:`~cmbs.model.robot_closures.closure_elements`), a driver of an unknown or fixed
+        joint, two drivers of one joint, or repeated constraint names.
     """
     g = _finite(gravity, f"model {name!r}", "gravity", source)
     if g.shape != (3,):
@@ -308,21 +338,47 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
             raise ModelError(f"link {joint.child!r} and the links it carries have no <inertial> (no mass, no inertia): "
                              "the joint would move nothing; give the link an inertial or make the joint fixed",
                              source=source, entry=f"joint {joint.name!r}")
+    link_names = tuple(by_name)
+    bodies = np.array([link_body[l] for l in link_names], np.int64)
+    offsets = np.array([link_offset[l] for l in link_names])
+    closure_ints, closure_reals, constraint_names = closure_elements(closures, link_names, bodies, offsets)
+    functions: list[TimeFunction] = []
+    driver_rows: list[tuple[int, int]] = []
+    for driver in drivers:
+        entry = f"driver {driver.name!r}"
+        if driver.joint not in coordinate:
+            fixed = " (a fixed joint has no coordinate)" if any(j.name == driver.joint for j in joints) else ""
+            raise ModelError(f"unknown joint {driver.joint!r}{fixed}{did_you_mean(driver.joint, coordinate)}; "
+                             f"movable joints: {', '.join(coordinate)}", entry=entry)
+        if any(row[0] == coordinate[driver.joint] for row in driver_rows):
+            raise ModelError(f"joint {driver.joint!r} is driven twice", entry=entry)
+        try:
+            functions.append(as_time_function(driver.function))
+        except ModelError as error:
+            raise ModelError(error.problem, entry=entry) from None
+        driver_rows.append((coordinate[driver.joint], len(functions) - 1))
+    constraint_names += tuple(driver.name for driver in drivers)
+    repeated = sorted({c for c in constraint_names if constraint_names.count(c) > 1})
+    if repeated:
+        raise ModelError(f"repeated constraint names (closure rows and drivers share one namespace): "
+                         f"{', '.join(repeated)}", entry=f"model {name!r}")
+    pack = TimeFunctionPack.build(functions, [f"driver {driver.name}" for driver in drivers])
     kernel = RobotKernel(parent, np.array(order, np.int64), kind, placement, axis, np.ascontiguousarray(inertia),
-                         g.copy(), np.zeros((0, 0)))
+                         g.copy(), closure_ints, closure_reals, np.array(driver_rows, np.int64).reshape(-1, 2),
+                         pack.table, pack.ops, pack.reals,
+                         np.array([len(constraint_names), pack.depth], np.int64), np.zeros((0, 0)))
     for array in kernel:
         array.setflags(write=False)
-    link_names = tuple(by_name)
-    equations = RobotEquations(kernel, link_names, np.array([link_body[l] for l in link_names], np.int64),
-                               np.array([link_offset[l] for l in link_names]), tuple(movable))
+    equations = RobotEquations(kernel, link_names, bodies, offsets, tuple(movable), pack,
+                               frozenset(d.name for d, f in zip(drivers, functions) if is_constant(f)))
     names = tuple(joint.name for joint in movable)
     index = {link: i for i, link in enumerate(link_names)}
     return Model(
         name=name,
         coordinate_names=names,
         coordinate_kinds=tuple("distance" if joint.type == "prismatic" else "angle" for joint in movable),
-        constraint_names=(),
-        drivers=np.zeros(0, dtype=bool),
+        constraint_names=constraint_names,
+        drivers=np.array([False] * (len(constraint_names) - len(drivers)) + [True] * len(drivers), dtype=bool),
         actuator_names=names,
         q0=np.zeros(n),
         qd0=np.zeros(n),
@@ -334,7 +390,9 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
         parameters={"builder": "robot", "gravity": tuple(float(x) for x in g),
                     "joints": [{"name": j.name, "type": j.type, "lower": j.lower, "upper": j.upper, "effort": j.effort,
                                 "velocity": j.velocity, "damping": j.damping, "friction": j.friction}
-                               for j in movable]},
+                               for j in movable],
+                    "closures": [dict(vars(closure)) for closure in closures],
+                    "drivers": [{"name": d.name, "joint": d.joint, "function": f} for d, f in zip(drivers, functions)]},
         segment_masses=tuple((link.name, float(link.inertial.mass)) for link in by_name.values()
                              if link.inertial is not None and link.inertial.mass > 0),
     )

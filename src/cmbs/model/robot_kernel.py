@@ -31,6 +31,24 @@ A spatial inertia about the world origin is held as (m, h = m c, Ī = I_G + m (|
 with c the centre of mass and I_G the inertia about it, both in world axes (Featherstone ch. 2: the
 rigid-body inertia moved to the origin); ``I v = (Ī ω + h × v_O, m v_O - h × ω)``, and composite
 inertias are sums of the ten numbers.
+
+Constraint rows (loop closures, :mod:`cmbs.model.robot_closures`; drivers) follow the tree's
+terms in the same evaluation.  A body point with local coordinates l is at ``p = o_k + R_k l``
+with velocity ``ṗ = v_O + ω × p`` and, at q̈ = 0, acceleration (Featherstone §2.11: the classical
+acceleration of a body point from the spatial one)::
+
+    J̇ q̇ (p) = a_O + α × p + ω × ṗ,      (α, a_O) = a_k + (0, g)  (the RNEA's a_k without the base's -g),
+
+and the columns of its Jacobian along the path to the ground are ``S_j,lin + S_j,ang × p``; a
+body-fixed vector ``u = R_k ū`` has ``u̇ = ω × u`` and the angular columns ``S_j,ang``.  Rows::
+
+    point  (3):  Φ = p_a - p_b,   A = J_a - J_b,   γ = -(J̇_a q̇ - J̇_b q̇),
+    dot    (1):  Φ = u·v (u on body a, v on body b),   A = (u × v)ᵀ (J_ω,a - J_ω,b),
+                 γ = -[((ω_a × u) × v + u × (ω_b × v))·(ω_a - ω_b) + (u × v)·(α_a - α_b)],
+    driver (1):  Φ = q_c - f(t),   A = e_cᵀ,   γ = f''(t),   Φ_t = -f'(t),
+
+from Φ̇ = (u × v)·(ω_a - ω_b) (since u̇·v = ω_a·(u × v) and u·v̇ = -ω_b·(u × v)); Φ_t = 0 for the
+closures, and the ground (body -1) has p = l, u = ū and no motion.
 """
 
 from __future__ import annotations
@@ -41,8 +59,13 @@ from typing import NamedTuple
 import numpy as np
 
 from cmbs.jit import borrow, njit
+from cmbs.model.drivers import evaluate_time_functions
 
 REVOLUTE, PRISMATIC = 0, 1
+#: closure elements: a point coincidence (3 rows) and a dot product of two body-fixed vectors (1 row)
+CLOSE_POINT, CLOSE_DOT = 0, 1
+#: rows of each closure element kind
+ELEMENT_ROWS = (3, 1)
 #: per body in ``placement``: E (3 x 3, row-major), then r (3)
 PLACEMENT = 12
 #: per body in ``inertia``: mass, centre of mass (3, body frame), inertia about it (xx, xy, xz, yy, yz, zz; body axes)
@@ -54,7 +77,8 @@ WORK = 46
 
 class RobotKernel(NamedTuple):
     """A spatial tree as the compiled loops take it (:mod:`cmbs.model.compiled`); ``mass`` is
-    empty (M depends on q and is written into the terms buffer)."""
+    empty (M depends on q and is written into the terms buffer).  Constraint rows: the closure
+    elements in order (their rows first), then one row per driver."""
 
     parent: np.ndarray       # (n,) int64, -1 for the ground
     order: np.ndarray        # (n,) int64, parents before children
@@ -63,7 +87,20 @@ class RobotKernel(NamedTuple):
     axis: np.ndarray         # (n, 3) unit axes in the joint frames
     inertia: np.ndarray      # (n, INERTIA)
     gravity: np.ndarray      # (3,)
+    closure_ints: np.ndarray     # (e, 3) int64: CLOSE_POINT or CLOSE_DOT, body a, body b (-1: the ground)
+    closure_reals: np.ndarray    # (e, 6): l_a, l_b (points) or ū, v̄ (vectors), in the bodies' frames
+    drivers: np.ndarray          # (d, 2) int64: driven coordinate, time function
+    tf_table: np.ndarray         # the drivers' time functions (:class:`cmbs.model.drivers.TimeFunctionPack`)
+    tf_ops: np.ndarray
+    tf_reals: np.ndarray
+    sizes: np.ndarray            # (2,) int64: m (constraint rows), depth of the expression stack
     mass: np.ndarray         # (0, 0)
+
+
+def scratch_size(kernel: RobotKernel) -> int:
+    """Scratch of a terms buffer: the time functions' values (k, 3), their stack (depth, 3) and
+    the work per body."""
+    return 3 * kernel.tf_table.shape[0] + 3 * int(kernel.sizes[1]) + WORK * kernel.parent.shape[0]
 
 
 @njit(cache=True, inline="always")
@@ -173,18 +210,28 @@ def _inertia_times(W, w, ox, oy, oz, vx, vy, vz):
 
 
 @njit(cache=True)
-def evaluate_terms(parent, order, kind, placement, axis, inertia, gravity, q, qd, u, buf):
-    """Q = u - (C q̇ + g) into buf[0:n], M into buf[n:n + n²]; the work from buf[n + n²:]
-    (module docstring).  Its arguments are borrowed (:func:`cmbs.jit.borrow`)."""
-    parent, order, kind, placement, axis, inertia, gravity, q, qd, u, buf = borrow(
-        (parent, order, kind, placement, axis, inertia, gravity, q, qd, u, buf))
+def evaluate_terms(kernel, q, qd, t, u, buf):
+    """Q = u - (C q̇ + g) into buf[0:n], the constraint rows (Φ, A, γ, Φ_t), M, then the scratch:
+    the time functions' values (the Python ones written by the caller), their stack and the work
+    (module docstring; layout of :class:`~cmbs.model.model.Terms`).  Its arguments are borrowed
+    (:func:`cmbs.jit.borrow`)."""
+    kernel, q, qd, u, buf = borrow((kernel, q, qd, u, buf))
+    parent, order, kind, placement, axis = kernel.parent, kernel.order, kernel.kind, kernel.placement, kernel.axis
+    inertia, gravity = kernel.inertia, kernel.gravity
     n = parent.shape[0]
-    o_M = n
-    w0 = n + n * n
+    m = kernel.sizes[0]
+    ntf = kernel.tf_table.shape[0]
+    depth = kernel.sizes[1]
+    o_M = n + m * (n + 3)
+    s0 = o_M + n * n
+    w0 = s0 + 3 * ntf + 3 * depth
     if buf.shape[0] != w0 + WORK * n:
         raise ValueError("terms workspace does not belong to this model (use model.new_terms())")
     if q.shape[0] != n or qd.shape[0] != n or u.shape[0] != n:
         raise ValueError("q, qd or u has the wrong size for this model")
+    if ntf > 0:
+        evaluate_time_functions(kernel.tf_table, kernel.tf_ops, kernel.tf_reals, t,
+                                buf[s0 + 3 * ntf:w0].reshape((depth, 3)), buf[s0:s0 + 3 * ntf].reshape((ntf, 3)))
     W = buf
     for idx in range(n):
         k = order[idx]
@@ -247,13 +294,124 @@ def evaluate_terms(parent, order, kind, placement, axis, inertia, gravity, q, qd
                 W[pbase + _F + i] += W[f + i]
             for i in range(10):
                 W[pbase + _I + i] += W[w + i]
+    if m > 0:
+        _constraint_rows(kernel, q, n, m, s0, w0, buf)
+
+
+@njit(cache=True, inline="always")
+def _point_motion(body, lx, ly, lz, gravity, W, w0):
+    """World position p and bias acceleration J̇ q̇ (q̈ = 0) of the point with local coordinates
+    l on ``body`` (-1: the ground; module docstring)."""
+    if body < 0:
+        return lx, ly, lz, 0.0, 0.0, 0.0
+    base = w0 + WORK * body
+    R, v, a = base + _R, base + _V, base + _A
+    px = W[base + _O] + W[R] * lx + W[R + 1] * ly + W[R + 2] * lz
+    py = W[base + _O + 1] + W[R + 3] * lx + W[R + 4] * ly + W[R + 5] * lz
+    pz = W[base + _O + 2] + W[R + 6] * lx + W[R + 7] * ly + W[R + 8] * lz
+    wx, wy, wz = W[v], W[v + 1], W[v + 2]
+    vx = W[v + 3] + wy * pz - wz * py
+    vy = W[v + 4] + wz * px - wx * pz
+    vz = W[v + 5] + wx * py - wy * px
+    ax, ay, az = W[a], W[a + 1], W[a + 2]
+    bx = W[a + 3] + gravity[0] + ay * pz - az * py + wy * vz - wz * vy
+    by = W[a + 4] + gravity[1] + az * px - ax * pz + wz * vx - wx * vz
+    bz = W[a + 5] + gravity[2] + ax * py - ay * px + wx * vy - wy * vx
+    return px, py, pz, bx, by, bz
+
+
+@njit(cache=True, inline="always")
+def _vector_motion(body, ux, uy, uz, W, w0):
+    """World vector u = R ū of ``body``, its angular velocity ω and bias angular acceleration α
+    (all zero for the ground)."""
+    if body < 0:
+        return ux, uy, uz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    base = w0 + WORK * body
+    R, v, a = base + _R, base + _V, base + _A
+    wx = W[R] * ux + W[R + 1] * uy + W[R + 2] * uz
+    wy = W[R + 3] * ux + W[R + 4] * uy + W[R + 5] * uz
+    wz = W[R + 6] * ux + W[R + 7] * uy + W[R + 8] * uz
+    return wx, wy, wz, W[v], W[v + 1], W[v + 2], W[a], W[a + 1], W[a + 2]
+
+
+@njit(cache=True, inline="always")
+def _add_point_columns(parent, body, sign, px, py, pz, buf, row, n, W, w0):
+    """Adds ``sign`` times the linear Jacobian of the point p on ``body`` to rows row..row+2 of A
+    (row-major from buf index ``row``): column j is S_j,lin + S_j,ang × p along the path."""
+    j = body
+    while j >= 0:
+        s = w0 + WORK * j + _S
+        sx, sy, sz = W[s], W[s + 1], W[s + 2]
+        buf[row + j] += sign * (W[s + 3] + sy * pz - sz * py)
+        buf[row + n + j] += sign * (W[s + 4] + sz * px - sx * pz)
+        buf[row + 2 * n + j] += sign * (W[s + 5] + sx * py - sy * px)
+        j = parent[j]
+
+
+@njit(cache=True, inline="always")
+def _add_angular_columns(parent, body, sign, cx, cy, cz, buf, row, W, w0):
+    """Adds ``sign`` times c·S_j,ang to the entries j of A's row at buf index ``row`` along the path."""
+    j = body
+    while j >= 0:
+        s = w0 + WORK * j + _S
+        buf[row + j] += sign * (cx * W[s] + cy * W[s + 1] + cz * W[s + 2])
+        j = parent[j]
+
+
+@njit(cache=True, inline="always")
+def _constraint_rows(kernel, q, n, m, s0, w0, buf):
+    """Φ, A, γ, Φ_t of the closure elements and the drivers (module docstring) from the poses,
+    velocities and accelerations of the forward pass."""
+    parent, gravity, ints, reals = kernel.parent, kernel.gravity, kernel.closure_ints, kernel.closure_reals
+    W = buf
+    o_A = n + m
+    o_gam = o_A + m * n
+    o_pt = o_gam + m
+    for i in range(m * n):
+        buf[o_A + i] = 0.0
+    for i in range(m):
+        buf[o_pt + i] = 0.0
+    row = 0
+    for e in range(ints.shape[0]):
+        ba, bb = ints[e, 1], ints[e, 2]
+        if ints[e, 0] == CLOSE_POINT:
+            ax, ay, az, gax, gay, gaz = _point_motion(ba, reals[e, 0], reals[e, 1], reals[e, 2], gravity, W, w0)
+            bx, by, bz, gbx, gby, gbz = _point_motion(bb, reals[e, 3], reals[e, 4], reals[e, 5], gravity, W, w0)
+            buf[n + row], buf[n + row + 1], buf[n + row + 2] = ax - bx, ay - by, az - bz
+            buf[o_gam + row], buf[o_gam + row + 1], buf[o_gam + row + 2] = gbx - gax, gby - gay, gbz - gaz
+            _add_point_columns(parent, ba, 1.0, ax, ay, az, buf, o_A + row * n, n, W, w0)
+            _add_point_columns(parent, bb, -1.0, bx, by, bz, buf, o_A + row * n, n, W, w0)
+            row += 3
+        else:
+            ux, uy, uz, wax, way, waz, aax, aay, aaz = _vector_motion(ba, reals[e, 0], reals[e, 1], reals[e, 2], W, w0)
+            vx, vy, vz, wbx, wby, wbz, abx, aby, abz = _vector_motion(bb, reals[e, 3], reals[e, 4], reals[e, 5], W, w0)
+            cx, cy, cz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+            buf[n + row] = ux * vx + uy * vy + uz * vz
+            # u̇ = ω_a × u, v̇ = ω_b × v; d/dt (u × v) = u̇ × v + u × v̇
+            dux, duy, duz = way * uz - waz * uy, waz * ux - wax * uz, wax * uy - way * ux
+            dvx, dvy, dvz = wby * vz - wbz * vy, wbz * vx - wbx * vz, wbx * vy - wby * vx
+            dcx = duy * vz - duz * vy + uy * dvz - uz * dvy
+            dcy = duz * vx - dux * vz + uz * dvx - ux * dvz
+            dcz = dux * vy - duy * vx + ux * dvy - uy * dvx
+            buf[o_gam + row] = -(dcx * (wax - wbx) + dcy * (way - wby) + dcz * (waz - wbz)
+                                 + cx * (aax - abx) + cy * (aay - aby) + cz * (aaz - abz))
+            _add_angular_columns(parent, ba, 1.0, cx, cy, cz, buf, o_A + row * n, W, w0)
+            _add_angular_columns(parent, bb, -1.0, cx, cy, cz, buf, o_A + row * n, W, w0)
+            row += 1
+    drivers = kernel.drivers
+    for d in range(drivers.shape[0]):
+        c, f = drivers[d, 0], drivers[d, 1]
+        buf[n + row] = q[c] - buf[s0 + 3 * f]
+        buf[o_A + row * n + c] = 1.0
+        buf[o_pt + row] = -buf[s0 + 3 * f + 1]
+        buf[o_gam + row] = buf[s0 + 3 * f + 2]
+        row += 1
 
 
 @njit(cache=True, inline="always")
 def _evaluate_robot(kernel, q, qd, t, u, buffer):
-    """:func:`evaluate_terms` for a :class:`RobotKernel` (no constraints: the buffer is Q, M, work)."""
-    evaluate_terms(kernel.parent, kernel.order, kernel.kind, kernel.placement, kernel.axis, kernel.inertia,
-              kernel.gravity, q, qd, u, buffer)
+    """:func:`evaluate_terms` for a :class:`RobotKernel`."""
+    evaluate_terms(kernel, q, qd, t, u, buffer)
 
 
 RobotKernel.evaluate = staticmethod(_evaluate_robot)

@@ -18,7 +18,8 @@ import numpy as np
 
 from cmbs.errors import ModelError
 from cmbs.model.model import Model
-from cmbs.model.robot import Inertial, TreeJoint, TreeLink, build_robot
+from cmbs.model.robot import Inertial, JointDriver, TreeJoint, TreeLink, build_robot
+from cmbs.model.robot_closures import Closure
 
 __all__ = ["load_urdf"]
 
@@ -29,11 +30,14 @@ _NUMBERS = {"origin": ("xyz", "rpy"), "axis": ("xyz",), "mass": ("value",),
             "limit": ("lower", "upper", "effort", "velocity"), "dynamics": ("damping", "friction")}
 
 
-def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81)) -> Model:
+def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81), closures: Sequence[Closure] = (),
+              drivers: Sequence[JointDriver] = ()) -> Model:
     """The robot of the URDF file ``path`` (module docstring), gravity ``gravity`` (m/s², world
-    axes).  Every problem is a one-line :class:`~cmbs.errors.ModelError` naming the file and the
-    element: a missing file, XML that is not well formed, a number that is not one, an unknown,
-    floating or planar joint type, a movable joint that carries no inertial."""
+    axes), closed by ``closures`` and driven by ``drivers`` (:func:`~cmbs.model.robot.build_robot`;
+    not assembled: a robot file does that, :mod:`cmbs.model.robot_files`).  Every problem of the
+    URDF is a one-line :class:`~cmbs.errors.ModelError` naming the file and the element: a missing
+    file, XML that is not well formed, a number that is not one, an unknown, floating or planar
+    joint type, a movable joint that carries no inertial."""
     import yourdfpy
 
     source = str(path)
@@ -66,7 +70,7 @@ def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81))
             damping=0.0 if dynamics is None or dynamics.damping is None else float(dynamics.damping),
             friction=0.0 if dynamics is None or dynamics.friction is None else float(dynamics.friction)))
     return build_robot(robot.name, links, joints, gravity=gravity, source=source,
-                       description=f"robot {robot.name!r} from {Path(path).name}")
+                       description=f"robot {robot.name!r} from {Path(path).name}", closures=closures, drivers=drivers)
 
 
 def _optional(value: object) -> float | None:
