@@ -19,7 +19,8 @@ the same mechanism, the script checks it (the mass matrix at the start state fro
 a state with velocities) and prints the differences.  No armature anywhere (none in the files).
 
 1. Per evaluation, called from Python for all, at the start state with joint velocities
-   (µs per call: median [min-max] over batches, bench_model.py's ``time_call``): forward
+   (µs per call: median [min-max] over batches, bench_model.py's ``time_interleaved``: the
+   calls' batches in turn, round by round, so that all see the same machine load): forward
    dynamics, cmbs's ``CompiledDynamics(model, "lagrange").into`` (one compiled call: M by CRBA,
    Q by RNEA, Cholesky solve of M q̈ = Q) against Pinocchio's ``aba`` and MuJoCo's
    ``mj_forward``; inverse dynamics, τ = M q̈ - Q through the same kernel (one compiled call
@@ -66,7 +67,7 @@ from cmbs.model.compiled import model_kernel  # noqa: E402
 from cmbs.model.robot_kernel import evaluate_terms  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from bench_model import fmt, time_call  # noqa: E402
+from bench_model import fmt, time_interleaved  # noqa: E402
 
 #: URDF file under example-robot-data's robots/, the start angles (rad; m for the fingers)
 #: (swings of 0.5-0.8 rad about the hanging rest [0, π/2, 0, -π/2, 0, 0] of the UR5 and about
@@ -226,17 +227,17 @@ class Robot:
         tau, out, lam, u = np.zeros(self.n), np.empty(self.n), np.empty(0), np.zeros(self.n)
         compiled, bound = CompiledDynamics(self.model, "lagrange"), self.bound()
         pm, pd = self.pin_model, self.pin_data
-        times = {"forward: cmbs CompiledDynamics.into": time_call(lambda: compiled.into(q, qd, 0.0, None, out, lam),
-                                                                  repeat, target),
-                 "forward: Pinocchio aba": time_call(lambda: pin.aba(pm, pd, q, qd, tau), repeat, target)}
         self.mj_set(q, qd)
-        times["forward: MuJoCo mj_forward"] = time_call(lambda: mj.mj_forward(m, d), repeat, target)
-        times["terms: cmbs M and Q alone (one call)"] = time_call(lambda: _terms_at(bound, q, qd, u), repeat, target)
-        times["inverse: cmbs M q̈ - Q (one call)"] = time_call(lambda: _inverse_at(bound, q, qd, qdd, u, out),
-                                                              repeat, target)
-        times["inverse: Pinocchio rnea"] = time_call(lambda: pin.rnea(pm, pd, q, qd, qdd), repeat, target)
-        d.qacc[:] = qdd
-        times["inverse: MuJoCo mj_inverse"] = time_call(lambda: mj.mj_inverse(m, d), repeat, target)
+        d_inverse = mj.MjData(m)                 # its own data: mj_forward writes d.qacc
+        d_inverse.qpos[:], d_inverse.qvel[:], d_inverse.qacc[:] = q, qd, qdd
+        calls = {"forward: cmbs CompiledDynamics.into": lambda: compiled.into(q, qd, 0.0, None, out, lam),
+                 "forward: Pinocchio aba": lambda: pin.aba(pm, pd, q, qd, tau),
+                 "forward: MuJoCo mj_forward": lambda: mj.mj_forward(m, d),
+                 "terms: cmbs M and Q alone (one call)": lambda: _terms_at(bound, q, qd, u),
+                 "inverse: cmbs M q̈ - Q (one call)": lambda: _inverse_at(bound, q, qd, qdd, u, out),
+                 "inverse: Pinocchio rnea": lambda: pin.rnea(pm, pd, q, qd, qdd),
+                 "inverse: MuJoCo mj_inverse": lambda: mj.mj_inverse(m, d_inverse)}
+        times = time_interleaved(calls, repeat, target)
         return times
 
     # -------------------------------------------------------------------------------- whole runs
