@@ -3,7 +3,7 @@
 MuJoCo (needs the ``[bench]`` extra: MuJoCo, Pinocchio and example-robot-data).
 
     python benchmarks/bench_robots.py [--quick] [--plot FILE]
-    # about 6 min on 2 shared cores; --quick (about 1.5 min): short timing batches, no MuJoCo
+    # about 7 min on 2 shared cores; --quick (about 1 min): short timing batches, no MuJoCo
     # run at h = 1e-5 (the reference is then cross-checked at h = 1e-4), a 1 000-variant sweep
 
 All three tools load the same URDF files (``ur_description/urdf/ur5_robot.urdf``: 6 revolute
@@ -36,7 +36,8 @@ a state with velocities) and prints the differences.  No armature anywhere (none
 3. A sweep of the UR5: 10 000 start states (the start joint angles plus uniform offsets in
    ±0.5 rad, at rest; 1 s at RK4 h = 1e-3, 1 000 steps), cmbs's ``cmbs.sweep`` (state-only
    variants: one compiled call over numba's threads) against ``mujoco.rollout.rollout`` of the
-   same states (its threads: one MjData per core), variants × steps per second.
+   same states (its threads: one MjData per thread), on one thread and on numba's threads (the
+   CPUs), variants × steps per second of wall time and of CPU time (the process's, all threads).
 
 Wall times: one run after a warm-up, the least of three for runs shorter than 0.5 s, on a machine
 that may be shared: the load average is printed with them.
@@ -389,12 +390,13 @@ def main() -> int:
     parser.add_argument("--variants", type=int, help="sweep variants (default 10 000, 1 000 with --quick)")
     args = parser.parse_args()
     import mujoco
+    import numba
     import pinocchio
 
     began = time.perf_counter()
     repeat, target = (3, 0.05) if args.quick else (7, 0.2)
     variants = args.variants or (1000 if args.quick else 10000)
-    threads = os.cpu_count() or 1
+    threads = numba.get_num_threads()
     print(f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {platform.processor() or platform.machine()}, "
           f"{threads} CPUs; load average {load()}")
     print(f"cmbs {cmbs.__version__}, MuJoCo {mujoco.__version__}, Pinocchio {pinocchio.__version__}, "
@@ -458,16 +460,19 @@ def main() -> int:
     Q0 = sweep_states(robot, variants)
     steps = int(round(SWEEP_T_END / SWEEP_H))
     print(f"\n== sweep: UR5, {variants} start states (q0 ± {SWEEP_SPREAD} rad, at rest), {SWEEP_T_END:g} s at "
-          f"RK4 h = {SWEEP_H:g} ({steps} steps), {threads} threads each (load {load()})")
-    wall_cmbs, cpu_cmbs, end_cmbs, info = cmbs_sweep(robot, Q0)
-    wall_mj, cpu_mj, end_mj = mujoco_sweep(robot, Q0, threads)
+          f"RK4 h = {SWEEP_H:g} ({steps} steps), on 1 and {threads} threads (load {load()})")
     rate = variants * steps
     print(f"  {'':<40} {'wall s':>8} {'variant-steps/s':>16} {'CPU s':>8} {'per CPU s':>10}")
-    for label, wall, cpu in ((f"cmbs.sweep (batched, {info['workers']} numba threads)", wall_cmbs, cpu_cmbs),
-                             (f"mujoco.rollout ({threads} MjData)", wall_mj, cpu_mj)):
-        print(f"  {label:<40} {wall:>8.3g} {rate / wall:>16.3g} {cpu:>8.3g} {rate / cpu:>10.3g}")
-    print(f"  cmbs / MuJoCo: wall {wall_cmbs / wall_mj:.2f}, CPU {cpu_cmbs / cpu_mj:.2f}; max end-angle difference "
-          f"between the two {np.abs(end_cmbs - end_mj).max():.1e} rad (load {load()})")
+    for used in sorted({1, threads}):
+        numba.set_num_threads(used)
+        wall_cmbs, cpu_cmbs, end_cmbs, info = cmbs_sweep(robot, Q0)
+        wall_mj, cpu_mj, end_mj = mujoco_sweep(robot, Q0, used)
+        for label, wall, cpu in ((f"cmbs.sweep (batched, {info['workers']} numba threads)", wall_cmbs, cpu_cmbs),
+                                 (f"mujoco.rollout ({used} MjData)", wall_mj, cpu_mj)):
+            print(f"  {label:<40} {wall:>8.3g} {rate / wall:>16.3g} {cpu:>8.3g} {rate / cpu:>10.3g}")
+        print(f"  {used} thread(s), cmbs / MuJoCo: wall {wall_cmbs / wall_mj:.2f}, CPU {cpu_cmbs / cpu_mj:.2f}; max "
+              f"end-angle difference between the two {np.abs(end_cmbs - end_mj).max():.1e} rad (load {load()})")
+    numba.set_num_threads(threads)
     if args.plot:
         plot(args.plot, tables)
     print(f"\nwhole benchmark: {time.perf_counter() - began:.0f} s; load average {load()}")
