@@ -17,6 +17,9 @@ disabled (``mjDSBL_LIMIT``, ``mjDSBL_EQUALITY``), contacts disabled: the three t
 the same mechanism, the script checks it (the mass matrix at the start state from MuJoCo's
 ``mj_fullM``, Pinocchio's ``crba`` and cmbs's M; the accelerations and the inverse dynamics at
 a state with velocities) and prints the differences.  No armature anywhere (none in the files).
+A third model, "Panda, fingers fixed", is a copy of panda.urdf with the two finger joints made
+fixed (their ``<mimic>`` removed), read by all three tools: without limits the free fingers
+slide off the hand (hundreds of metres in the 10 s runs), the fixed ones stay with it.
 
 1. Per evaluation, called from Python for all, at the start state with joint velocities
    (µs per call: median [min-max] over batches, bench_model.py's ``time_interleaved``: the
@@ -27,8 +30,8 @@ a state with velocities) and prints the differences.  No armature anywhere (none
    defined here: ``evaluate_terms`` then the product; cmbs has no O(n) inverse dynamics of trees)
    against ``pinocchio.rnea`` and ``mj_inverse``.  Ratios cmbs / other.
 2. Whole 10 s runs of each robot falling freely from a bent start at rest (zero torques): cmbs
-   compiled RK4 at h = 1e-3 and 1e-4 and DOP853 at rtol 1e-4 ... 1e-10 (atol = rtol / 100); MuJoCo RK4,
-   Euler (its default) and implicitfast at h = 1e-3 and 1e-4 (``mj_step`` with ``nstep`` steps
+   compiled RK4 at h = 1e-3 and 1e-4 and DOP853 at rtol 1e-4 ... 1e-10 (atol = rtol / 100);
+   MuJoCo RK4, Euler (its default) and implicitfast at h = 1e-3 and 1e-4 (``mj_step`` with ``nstep`` steps
    per output of 0.01 s).  Error: max over the 1 001 outputs and the revolute joints of
    |q - q_ref| (rad) against cmbs's DOP853 at rtol 1e-12 (atol 1e-14), cross-checked against
    MuJoCo's RK4 at h = 1e-5; the energy error |E(10 s) - E(0)| (J, each tool's own energy).
@@ -71,7 +74,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_model import fmt, time_interleaved  # noqa: E402
 
 #: URDF file under example-robot-data's robots/, the start angles (rad; m for the fingers)
-#: (swings of 0.5-0.8 rad about the hanging rest [0, π/2, 0, -π/2, 0, 0] of the UR5 and about
+#: (0.25-0.8 rad from the hanging rest [0, π/2, 0, -π/2, 0, 0] of the UR5 and
 #: [0, 2.92, -0.02, -0.50, 0.72, 2.42, 0.55] of the Panda, with the finger axis level there:
 #: large, but regular motions, whose errors do not grow exponentially over the 10 s), and the
 #: joints made fixed in a copy of the file for the Panda's second variant
@@ -400,7 +403,8 @@ def main() -> int:
     print(f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; {platform.processor() or platform.machine()}, "
           f"{threads} CPUs; load average {load()}")
     print(f"cmbs {cmbs.__version__}, MuJoCo {mujoco.__version__}, Pinocchio {pinocchio.__version__}, "
-          f"example-robot-data {importlib.metadata.version('example-robot-data')}; 1 BLAS thread; all called from Python")
+          f"example-robot-data {importlib.metadata.version('example-robot-data')}; 1 BLAS thread; "
+          "all called from Python")
     directory = tempfile.mkdtemp(prefix="cmbs-robots-")
     robots = {name: Robot(name, directory) for name in ROBOTS}
     rng = np.random.default_rng(7)
@@ -430,7 +434,8 @@ def main() -> int:
         reference = robot.cmbs_run("dop853", rtol=REFERENCE_RTOL)
         check_h = 1e-4 if args.quick else 1e-5
         check = robot.mujoco_run("rk4", check_h)
-        print(f"reference cmbs DOP853 rtol {REFERENCE_RTOL:g}: {reference['wall']:.3g} s, |ΔE| {reference['dE']:.1e} J; "
+        print(f"reference cmbs DOP853 rtol {REFERENCE_RTOL:g}: {reference['wall']:.3g} s, "
+              f"|ΔE| {reference['dE']:.1e} J; "
               f"MuJoCo RK4 h = {check_h:g} ({check['wall']:.3g} s) differs from it by "
               f"{robot.error(check['q'], reference['q']):.1e} rad")
         rows = [dict(tool="cmbs", label=f"RK4 h={h:g}", **robot.cmbs_run("rk4", h=h)) for h in (1e-3, 1e-4)]
@@ -451,7 +456,8 @@ def main() -> int:
             f"h = {h:g} {same[f'cmbsrk4 h={h:g}'] / same[f'MuJoCork4 h={h:g}']:.2f}" for h in (1e-3, 1e-4)))
         prismatic = ~robot.revolute
         if prismatic.any():
-            print(f"  (prismatic joints, not in the errors: |q| up to {np.abs(reference['q'][:, prismatic]).max():.3g} m "
+            reach = np.abs(reference["q"][:, prismatic]).max()
+            print(f"  (prismatic joints, not in the errors: |q| up to {reach:.3g} m "
                   "in the reference run)")
         print_levels(name, rows)
         tables[name] = rows
