@@ -1,11 +1,14 @@
 """Link poses of robots (cmbs.kinematics.body_poses on a URDF model) and their columns in result
 files, along a short UR5 swing: against frame_placement, against Pinocchio's
 framesForwardKinematics (oMf), and the quaternion columns against scipy's conversion of the
-rotations."""
+rotations; the HTML viewer's stick figure of the link origins."""
 
 from __future__ import annotations
 
 import importlib.metadata
+import json
+import re
+import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +40,7 @@ def _ur5_urdf() -> Path | None:
 UR5 = _ur5_urdf()
 pytestmark = pytest.mark.skipif(UR5 is None, reason="needs example-robot-data (the UR5 URDF)")
 #: the UR5's links that do not move: the root and the links fixed to it
-GROUND_LINKS = {"world", "base_link", "base_link_inertia", "base"}
+GROUND_LINKS = {"world", "base_link", "base"}
 
 
 @pytest.fixture(scope="module")
@@ -123,3 +126,45 @@ def test_result_file_has_link_origins_and_quaternions(swing, tmp_path):
         assert np.all(np.einsum("ki,ki->k", quaternion[1:], quaternion[:-1]) > 0)       # continuous sign
     assert worst < 1e-12
     assert POSE_COLUMNS == ("origin.x", "origin.y", "origin.z", "qw", "qx", "qy", "qz")
+
+
+@pytest.mark.skipif(pinocchio is None, reason="needs pinocchio (pip 'pin')")
+def test_the_viewer_draws_the_links_as_a_stick_figure(tmp_path):
+    """`cmbs simulate FILE --animate x.html` on a robot file with gravity along -y: the embedded
+    JSON has the URDF's links as points, its joints (parent, child) as lines, the origins that do
+    not move as ground, "up" against gravity, and each frame the link origins (Pinocchio's
+    oMf translations at the states interpolated at the frame times, within half the unit)."""
+    robot = tmp_path / "ur5-sideways.toml"
+    robot.write_text(f'[model]\nurdf = {str(UR5)!r}\ngravity = [0.0, -9.81, 0.0]\n\n[initial_velocities]\n'
+                     'shoulder_pan_joint = 1.0\nelbow_joint = -1.0\n')
+    page, out = tmp_path / "ur5.html", tmp_path / "ur5.npz"
+    assert main(["simulate", str(robot), "--t-end", "0.5", "--dt", "0.01", "--integrator", "dop853", "--out",
+                 str(out), "--animate", str(page)]) == 0
+    run = cmbs.Trajectory.load(out)
+    found = re.findall(r'<script id="cmbs-data" type="application/json">(.*?)</script>',
+                       page.read_text(encoding="utf-8"), re.DOTALL)
+    assert len(found) == 1
+    data = json.loads(found[0])
+    urdf = ElementTree.parse(UR5).getroot()
+    links = [link.get("name") for link in urdf.findall("link")]
+    assert data["points"] == links and data["planar"] is False
+    pairs = {(joint.find("parent").get("link"), joint.find("child").get("link")) for joint in urdf.findall("joint")}
+    assert {(links[i], links[j]) for i, j in data["lines"]} == pairs and len(data["lines"]) == len(pairs)
+    # the viewer's ground points are those whose position does not move: the links fixed to the
+    # root and the shoulder link, whose origin is on the shoulder pan axis
+    assert {link for link, ground in zip(links, data["ground"]) if ground} == GROUND_LINKS | {"shoulder_link"}
+    assert data["up"] == [0.0, 1.0, 0.0]
+    times = np.array(data["times"])
+    assert times[0] == 0.0 and times[-1] == pytest.approx(0.5)
+    reference = pinocchio.buildModelFromUrdf(str(UR5))
+    pin_data = reference.createData()
+    frames = np.array(data["frames"], dtype=float).reshape(len(times), len(links), 3) * data["unit"]
+    columns = [run.names.index(name) for name in reference.names[1:]]
+    worst = 0.0
+    for k, t in enumerate(times):
+        q = np.array([np.interp(t, run.t, run.q[:, c]) for c in columns])
+        pinocchio.framesForwardKinematics(reference, pin_data, q)
+        origins = np.array([pin_data.oMf[reference.getFrameId(link, pinocchio.BODY)].translation for link in links])
+        worst = max(worst, np.abs(frames[k] - origins).max())
+    assert worst <= 0.5 * data["unit"] + 1e-12
+    assert np.ptp(frames[:, links.index("tool0")], axis=0).max() > 0.05             # the arm moves

@@ -133,6 +133,11 @@ class RobotEquations:
         self._moving = np.array(moving, np.int64)
 
     @property
+    def gravity(self) -> tuple[float, float, float]:
+        """The acceleration of gravity (m/s², world axes)."""
+        return tuple(float(value) for value in self.kernel.gravity)
+
+    @property
     def body_names(self) -> tuple[str, ...]:
         """The names of :attr:`bodies` (they are link names)."""
         return self.bodies
