@@ -151,7 +151,7 @@ def test_one_configuration_and_non_finite_rows(bricard_configurations):
 
 
 def test_body_poses_of_a_model_without_spatial_bodies():
-    with pytest.raises(ModelError, match="not a spatial model"):
+    with pytest.raises(ModelError, match="neither a spatial model"):
         body_poses(cmbs.load("four-bar"), cmbs.load("four-bar").q0)
     model = cmbs.load("bricard")
     with pytest.raises(ModelError, match=r"shape \(24,\) or \(k, 24\)"):

@@ -284,8 +284,8 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _save(model: cmbs.Model, run: cmbs.Trajectory, path: str) -> Path:
-    """Write ``run`` to the result file ``path`` with the poses of a spatial model's bodies
-    (:func:`cmbs.kinematics.with_body_poses`); its path."""
+    """Write ``run`` to the result file ``path`` with the poses of a spatial model's bodies or a
+    robot's moving links (:func:`cmbs.kinematics.with_body_poses`); its path."""
     from cmbs.kinematics import with_body_poses
 
     return with_body_poses(model, run).save(path)

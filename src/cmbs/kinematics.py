@@ -98,15 +98,21 @@ def point_array(model: Model, q: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class BodyPoses:
-    """Poses of a spatial model's rigid bodies (:func:`body_poses`), ``...`` the leading shape of
-    the coordinates given (none for one configuration, (k,) for k of them).
+    """Poses of the rigid bodies of a spatial model or the links of a robot (:func:`body_poses`),
+    ``...`` the leading shape of the coordinates given (none for one configuration, (k,) for k
+    of them).
 
-    ``names`` (bodies,), in the order they were added; ``origins`` (..., bodies, 3) the position
-    of each body's origin point; ``rotations`` (..., bodies, 3, 3) the rotation R that turns the
-    body as built (the positions given to the builder, where its inertia is given in ground
-    axes) into its pose: a body-fixed point p is at o + R (p₀ - o₀); ``quaternions``
-    (..., bodies, 4) the same rotations as unit quaternions, **scalar first** (w, x, y, z), of
-    continuous sign along the first axis (the first with w >= 0).
+    ``names`` (bodies,), in the order they were added (a robot's moving links in the order of
+    its links); ``origins`` (..., bodies, 3) the position of each body's origin point;
+    ``rotations`` (..., bodies, 3, 3) the rotation R that turns the body as built into its pose:
+    a body-fixed point p is at o + R (p₀ - o₀), p₀ and o₀ the point and the origin as built;
+    ``quaternions`` (..., bodies, 4) the same rotations as unit quaternions, **scalar first**
+    (w, x, y, z), of continuous sign along the first axis (the first with w >= 0).
+
+    As built, a spatial natural-coordinate body is at the positions given to the builder (its
+    inertia given in ground axes); a robot link is its frame at the world origin aligned with
+    the world axes (o₀ = 0, p₀ = p its link coordinates), so R is the link frame's world
+    rotation and the point is at o + R p (:func:`cmbs.model.robot.frame_placement`).
     """
 
     names: tuple[str, ...]
@@ -117,22 +123,25 @@ class BodyPoses:
 
 def body_poses(model: Model, q: np.ndarray) -> BodyPoses:
     """The poses of the rigid bodies of a spatial model (:class:`~cmbs.SpatialModelBuilder`
-    ``add_body``) at coordinates ``q``, (n,) or (k, n): each body's origin, and the rotation
-    R = X X₀⁻¹ from its basis elements X = [b₁ b₂ b₃] (point differences and unit vectors) at
-    q and as built, made exactly orthonormal by polar decomposition (the constraint error of a
-    simulation leaves it slightly off; see ``SpatialEquations.body_poses``), and its quaternion.
-    Rods and point masses are no bodies (a rod's spin about its axis is no coordinate).
-    Configurations with non-finite coordinates give NaN.
+    ``add_body``) or of the moving links of a robot (:mod:`cmbs.model.robot`) at coordinates
+    ``q``, (n,) or (k, n), and their quaternions.  Spatial bodies: each body's origin, and the
+    rotation R = X X₀⁻¹ from its basis elements X = [b₁ b₂ b₃] (point differences and unit
+    vectors) at q and as built, made exactly orthonormal by polar decomposition (the constraint
+    error of a simulation leaves it slightly off; see ``SpatialEquations.body_poses``); rods and
+    point masses are no bodies (a rod's spin about its axis is no coordinate).  Robots: each
+    link frame's world origin and rotation (``RobotEquations.body_poses``), for every link but
+    the root and the links fixed to it.  Configurations with non-finite coordinates give NaN.
 
     Raises
     ------
     ModelError
-        ``model`` is not a spatial natural-coordinate model, or ``q`` has not n columns.
+        ``model`` is neither a spatial natural-coordinate model nor a robot, or ``q`` has not n
+        columns.
     """
     equations = base_equations(model)[0]
     if not hasattr(equations, "body_poses"):
-        raise ModelError(f"model {model.name!r} is not a spatial model (cmbs.SpatialModelBuilder): body poses are "
-                         "those of its rigid bodies")
+        raise ModelError(f"model {model.name!r} is neither a spatial model (cmbs.SpatialModelBuilder) nor a robot: "
+                         "body poses are those of its rigid bodies or links")
     q = np.asarray(q, dtype=float)
     if q.ndim not in (1, 2) or q.shape[-1] != model.n:
         raise ModelError(f"body poses of model {model.name!r} need coordinates of shape ({model.n},) or (k, "
@@ -149,7 +158,7 @@ def body_poses(model: Model, q: np.ndarray) -> BodyPoses:
         for k in range(1, q.shape[0]):        # the sign of least change from the previous instant
             flip = np.einsum("bi,bi->b", quaternions[k], quaternions[k - 1]) < 0
             quaternions[k, flip] *= -1.0
-    return BodyPoses(tuple(body.name for body in equations.bodies), origins, rotations, quaternions)
+    return BodyPoses(equations.body_names, origins, rotations, quaternions)
 
 
 #: the result-file columns of a body's pose, after the body's name: its origin, then its
@@ -158,10 +167,10 @@ POSE_COLUMNS = ("origin.x", "origin.y", "origin.z", "qw", "qx", "qy", "qz")
 
 
 def with_body_poses(model: Model, trajectory: Trajectory) -> Trajectory:
-    """``trajectory`` with the poses of a spatial model's bodies (:func:`body_poses`) added as
-    extras, seven per body: ``BODY.origin.x``, ``.origin.y``, ``.origin.z`` (m) and the
-    quaternion ``BODY.qw``, ``.qx``, ``.qy``, ``.qz`` (scalar first); what a result file holds.
-    Returned unchanged for a model that is not spatial or has no bodies.
+    """``trajectory`` with the poses of a spatial model's bodies or a robot's moving links
+    (:func:`body_poses`) added as extras, seven per body: ``BODY.origin.x``, ``.origin.y``,
+    ``.origin.z`` (m) and the quaternion ``BODY.qw``, ``.qx``, ``.qy``, ``.qz`` (scalar first);
+    what a result file holds.  Returned unchanged for a model that is neither or has no bodies.
 
     Raises
     ------

@@ -126,6 +126,21 @@ class RobotEquations:
         self.python: tuple[tuple[int, TimeFunction], ...] = self.time_functions.python
         #: the drivers of a constant, which hold their joint and do no work
         self.steady_drivers = steady_drivers
+        moving = [i for i, body in enumerate(link_body) if body >= 0]
+        #: the links that move (every link but the root and those fixed to it), in the order of
+        #: :attr:`link_names`: the bodies of :meth:`body_poses` and of the result files' pose columns
+        self.bodies: tuple[str, ...] = tuple(link_names[i] for i in moving)
+        self._moving = np.array(moving, np.int64)
+
+    @property
+    def gravity(self) -> tuple[float, float, float]:
+        """The acceleration of gravity (m/s², world axes)."""
+        return tuple(float(value) for value in self.kernel.gravity)
+
+    @property
+    def body_names(self) -> tuple[str, ...]:
+        """The names of :attr:`bodies` (they are link names)."""
+        return self.bodies
 
     def new_terms(self) -> Terms:
         """A workspace sized for this model (its scratch holds the time functions and the per-body work)."""
@@ -170,6 +185,25 @@ class RobotEquations:
                 rotations[i] = R[body] @ offset[:3, :3]
                 origins[i] = o[body] + R[body] @ offset[:3, 3]
         return rotations, origins
+
+    def body_poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Origins (..., bodies, 3) and rotations (..., bodies, 3, 3) of the moving links'
+        frames (:attr:`bodies`) at coordinates ``q`` (..., n): for link i fixed to body k with
+        the placement (R_i⁰, p_i⁰) in its frame, ``R = R_k R_i⁰`` and ``o = o_k + R_k p_i⁰``
+        (:meth:`link_placements`).  A link as built is its frame at the world origin aligned with
+        the world axes, so R is the frame's world rotation and a point p given in link
+        coordinates is at o + R p.  Rows of q that are not finite give NaN."""
+        q = np.asarray(q, dtype=float)
+        rows = q.reshape(-1, self.n)
+        count = self._moving.size
+        origins = np.full((rows.shape[0], count, 3), np.nan)
+        rotations = np.full((rows.shape[0], count, 3, 3), np.nan)
+        for r, row in enumerate(rows):
+            if np.all(np.isfinite(row)):
+                R, o = self.link_placements(row)
+                rotations[r], origins[r] = R[self._moving], o[self._moving]
+        shape = q.shape[:-1]
+        return origins.reshape(*shape, count, 3), rotations.reshape(*shape, count, 3, 3)
 
     def point_positions(self, q: np.ndarray) -> np.ndarray:
         """(L, 3): the origins of the link frames, in the order of :attr:`link_names`."""

@@ -862,6 +862,11 @@ class SpatialEquations:
     def potential_energy(self, q: np.ndarray) -> float:
         return float(self.energy_parts(np.atleast_2d(q), np.zeros((1, self.n)))[1][0])
 
+    @property
+    def body_names(self) -> tuple[str, ...]:
+        """The names of :attr:`bodies`."""
+        return tuple(body.name for body in self.bodies)
+
     def body_poses(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Origins (..., bodies, 3) and rotation matrices (..., bodies, 3, 3) of the bodies at
         coordinates ``q`` (..., n).
