@@ -1,9 +1,24 @@
 """Independent numerical checks shared by the tests: finite differences of the model's own
-position-level functions, against which the analytic A, γ, Φ_t and Q are compared."""
+position-level functions, against which the analytic A, γ, Φ_t and Q are compared; and where the
+robot tests find their URDF files."""
 
 from __future__ import annotations
 
+import importlib.metadata
+from pathlib import Path
+
 import numpy as np
+
+
+def example_robots() -> Path | None:
+    """example-robot-data's robots directory (the URDF files the robot tests load), None when the
+    package (the [test] extra) is not installed."""
+    try:
+        distribution = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError:
+        return None
+    path = Path(str(distribution.locate_file("cmeel.prefix/share/example-robot-data/robots")))
+    return path if path.is_dir() else None
 
 
 def jacobian_fd(model, q: np.ndarray, t: float = 0.0, h: float = 1e-6) -> np.ndarray:

@@ -9,7 +9,6 @@ velocity (at ``idx_v``): :func:`_pinocchio_state` converts.
 
 from __future__ import annotations
 
-import importlib.metadata
 import os
 import subprocess
 import sys
@@ -19,6 +18,7 @@ import numpy as np
 import pytest
 
 import cmbs
+from helpers import example_robots
 from cmbs.errors import CmbsError
 from cmbs.model.robot import frame_jacobian, frame_placement
 
@@ -28,17 +28,7 @@ except ImportError:
     pinocchio = None
 
 
-def _robots_directory() -> Path | None:
-    """example-robot-data's robots directory (its URDF files), None when it is not installed."""
-    try:
-        distribution = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError:
-        return None
-    path = Path(str(distribution.locate_file("cmeel.prefix/share/example-robot-data/robots")))
-    return path if path.is_dir() else None
-
-
-ROBOTS = _robots_directory()
+ROBOTS = example_robots()
 needs_pinocchio = pytest.mark.skipif(pinocchio is None or ROBOTS is None,
                                      reason="the comparisons need pinocchio (pip 'pin') and example-robot-data")
 URDFS = {

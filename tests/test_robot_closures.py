@@ -2,7 +2,12 @@
 against central finite differences, Bricard's mechanism (IFToMM A04; its robot file is
 docs/robots.md's example) and a four-bar in joint coordinates against the natural-coordinate
 models, robot files (TOML naming a URDF and its closures) and their errors, inverse dynamics of a
-driven UR5 against Pinocchio's RNEA."""
+driven UR5 against Pinocchio's RNEA.
+
+The closed trees run in the Python loop (compiled=False), which evaluates the same compiled robot
+kernel and calls the same compiled solves: the compiled loops' handling of robot models is tested
+in tests/test_robot.py and tests/test_robot_dynamics.py, and a compiled loop per formulation for
+this model kind would cost the suite minutes of compilation."""
 
 from __future__ import annotations
 
@@ -132,7 +137,7 @@ def test_closed_made_up_tree_keeps_its_energy(kind, dof):
     model = model.replace(q0=cmbs.assemble(model, np.full(model.n, 0.2)))
     assert cmbs.constraint_report(model, model.q0).dof == dof
     run = cmbs.simulate(model, t_end=1.0, dt=0.05, formulation="projection", integrator="dop853", rtol=1e-11,
-                        atol=1e-12)
+                        atol=1e-12, compiled=False)
     assert run.info["status"] == "success"
     energy = model.energy_history(run.q, run.qd)
     assert np.abs(energy - energy[0]).max() < 1e-8
@@ -162,7 +167,7 @@ def test_bricard_moves_as_the_natural_coordinate_model(bricard):
     kept to 1e-8 J."""
     natural = cmbs.load("bricard")
     options = dict(t_end=2.0, dt=0.05, formulation="projection", integrator="dop853", rtol=1e-11, atol=1e-12)
-    run, reference = cmbs.simulate(bricard, **options), cmbs.simulate(natural, **options)
+    run, reference = cmbs.simulate(bricard, compiled=False, **options), cmbs.simulate(natural, **options)
     assert run.info["status"] == reference.info["status"] == "success"
     P3 = np.array([frame_placement(bricard, q, "rod3")[1] for q in run.q])
     P3_natural = reference.q[:, [natural.coordinate_index(f"P3.{c}") for c in "xyz"]]
@@ -222,7 +227,7 @@ axis_b = [0.0, 1.0, 0.0]
     report = cmbs.constraint_report(model, model.q0)
     assert (model.n, model.m, report.rank, report.dof) == (3, 5, 2, 1)
     options = dict(t_end=2.0, dt=0.05, integrator="dop853", rtol=1e-11, atol=1e-12)
-    run = cmbs.simulate(model, formulation=formulation, **options)
+    run = cmbs.simulate(model, formulation=formulation, compiled=False, **options)
     reference = cmbs.simulate(natural, formulation="lagrange", **options)
     assert run.info["status"] == reference.info["status"] == "success"
     for point, link, local in (("P1", "coupler", np.zeros(3)), ("P2", "rocker", start["P2"] - start["B"])):
@@ -378,7 +383,7 @@ def test_welded_twin_pendulums_swing_as_one_pendulum_of_both_bodies():
     report = cmbs.constraint_report(welded, welded.q0)
     assert (welded.m, report.rank, report.dof) == (6, 1, 1)
     options = dict(t_end=2.0, dt=0.05, integrator="dop853", rtol=1e-11, atol=1e-12)
-    run = cmbs.simulate(welded, formulation="projection", **options)
-    reference = cmbs.simulate(single.replace(q0=np.array([0.5])), **options)
+    run = cmbs.simulate(welded, formulation="projection", compiled=False, **options)
+    reference = cmbs.simulate(single.replace(q0=np.array([0.5])), compiled=False, **options)
     assert np.ptp(reference.q[:, 0]) > 0.5
     assert np.abs(run.q - reference.q[:, [0, 0]]).max() < 1e-9         # measured 1.1e-13

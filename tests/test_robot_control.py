@@ -5,7 +5,6 @@ regulation against its Lyapunov function."""
 
 from __future__ import annotations
 
-import importlib.metadata
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +12,7 @@ import pytest
 from scipy.integrate import cumulative_simpson
 
 import cmbs
+from helpers import example_robots
 from cmbs.cli import main
 from cmbs.control import PD, ComputedTorque, Reference, track
 
@@ -22,18 +22,7 @@ except ImportError:
     pinocchio = None
 
 
-def _ur5_urdf() -> Path | None:
-    """example-robot-data's UR5 URDF, None when it is not installed."""
-    try:
-        distribution = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError:
-        return None
-    path = Path(str(distribution.locate_file(
-        "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf")))
-    return path if path.is_file() else None
-
-
-UR5 = _ur5_urdf()
+UR5 = None if example_robots() is None else example_robots() / "ur_description/urdf/ur5_robot.urdf"
 pytestmark = pytest.mark.skipif(UR5 is None, reason="needs example-robot-data (the UR5 URDF)")
 
 #: each joint's reference: the driver's expression, the function and its rate at t = 0

@@ -5,17 +5,16 @@ rotations; the HTML viewer's stick figure of the link origins."""
 
 from __future__ import annotations
 
-import importlib.metadata
 import json
 import re
 import xml.etree.ElementTree as ElementTree
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 import cmbs
+from helpers import example_robots
 from cmbs.cli import main
 from cmbs.kinematics import POSE_COLUMNS, body_poses
 from cmbs.model.robot import frame_placement
@@ -26,18 +25,7 @@ except ImportError:
     pinocchio = None
 
 
-def _ur5_urdf() -> Path | None:
-    """example-robot-data's UR5 URDF, None when it is not installed."""
-    try:
-        distribution = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError:
-        return None
-    path = Path(str(distribution.locate_file(
-        "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf")))
-    return path if path.is_file() else None
-
-
-UR5 = _ur5_urdf()
+UR5 = None if example_robots() is None else example_robots() / "ur_description/urdf/ur5_robot.urdf"
 pytestmark = pytest.mark.skipif(UR5 is None, reason="needs example-robot-data (the UR5 URDF)")
 #: the UR5's links that do not move: the root and the links fixed to it
 GROUND_LINKS = {"world", "base_link", "base"}

@@ -390,22 +390,33 @@ def _unreachable_drivers(model: Model) -> tuple[str, str] | None:
     return None
 
 
+def coordinate_values(document: dict, section: str, model: Model, start: np.ndarray, *, noun: str = "coordinate",
+                      quantity: str = "value") -> tuple[np.ndarray, tuple[str, ...]]:
+    """A copy of ``start`` (n,) with the numbers of the table ``[section]`` ({name: number}, each
+    name a coordinate of ``model``, a ``noun`` in the messages) in place, and the names given.
+    One-line errors for a section that is not a table, an unknown name and a ``quantity`` that is
+    not a finite number."""
+    table = document.get(section, {})
+    if not isinstance(table, dict):
+        raise ModelError(f"[{section}] must be a table of {noun} = {quantity}", entry=section)
+    values = np.array(start, dtype=float)
+    names = model.coordinate_names
+    for name, value in table.items():
+        entry = f"{section}.{name}"
+        if name not in names:
+            raise ModelError(f"unknown {noun} {name!r}{did_you_mean(name, names)} ({noun}s: {', '.join(names)})",
+                             entry=entry)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ModelError(f"the {quantity} must be a finite number, got {value!r}", entry=entry)
+        values[model.coordinate_index(name)] = float(value)
+    return values, tuple(table)
+
+
 def _initial_velocities(document: dict, model: Model) -> tuple[Model, tuple[str, ...]]:
     """``model`` with the velocities of ``[initial_velocities]`` ({coordinate: value}) in its
     q̇0, and their coordinate names."""
-    table = document.get("initial_velocities", {})
-    if not isinstance(table, dict):
-        raise ModelError("[initial_velocities] must be a table of coordinate = velocity", entry="initial_velocities")
-    qd0 = np.array(model.qd0, dtype=float)
-    for name, value in table.items():
-        entry = f"initial_velocities.{name}"
-        if name not in model.coordinate_names:
-            raise ModelError(f"unknown coordinate {name!r}{did_you_mean(name, model.coordinate_names)} "
-                             f"(coordinates: {', '.join(model.coordinate_names)})", entry=entry)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ModelError(f"the velocity must be a finite number, got {value!r}", entry=entry)
-        qd0[model.coordinate_index(name)] = float(value)
-    return model.replace(qd0=qd0), tuple(table)
+    qd0, names = coordinate_values(document, "initial_velocities", model, model.qd0, quantity="velocity")
+    return model.replace(qd0=qd0), names
 
 
 #: largest |Φ_q q̇0 + Φ_t| (relative to 1 + max |q̇0|) accepted for the given initial velocities

@@ -17,7 +17,7 @@ import math
 from pathlib import Path
 
 from cmbs.errors import ModelError, did_you_mean
-from cmbs.model.files import _driver, _Entry, _entries, _initial_velocities, assembled
+from cmbs.model.files import _driver, _Entry, _entries, _initial_velocities, assembled, coordinate_values
 from cmbs.model.model import Model
 from cmbs.model.robot import JointDriver
 from cmbs.model.robot_closures import CLOSURE_KINDS, Closure
@@ -64,18 +64,7 @@ def _closure(name: str, table: object) -> Closure:
 
 def _initial_positions(document: dict, model: Model) -> Model:
     """``model`` with the joint values of ``[initial_positions]`` in its q0 (the assembly's guess)."""
-    table = document.get("initial_positions", {})
-    if not isinstance(table, dict):
-        raise ModelError("[initial_positions] must be a table of joint = value", entry="initial_positions")
-    q0 = model.q0.copy()
-    for name, value in table.items():
-        entry = f"initial_positions.{name}"
-        if name not in model.coordinate_names:
-            raise ModelError(f"unknown joint {name!r}{did_you_mean(name, model.coordinate_names)} (movable joints: "
-                             f"{', '.join(model.coordinate_names)})", entry=entry)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ModelError(f"the value must be a finite number, got {value!r}", entry=entry)
-        q0[model.coordinate_index(name)] = float(value)
+    q0, _ = coordinate_values(document, "initial_positions", model, model.q0, noun="joint")
     return model.replace(q0=q0)
 
 
