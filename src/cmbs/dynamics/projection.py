@@ -219,7 +219,16 @@ def _by_dependent_rows(kernel, Q, A, gamma, schur, qdd, lam):
                                        A, gamma, kernel.row_scale, schur[2], schur[5], schur[6], qdd, lam)
     if certificate.shape[0] == 0:
         return False
-    threshold = kernel.threshold
+    return row_scaled_svd_agrees(certificate, kernel.threshold)
+
+
+@njit(cache=True, inline="always")
+def row_scaled_svd_agrees(certificate, threshold):
+    """Whether the SVD of the row-scaled A, singular values up to ``threshold`` discarded, keeps
+    exactly the rows :func:`cmbs.dynamics.dependent_rows.solve_dependent_rows` kept (its
+    ``certificate``): the left-out singular values are at most ρ ≤ ``threshold``, the kept ones
+    at least σ_min(A'_I) > ``threshold`` and ≥ PROJECTION_REGULAR·max(σ_max, 1) (for accuracy).
+    The projection's test, and Udwadia-Kalaba's for its multipliers."""
     low = certificate[KEPT_LOW]
     return (low >= PROJECTION_REGULAR * PROJECTION_REGULAR * max(certificate[TRACE], 1.0)
             and low > threshold * threshold and certificate[RESIDUAL] <= threshold * threshold)

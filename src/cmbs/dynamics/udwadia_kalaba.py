@@ -35,11 +35,11 @@ import numpy as np
 from cmbs.dynamics.base import OK, Accelerations, StatelessSolver, check_parameters
 from cmbs.dynamics.dense import NOT_POSITIVE_DEFINITE, add_scaled_gram, all_finite, fill_nan, multiply, \
     multiply_transposed
-from cmbs.dynamics.dependent_rows import KEPT_LOW, RESIDUAL, TRACE, dependent_rows, solve_dependent_rows
+from cmbs.dynamics.dependent_rows import KEPT_LOW, RESIDUAL, dependent_rows, solve_dependent_rows
 from cmbs.dynamics.field import unchanged
 from cmbs.dynamics.kkt import DENSE, band_kkt, banded, bounds_meeting, cholesky_in_place, packed_workspace, \
     schur_solve, solve_lower, solve_lower_transposed, unpack_workspace
-from cmbs.dynamics.projection import PROJECTION_REGULAR, reference_row_scale
+from cmbs.dynamics.projection import PROJECTION_REGULAR, reference_row_scale, row_scaled_svd_agrees
 from cmbs.errors import CmbsError, SingularSystemError
 from cmbs.jit import njit, same_kind
 from cmbs.model.compiled import model_kernel
@@ -346,8 +346,7 @@ def _by_dependent_rows(kernel, M, Q, A, gamma, c, qdd, lam):
         return False
     threshold, low, residual = kernel.threshold, certificate[KEPT_LOW], certificate[RESIDUAL]
     weight = kernel.mass_scale * kernel.mass_scale / kernel.mass_low
-    return (low >= PROJECTION_REGULAR * PROJECTION_REGULAR * max(certificate[TRACE], 1.0)
-            and low > threshold * threshold and residual <= threshold * threshold
+    return (row_scaled_svd_agrees(certificate, threshold)
             and weight * low > threshold * threshold and weight * residual <= threshold * threshold
             and _regular_force(kernel, M, Q, qdd, lam))
 
