@@ -416,10 +416,12 @@ def _prescribed(model: cmbs.Model, args: argparse.Namespace) -> cmbs.Model:
 def _reaction_series(model: cmbs.Model, reactions: dict) -> list[tuple[str, np.ndarray, str]]:
     """(label, history, unit) of every joint reaction, for printing and saving; natural-coordinate
     models report forces per segment end (spatial ones: per body point, and couples through its
-    unit vectors), joint-coordinate models per joint (a torque in N m at a revolute joint, a
-    force in N along a prismatic one)."""
+    unit vectors), joint-coordinate models and robots per link or joint (the force and the moment
+    about the joint of the parent on the link; the torque in N m at a revolute joint, the force in
+    N along a prismatic one)."""
     if "joint_forces" in reactions:
         return ([(f"reaction on {link}", force, "N") for link, force in reactions["forces"].items()]
+                + [(f"moment on {link}", moment, "N m") for link, moment in reactions["moments"].items()]
                 + [(f"joint force {name}", force, force_unit(model, name))
                    for name, force in reactions["joint_forces"].items()]
                 + [(f"closure force {name}", force, "N") for name, force in reactions["closures"].items()])
@@ -644,7 +646,8 @@ def build_parser() -> argparse.ArgumentParser:
     inverse.add_argument("--reactions", action="store_true",
                          help="also the joint reactions: at every segment end, joint torques and slider forces "
                               "(natural coordinates; in 3-D at every body point, and couples through its unit "
-                              "vectors); at every joint and closure (joint coordinates)")
+                              "vectors); at every joint and closure (joint coordinates and robots: the force and moment of "
+                              "the parent on the link, and the joint's torque or force)")
     inverse.add_argument("--out", help="result file (.npz or .csv) with the motion and driver_forces")
     inverse.add_argument("--plot", help="figure of the forces and the motion")
     inverse.set_defaults(run=_inverse)

@@ -206,10 +206,13 @@ def joint_reaction_history(model: Model, motion: Trajectory) -> dict:
     ``'lam'`` (k, m), e.g. ``inverse_dynamics(...).motion``, and ``'u'`` (k, n_u) if the inputs
     were not zero): :func:`joint_reactions` for natural-coordinate models,
     :func:`~cmbs.inverse.spatial_reactions.spatial_reactions` for spatial ones,
-    :func:`~cmbs.inverse.tree_reactions.tree_reactions` for joint-coordinate ones.  The same keys,
-    each value with a leading time axis ((k, 2) or (k, 3) for forces, (k,) for scalars)."""
+    :func:`~cmbs.inverse.tree_reactions.tree_reactions` for joint-coordinate ones,
+    :func:`~cmbs.inverse.robot_reactions.robot_reactions` for robots.  The same keys, each value
+    with a leading time axis ((k, 2) or (k, 3) for forces, (k,) for scalars)."""
+    from cmbs.inverse.robot_reactions import robot_reactions
     from cmbs.inverse.spatial_reactions import spatial_reactions
     from cmbs.inverse.tree_reactions import tree_reactions
+    from cmbs.model.robot import RobotEquations
     from cmbs.model.spatial import SpatialEquations
 
     if "lam" not in motion.extras:
@@ -222,7 +225,8 @@ def joint_reaction_history(model: Model, motion: Trajectory) -> dict:
                     for i in range(motion.t.size)]
     else:
         inputs = np.asarray(motion.extras.get("u", np.zeros((motion.t.size, model.n_u))), dtype=float)
-        per_time = [tree_reactions(model, motion.q[i], motion.qd[i], motion.qdd[i], lam[i], inputs[i], motion.t[i])
+        reactions = robot_reactions if isinstance(equations, RobotEquations) else tree_reactions
+        per_time = [reactions(model, motion.q[i], motion.qd[i], motion.qdd[i], lam[i], inputs[i], motion.t[i])
                     for i in range(motion.t.size)]
     if not per_time:
         raise CmbsError("the trajectory is empty")

@@ -471,3 +471,27 @@ def body_poses(kernel: RobotKernel, q: np.ndarray) -> tuple[np.ndarray, np.ndarr
     _poses_kernel(kernel.parent, kernel.order, kernel.kind, kernel.placement, kernel.axis,
                   np.ascontiguousarray(q, dtype=float), R, o, S)
     return R, o, S
+
+
+class BodyWork(NamedTuple):
+    """What :func:`evaluate_terms` leaves per body in the terms' scratch, as arrays (views):
+    world rotation R (n, 3, 3), frame origin o (n, 3), motion subspace S (n, 6), the sum over the
+    body's subtree of the bias wrenches ``I a + v ×_f I v`` (RNEA at q̈ = 0, base at -g; n, 6)
+    and the composite inertia (m, h, Ī) of its subtree (n, 10), all in world Plücker coordinates
+    (module docstring)."""
+
+    R: np.ndarray
+    o: np.ndarray
+    S: np.ndarray
+    bias_subtree: np.ndarray
+    composite: np.ndarray
+
+
+def body_work(kernel: RobotKernel, scratch: np.ndarray) -> BodyWork:
+    """The per-body work of the last evaluation into a terms buffer whose scratch is ``scratch``
+    (``terms.scratch`` after ``model.evaluate``)."""
+    n = kernel.parent.shape[0]
+    start = 3 * kernel.tf_table.shape[0] + 3 * int(kernel.sizes[1])
+    work = scratch[start:start + WORK * n].reshape(n, WORK)
+    return BodyWork(work[:, _R:_R + 9].reshape(n, 3, 3), work[:, _O:_O + 3], work[:, _S:_S + 6],
+                    work[:, _F:_F + 6], work[:, _I:_I + 10])
