@@ -42,7 +42,7 @@ from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, Rob
     evaluate_terms, scratch_size
 
 __all__ = ["Inertial", "TreeLink", "TreeJoint", "JointDriver", "RobotEquations", "build_robot", "frame_placement",
-           "frame_jacobian"]
+           "frame_jacobian", "initial_value"]
 
 MOVABLE = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
 JOINT_TYPES = (*MOVABLE, "fixed")
@@ -251,6 +251,16 @@ def _robot_equations(model: Model) -> RobotEquations:
     return model.equations
 
 
+def initial_value(joint: TreeJoint) -> float:
+    """The joint's coordinate in ``model.q0``: the value nearest 0 within its limits,
+    ``min(max(0, lower), upper)`` (a missing limit bounds nothing; a continuous joint has none:
+    URDF ignores its ``lower`` and ``upper``)."""
+    if joint.type == "continuous":
+        return 0.0
+    value = 0.0 if joint.lower is None else max(0.0, joint.lower)
+    return value if joint.upper is None else min(value, joint.upper)
+
+
 def _finite(values: Sequence[float], entry: str, label: str, source: str | None) -> np.ndarray:
     array = np.asarray(values, dtype=float)
     if not np.all(np.isfinite(array)):
@@ -277,17 +287,18 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                 drivers: Sequence[JointDriver] = ()) -> Model:
     """The :class:`~cmbs.model.model.Model` of the tree of ``links`` and ``joints`` closed by
     ``closures`` and driven by ``drivers`` (module docstring); ``source`` names the file it came
-    from in errors and on the model.  ``model.q0`` is zero (not assembled:
-    :func:`cmbs.kinematics.assemble`).
+    from in errors and on the model.  ``model.q0`` is each coordinate's value nearest 0 within
+    its joint's limits (:func:`initial_value`; not assembled: :func:`cmbs.kinematics.assemble`).
 
     Raises
     ------
     ModelError
         Naming the joint, link, closure or driver: an unknown type, an unknown or repeated link, a
         link with two parents, a tree without exactly one root, a zero axis, non-finite numbers, a
-        negative mass, a movable joint that carries no mass nor inertia, a closure's mistakes
-        (:func:`~cmbs.model.robot_closures.closure_elements`), a driver of an unknown or fixed
-        joint, two drivers of one joint, or repeated constraint names.
+        negative mass, limits with lower > upper, a movable joint that carries no mass nor
+        inertia, a closure's mistakes (:func:`~cmbs.model.robot_closures.closure_elements`), a
+        driver of an unknown or fixed joint, two drivers of one joint, or repeated constraint
+        names.
     """
     g = _finite(gravity, f"model {name!r}", "gravity", source)
     if g.shape != (3,):
@@ -321,6 +332,8 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
         _finite(joint.origin, entry, "origin", source)
         if joint.type in MOVABLE and not np.linalg.norm(_finite(joint.axis, entry, "axis", source)) > 0:
             raise ModelError(f"axis must be nonzero, got {list(joint.axis)}", source=source, entry=entry)
+        if joint.lower is not None and joint.upper is not None and joint.lower > joint.upper:
+            raise ModelError(f"limit lower {joint.lower:g} > upper {joint.upper:g}", source=source, entry=entry)
         parent_joint[joint.child] = joint
         children[joint.parent].append(joint)
     roots = [link for link in by_name if link not in parent_joint]
@@ -414,7 +427,7 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
         constraint_names=constraint_names,
         drivers=np.array([False] * (len(constraint_names) - len(drivers)) + [True] * len(drivers), dtype=bool),
         actuator_names=names,
-        q0=np.zeros(n),
+        q0=np.array([initial_value(joint) for joint in movable], dtype=float).reshape(n),
         qd0=np.zeros(n),
         point_names=link_names,
         lines=tuple((index[joint.parent], index[joint.child]) for joint in joints),
