@@ -23,7 +23,8 @@ are part of the ground.  Every link keeps its own frame for the kinematics
 (:func:`frame_placement`, :func:`frame_jacobian`).  M(q) and Q are computed by the compiled
 composite-rigid-body and recursive Newton-Euler algorithms of :mod:`cmbs.model.robot_kernel`.
 Joint limits, effort and velocity limits, damping and friction are kept as data
-(:attr:`RobotEquations.joints`), not enforced.
+(:attr:`RobotEquations.joints`), not enforced; so is the links' visual geometry
+(``model.parameters["visuals"]``: per link name, its :class:`~cmbs.model.visuals.Visual` list).
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from cmbs.model.model import Model, Terms
 from cmbs.model.robot_closures import Closure, closure_elements
 from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, RobotKernel, body_poses, energies, \
     evaluate_terms, scratch_size
+from cmbs.model.visuals import Visual, checked_visual
 
 __all__ = ["Inertial", "TreeLink", "TreeJoint", "JointDriver", "RobotEquations", "build_robot", "frame_placement",
            "frame_jacobian", "initial_value"]
@@ -60,10 +62,12 @@ class Inertial:
 
 @dataclass(frozen=True, eq=False)
 class TreeLink:
-    """A link: its name and inertial (None: massless)."""
+    """A link: its name, inertial (None: massless) and visual geometry (in the link frame, data
+    for the viewer: :mod:`cmbs.model.visuals`)."""
 
     name: str
     inertial: Inertial | None = None
+    visuals: tuple[Visual, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -295,10 +299,10 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
     ModelError
         Naming the joint, link, closure or driver: an unknown type, an unknown or repeated link, a
         link with two parents, a tree without exactly one root, a zero axis, non-finite numbers, a
-        negative mass, limits with lower > upper, a movable joint that carries no mass nor
-        inertia, a closure's mistakes (:func:`~cmbs.model.robot_closures.closure_elements`), a
-        driver of an unknown or fixed joint, two drivers of one joint, or repeated constraint
-        names.
+        negative mass, a visual that is no shape (:func:`~cmbs.model.visuals.checked_visual`),
+        limits with lower > upper, a movable joint that carries no mass nor inertia, a closure's
+        mistakes (:func:`~cmbs.model.robot_closures.closure_elements`), a driver of an unknown or
+        fixed joint, two drivers of one joint, or repeated constraint names.
     """
     g = _finite(gravity, f"model {name!r}", "gravity", source)
     if g.shape != (3,):
@@ -315,6 +319,8 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                                  entry=entry)
             _finite(link.inertial.origin, entry, "origin", source)
             _finite(link.inertial.inertia, entry, "inertia", source)
+        for k, visual in enumerate(link.visuals):
+            checked_visual(visual, source=source, entry=f"link {link.name!r} visual {k + 1}")
     children: dict[str, list[TreeJoint]] = {link: [] for link in by_name}
     parent_joint: dict[str, TreeJoint] = {}
     for joint in joints:
@@ -439,7 +445,8 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                                 "velocity": j.velocity, "damping": j.damping, "friction": j.friction}
                                for j in movable],
                     "closures": [dict(vars(closure)) for closure in closures],
-                    "drivers": [{"name": d.name, "joint": d.joint, "function": f} for d, f in zip(drivers, functions)]},
+                    "drivers": [{"name": d.name, "joint": d.joint, "function": f} for d, f in zip(drivers, functions)],
+                    "visuals": {link.name: tuple(link.visuals) for link in by_name.values() if link.visuals}},
         segment_masses=tuple((link.name, float(link.inertial.mass)) for link in by_name.values()
                              if link.inertial is not None and link.inertial.mass > 0),
     )
