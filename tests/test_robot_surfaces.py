@@ -7,7 +7,9 @@ Motions are given as trajectories written here (no simulation) to keep the tests
 
 from __future__ import annotations
 
+import functools
 import html
+import importlib
 import json
 import re
 import warnings
@@ -140,20 +142,23 @@ def test_a_mesh_is_scaled_then_placed_by_its_origin(tmp_path):
 
 def test_an_unreadable_mesh_is_a_warning_and_a_stick_figure(tmp_path):
     """A mesh file trimesh cannot read (broken COLLADA), one without triangles, a missing one: a
-    CmbsWarning naming the link and the file each, and those links get no surfaces."""
+    CmbsWarning naming the link and the file each, and those links get no surfaces (the others
+    keep theirs)."""
     (tmp_path / "broken.dae").write_text("<COLLADA><not closed")
     (tmp_path / "empty.stl").write_bytes(b"\x00\x01 not a mesh")
     path = tmp_path / "broken.urdf"
     text = SHAPES.replace('<sphere radius="0.05"/>', '<mesh filename="missing.stl"/>') \
         .replace('<link name="base"/>', '<link name="base"><visual><geometry><mesh filename="broken.dae"/>'
-                                        '</geometry></visual></link>')
+                                        '</geometry></visual></link>') \
+        .replace("</robot>", '<link name="tip"><visual><geometry><box size="0.1 0.1 0.1"/></geometry></visual></link>'
+                             '<joint name="tip" type="fixed"><parent link="arm"/><child link="tip"/></joint></robot>')
     for urdf, problem in ((text, r"cannot read mesh {folder}/broken\.dae \(.+\)"),
                           (text.replace("broken.dae", "empty.stl"), r"mesh {folder}/empty\.stl has no triangles")):
         path.write_text(urdf)
         model = cmbs.load(path)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            assert link_surfaces(model) == ()
+            assert [surface.link for surface in link_surfaces(model)] == ["tip"]
         messages = [str(warning.message) for warning in caught if warning.category is CmbsWarning]
         assert len(messages) == 2 and len(caught) == 2
         assert re.fullmatch(re.escape(f"{path}: link 'base': ") + problem.format(folder=re.escape(str(tmp_path)))
@@ -161,7 +166,11 @@ def test_an_unreadable_mesh_is_a_warning_and_a_stick_figure(tmp_path):
         assert messages[1] == f"{path}: link 'arm': mesh missing.stl: no such file; the link is drawn as a stick figure"
 
 
-def test_the_command_line_warns_in_one_line(tmp_path, capsys):
+def test_the_command_line_warns_in_one_line(tmp_path, capsys, monkeypatch):
+    """`cmbs simulate --animate` says so in one line and writes the viewer of the stick figure
+    (its run in the Python loop: no compiled loop to build for this test)."""
+    simulation = importlib.import_module("cmbs.simulate")
+    monkeypatch.setattr(simulation, "simulate", functools.partial(simulation.simulate, compiled=False))
     path = tmp_path / "missing.urdf"
     path.write_text(SHAPES.replace('<sphere radius="0.05"/>', '<mesh filename="missing.stl"/>'))
     page = tmp_path / "missing.html"
