@@ -40,7 +40,8 @@ SHAPES = f"""<robot name="shapes">
   <link name="arm">{INERTIAL}
     <visual><origin xyz="0.3 0 0.2" rpy="0 0 0.5"/><geometry><box size="0.2 0.1 0.05"/></geometry>
       <material name="red"><color rgba="1 0 0 1"/></material></visual>
-    <visual><origin xyz="0 0 0.1" rpy="1.5707963267948966 0 0"/><geometry><cylinder radius="0.03" length="0.2"/></geometry>
+    <visual><origin xyz="0 0 0.1" rpy="1.5707963267948966 0 0"/>
+      <geometry><cylinder radius="0.03" length="0.2"/></geometry>
       <material name="green"><color rgba="0 1 0 1"/></material></visual>
     <visual><origin xyz="0 0.1 0"/><geometry><sphere radius="0.05"/></geometry></visual>
   </link>
@@ -273,8 +274,8 @@ window.addEventListener("load", () => setTimeout(() => {
   sticks.click();
   const out = document.createElement("pre");
   out.id = "harness";
-  out.textContent = JSON.stringify({ failures: window.failures, dark, shown: !document.getElementById("in-front").hidden,
-                                     toggled: canvas.toDataURL() !== before });
+  const shown = !document.getElementById("in-front").hidden;
+  out.textContent = JSON.stringify({ failures: window.failures, dark, shown, toggled: canvas.toDataURL() !== before });
   document.body.appendChild(out);
 }, 0));
 </script>
