@@ -134,7 +134,8 @@ def visual_surfaces(link: str, visual: Visual) -> list[Surface]:
 def simplified(surfaces: list[Surface], budget: int) -> list[Surface]:
     """``surfaces`` (one link's) with at most ``budget`` triangles in all: unchanged if they have
     no more, else vertex-clustered on one grid (module docstring); surfaces left without
-    triangles are dropped."""
+    triangles are dropped.  A budget below 56 may be missed: cubes of the link's size, the
+    largest tried, leave the triangles of up to 8 cubes' vertices."""
     if sum(len(surface.triangles) for surface in surfaces) <= budget:
         return surfaces
     vertices = np.concatenate([surface.vertices for surface in surfaces])
