@@ -22,8 +22,9 @@ from PIL import Image  # noqa: E402  (a dependency of matplotlib)
 
 from cmbs.errors import CmbsError, did_you_mean  # noqa: E402
 from cmbs.files_io import atomic_path, checked_output  # noqa: E402
-from cmbs.kinematics import point_array  # noqa: E402
+from cmbs.kinematics import BodyPoses, body_poses, point_array  # noqa: E402
 from cmbs.model.model import Model  # noqa: E402
+from cmbs.surfaces import Surface, grounded, link_surfaces  # noqa: E402
 from cmbs.trajectory import Trajectory  # noqa: E402
 
 #: Most frames an animation gets; longer motions are shown with a lower frame rate.
@@ -33,6 +34,8 @@ FIGURE_SIZE = (6.4, 4.8)
 #: Line styles of the moving figure's segments and of the reference ("ghost") figure under it.
 FIGURE_STYLE = {"color": "C0", "linewidth": 2.5, "solid_capstyle": "round"}
 GHOST_STYLE = {"color": "0.55", "alpha": 0.5, "linewidth": 5.0, "solid_capstyle": "round"}
+#: the light of a surface facing away from the light, as a fraction of its colour (flat shading)
+AMBIENT = 0.35
 
 
 def frame_times(trajectory: Trajectory, *, fps: float = 30, speed: float = 1.0,
@@ -72,13 +75,18 @@ class Frames(NamedTuple):
     """What an animation shows (:func:`animation_frames`): the simulated ``times`` of its frames,
     the frame ``rate`` they are played at, the model's point positions ``points`` (frames, points,
     2) in the plane (x, z) or (frames, points, 3) in space, those of the reference (``ghost``,
-    same shape) or None, and the index of the ``trail`` point or None."""
+    same shape) or None, and the index of the ``trail`` point or None; for a robot with visual
+    geometry its ``surfaces`` (:func:`cmbs.surfaces.link_surfaces`, those of the links that do
+    not move in world coordinates: :func:`cmbs.surfaces.grounded`) and the ``poses`` of its
+    moving links at the frame times (:func:`cmbs.kinematics.body_poses`), else () and None."""
 
     times: np.ndarray
     rate: float
     points: np.ndarray
     ghost: np.ndarray | None
     trail: int | None
+    surfaces: tuple[Surface, ...] = ()
+    poses: BodyPoses | None = None
 
 
 def animation_frames(model: Model, trajectory: Trajectory, *, fps: float = 30, speed: float = 1.0,
@@ -105,9 +113,13 @@ def animation_frames(model: Model, trajectory: Trajectory, *, fps: float = 30, s
                             f"{', '.join(model.point_names) or 'none'}")
         trail_index = model.point_names.index(trail)
     times, rate = frame_times(trajectory, fps=fps, speed=speed, reference=reference)
-    points = _poses(model, times, trajectory.t, q, "trajectory")
-    ghost = _poses(model, times, reference.t, reference_q, "reference") if reference is not None else None
-    return Frames(times, rate, points, ghost, trail_index)
+    frames_q = _interpolated(times, trajectory.t, q)
+    points = _points(model, frames_q, "trajectory")
+    ghost = _points(model, _interpolated(times, reference.t, reference_q), "reference") \
+        if reference is not None else None
+    surfaces = grounded(model, link_surfaces(model))
+    poses = body_poses(model, frames_q) if surfaces else None
+    return Frames(times, rate, points, ghost, trail_index, surfaces, poses)
 
 
 def label_decimals(times: np.ndarray) -> int:
@@ -139,7 +151,9 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
     apart, so that every frame's label differs) and, with ``trail`` (a name from
     ``model.point_names``), the path that point has traced so far.  The axis limits are fixed
     and cover every frame, with equal scales on x and z.  A spatial model (points in 3-D) is
-    drawn in a 3-D axis with a fixed view and equal scales on x, y and z.
+    drawn in a 3-D axis with a fixed view and equal scales on x, y and z.  A robot with visual
+    geometry (URDF ``<visual>``: :mod:`cmbs.surfaces`) is drawn as its links' flat-shaded
+    triangles over the stick figure, the limits covering them too.
 
     Reference
         ``reference``, a second motion of the same model (e.g. the recorded motion a simulation
@@ -188,11 +202,14 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
 
         return write_viewer(model, frames, path)
     mp4 = path.suffix.lower() == ".mp4"
-    times, rate, points, ghost, trail_index = frames
+    times, rate, points, ghost, trail_index = frames[:5]
     decimals = label_decimals(times)
 
     spatial = points.shape[2] == 3
     everything = points if ghost is None else np.concatenate([points, ghost], axis=1)
+    shaded = _Shaded(frames.surfaces, frames.poses) if spatial and frames.surfaces else None
+    if shaded is not None:
+        everything = np.concatenate([everything, shaded.extent(times.size)], axis=1)
     figure = plt.figure(figsize=FIGURE_SIZE, dpi=dpi)
     try:
         if spatial:
@@ -218,7 +235,11 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
             axis.legend([Line2D([], [], **FIGURE_STYLE), Line2D([], [], **GHOST_STYLE)], ["simulated", "reference"],
                         loc="upper right")
 
-        moving = [artist for artist in (trail_line, *ghosts, *segments, dots, label) if artist is not None]
+        if shaded is not None:
+            axis.add_collection3d(shaded.collection)
+        # the stick figure under the surfaces, the trail over them
+        moving = [artist for artist in (*ghosts, *segments, dots, shaded and shaded.collection, trail_line, label)
+                  if artist is not None]
 
         def pose(frame: int) -> None:
             here = points[frame]
@@ -227,6 +248,8 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
             for line, (i, j) in zip(ghosts, model.lines):
                 _place(line, ghost[frame][[i, j]])
             _place(dots, here)
+            if shaded is not None:
+                shaded.pose(frame, axis)
             if trail_line is not None:
                 _place(trail_line, points[:frame + 1, trail_index])
             label.set_text(f"t = {times[frame]:.{decimals}f} s")
@@ -242,6 +265,8 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
             pose(frame)
             figure.canvas.restore_region(background)
             for artist in moving:
+                if shaded is not None and artist is shaded.collection:
+                    artist.do_3d_projection()             # sorts the triangles by depth (Axes3D.draw does it)
                 axis.draw_artist(artist)
 
         if mp4:
@@ -261,6 +286,56 @@ def animate(model: Model, trajectory: Trajectory, path: str | os.PathLike, *, fp
     finally:
         plt.close(figure)
     return path
+
+
+class _Shaded:
+    """A robot's surfaces (:attr:`Frames.surfaces`) in a 3-D axis: one ``Poly3DCollection`` of all
+    their triangles, placed at each frame by the link poses (p_world = o + R p), depth-sorted by
+    matplotlib (painter's algorithm on the triangles' mean depth) and flat-shaded: a triangle of
+    colour c with unit normal n is drawn ``c (a + (1 - a) |n · l|)``, a = :data:`AMBIENT`, l the
+    unit direction from the scene to the viewer (a light at the eye)."""
+
+    def __init__(self, surfaces: tuple[Surface, ...], poses: BodyPoses):
+        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+        self.surfaces, self.poses = surfaces, poses
+        self.index = {name: k for k, name in enumerate(poses.names)}
+        self.colours = np.concatenate([np.tile(surface.colour, (len(surface.triangles), 1)) for surface in surfaces])
+        self.collection = Poly3DCollection(np.zeros((0, 3, 3)), linewidths=0.3, gid="surfaces")
+
+    def placed(self, frame: int) -> list[np.ndarray]:
+        """The surfaces' vertices in world coordinates at ``frame``."""
+        placed = []
+        for surface in self.surfaces:
+            if surface.link is None:
+                placed.append(surface.vertices)
+            else:
+                k = self.index[surface.link]
+                placed.append(surface.vertices @ self.poses.rotations[frame, k].T + self.poses.origins[frame, k])
+        return placed
+
+    def extent(self, count: int) -> np.ndarray:
+        """(count, 2, 3): the corners of the box around the vertices at each frame."""
+        boxes = []
+        for frame in range(count):
+            vertices = np.concatenate(self.placed(frame))
+            boxes.append([vertices.min(axis=0), vertices.max(axis=0)])
+        return np.array(boxes)
+
+    def pose(self, frame: int, axis: plt.Axes) -> None:
+        """The triangles at ``frame``, shaded for the axis' view."""
+        corners = np.concatenate([vertices[surface.triangles]
+                                  for vertices, surface in zip(self.placed(frame), self.surfaces)])
+        normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        lengths = np.linalg.norm(normals, axis=1)
+        normals /= np.where(lengths > 0, lengths, 1.0)[:, None]
+        elevation, azimuth = np.radians(axis.elev), np.radians(axis.azim)
+        eye = np.array([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
+        light = AMBIENT + (1 - AMBIENT) * np.abs(normals @ eye)
+        colours = np.clip(self.colours * light[:, None], 0.0, 1.0)
+        self.collection.set_verts(corners)
+        self.collection.set_facecolor(colours)
+        self.collection.set_edgecolor(colours)         # no hairline gaps between neighbouring triangles
 
 
 class _BlitPillowWriter(animation.PillowWriter):
@@ -321,11 +396,16 @@ def _time_span(trajectory: Trajectory, what: str) -> tuple[float, float]:
     return float(t[0]), float(t[-1])
 
 
-def _poses(model: Model, times: np.ndarray, sample_times: np.ndarray, q: np.ndarray, what: str) -> np.ndarray:
-    """(frames, points, 2) point positions (x, z) at ``times``, (frames, points, 3) for a spatial
-    model, the coordinates ``q`` (samples, n) interpolated linearly between ``sample_times``."""
-    frames_q = np.column_stack([np.interp(times, sample_times, column) for column in q.T]) \
+def _interpolated(times: np.ndarray, sample_times: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(frames, n): the coordinates ``q`` (samples, n) interpolated linearly between
+    ``sample_times`` to ``times``."""
+    return np.column_stack([np.interp(times, sample_times, column) for column in q.T]) \
         if q.shape[1] else np.zeros((times.size, 0))
+
+
+def _points(model: Model, frames_q: np.ndarray, what: str) -> np.ndarray:
+    """(frames, points, 2) point positions (x, z) at the coordinates ``frames_q``, (frames,
+    points, 3) for a spatial model."""
     points = np.array([point_array(model, row) for row in frames_q])
     if not np.all(np.isfinite(points)):
         raise CmbsError(f"cannot animate model {model.name!r}: non-finite point positions along the {what}")

@@ -10,13 +10,14 @@ import argparse
 import math
 import signal
 import sys
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable, Sequence
 
 import numpy as np
 
 import cmbs
-from cmbs.errors import CmbsError
+from cmbs.errors import CmbsError, CmbsWarning
 from cmbs.files_io import checked_output
 from cmbs.units import bracketed, coordinate_unit, force_unit
 
@@ -744,8 +745,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         announce_compilation(lambda line: print(line, file=sys.stderr, flush=True))
     previous = _catch_sigterm()
     try:
-        _check_numbers(args)
-        return args.run(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning(warnings.showwarning)
+            _check_numbers(args)
+            return args.run(args)
     except _Terminated:
         print("cmbs: terminated", file=sys.stderr)
         return 143
@@ -763,6 +766,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _one_line_warning(show):
+    """``warnings.showwarning`` that prints a :class:`~cmbs.errors.CmbsWarning` as the line
+    ``cmbs: warning: ...`` on standard error and hands other warnings to ``show``."""
+
+    def shown(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, CmbsWarning):
+            print(f"cmbs: warning: {message}", file=sys.stderr)
+        else:
+            show(message, category, filename, lineno, file, line)
+
+    return shown
 
 
 def _catch_sigterm():

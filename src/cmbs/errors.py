@@ -84,3 +84,8 @@ def check_in_range(values: Iterable[float], what: str) -> None:
     for value in values:
         if abs(value) > MAX_MAGNITUDE:
             raise CmbsError(f"{what}: {value:g} is out of range: values must be <= {MAX_MAGNITUDE:g} in magnitude")
+
+
+class CmbsWarning(UserWarning):
+    """Something cmbs works around and says so (e.g. a robot link's mesh file that cannot be read
+    is drawn as a stick figure); the command-line interface prints it as one line."""

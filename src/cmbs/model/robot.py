@@ -23,7 +23,8 @@ are part of the ground.  Every link keeps its own frame for the kinematics
 (:func:`frame_placement`, :func:`frame_jacobian`).  M(q) and Q are computed by the compiled
 composite-rigid-body and recursive Newton-Euler algorithms of :mod:`cmbs.model.robot_kernel`.
 Joint limits, effort and velocity limits, damping and friction are kept as data
-(:attr:`RobotEquations.joints`), not enforced.
+(:attr:`RobotEquations.joints`), not enforced; so is the links' visual geometry
+(``model.parameters["visuals"]``: per link name, its :class:`~cmbs.model.visuals.Visual` list).
 """
 
 from __future__ import annotations
@@ -40,9 +41,10 @@ from cmbs.model.model import Model, Terms
 from cmbs.model.robot_closures import Closure, closure_elements
 from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, RobotKernel, body_poses, energies, \
     evaluate_terms, scratch_size
+from cmbs.model.visuals import Visual, checked_visual
 
 __all__ = ["Inertial", "TreeLink", "TreeJoint", "JointDriver", "RobotEquations", "build_robot", "frame_placement",
-           "frame_jacobian"]
+           "frame_jacobian", "initial_value"]
 
 MOVABLE = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
 JOINT_TYPES = (*MOVABLE, "fixed")
@@ -60,10 +62,12 @@ class Inertial:
 
 @dataclass(frozen=True, eq=False)
 class TreeLink:
-    """A link: its name and inertial (None: massless)."""
+    """A link: its name, inertial (None: massless) and visual geometry (in the link frame, data
+    for the viewer: :mod:`cmbs.model.visuals`)."""
 
     name: str
     inertial: Inertial | None = None
+    visuals: tuple[Visual, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -251,6 +255,16 @@ def _robot_equations(model: Model) -> RobotEquations:
     return model.equations
 
 
+def initial_value(joint: TreeJoint) -> float:
+    """The joint's coordinate in ``model.q0``: the value nearest 0 within its limits,
+    ``min(max(0, lower), upper)`` (a missing limit bounds nothing; a continuous joint has none:
+    URDF ignores its ``lower`` and ``upper``)."""
+    if joint.type == "continuous":
+        return 0.0
+    value = 0.0 if joint.lower is None else max(0.0, joint.lower)
+    return value if joint.upper is None else min(value, joint.upper)
+
+
 def _finite(values: Sequence[float], entry: str, label: str, source: str | None) -> np.ndarray:
     array = np.asarray(values, dtype=float)
     if not np.all(np.isfinite(array)):
@@ -277,17 +291,18 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                 drivers: Sequence[JointDriver] = ()) -> Model:
     """The :class:`~cmbs.model.model.Model` of the tree of ``links`` and ``joints`` closed by
     ``closures`` and driven by ``drivers`` (module docstring); ``source`` names the file it came
-    from in errors and on the model.  ``model.q0`` is zero (not assembled:
-    :func:`cmbs.kinematics.assemble`).
+    from in errors and on the model.  ``model.q0`` is each coordinate's value nearest 0 within
+    its joint's limits (:func:`initial_value`; not assembled: :func:`cmbs.kinematics.assemble`).
 
     Raises
     ------
     ModelError
         Naming the joint, link, closure or driver: an unknown type, an unknown or repeated link, a
         link with two parents, a tree without exactly one root, a zero axis, non-finite numbers, a
-        negative mass, a movable joint that carries no mass nor inertia, a closure's mistakes
-        (:func:`~cmbs.model.robot_closures.closure_elements`), a driver of an unknown or fixed
-        joint, two drivers of one joint, or repeated constraint names.
+        negative mass, a visual that is no shape (:func:`~cmbs.model.visuals.checked_visual`),
+        limits with lower > upper, a movable joint that carries no mass nor inertia, a closure's
+        mistakes (:func:`~cmbs.model.robot_closures.closure_elements`), a driver of an unknown or
+        fixed joint, two drivers of one joint, or repeated constraint names.
     """
     g = _finite(gravity, f"model {name!r}", "gravity", source)
     if g.shape != (3,):
@@ -304,6 +319,8 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                                  entry=entry)
             _finite(link.inertial.origin, entry, "origin", source)
             _finite(link.inertial.inertia, entry, "inertia", source)
+        for k, visual in enumerate(link.visuals):
+            checked_visual(visual, source=source, entry=f"link {link.name!r} visual {k + 1}")
     children: dict[str, list[TreeJoint]] = {link: [] for link in by_name}
     parent_joint: dict[str, TreeJoint] = {}
     for joint in joints:
@@ -321,6 +338,8 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
         _finite(joint.origin, entry, "origin", source)
         if joint.type in MOVABLE and not np.linalg.norm(_finite(joint.axis, entry, "axis", source)) > 0:
             raise ModelError(f"axis must be nonzero, got {list(joint.axis)}", source=source, entry=entry)
+        if joint.lower is not None and joint.upper is not None and joint.lower > joint.upper:
+            raise ModelError(f"limit lower {joint.lower:g} > upper {joint.upper:g}", source=source, entry=entry)
         parent_joint[joint.child] = joint
         children[joint.parent].append(joint)
     roots = [link for link in by_name if link not in parent_joint]
@@ -414,7 +433,7 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
         constraint_names=constraint_names,
         drivers=np.array([False] * (len(constraint_names) - len(drivers)) + [True] * len(drivers), dtype=bool),
         actuator_names=names,
-        q0=np.zeros(n),
+        q0=np.array([initial_value(joint) for joint in movable], dtype=float).reshape(n),
         qd0=np.zeros(n),
         point_names=link_names,
         lines=tuple((index[joint.parent], index[joint.child]) for joint in joints),
@@ -426,7 +445,8 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                                 "velocity": j.velocity, "damping": j.damping, "friction": j.friction}
                                for j in movable],
                     "closures": [dict(vars(closure)) for closure in closures],
-                    "drivers": [{"name": d.name, "joint": d.joint, "function": f} for d, f in zip(drivers, functions)]},
+                    "drivers": [{"name": d.name, "joint": d.joint, "function": f} for d, f in zip(drivers, functions)],
+                    "visuals": {link.name: tuple(link.visuals) for link in by_name.values() if link.visuals}},
         segment_masses=tuple((link.name, float(link.inertial.mass)) for link in by_name.values()
                              if link.inertial is not None and link.inertial.mass > 0),
     )

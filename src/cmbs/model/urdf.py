@@ -1,11 +1,13 @@
 """Robots from URDF files (https://wiki.ros.org/urdf/XML): ``cmbs.load("arm.urdf")``.
 
 The file is parsed by yourdfpy (no meshes loaded) into the links and joints of a spatial tree
-(:func:`cmbs.model.robot.build_robot`).  URDF's ``<origin xyz rpy>`` is the transform
-``Trans(xyz) Rz(yaw) Ry(pitch) Rx(roll)`` (fixed axes x, y, z); yourdfpy returns it as a 4 x 4
-matrix.  Floating and planar joints (six and three coordinates) are refused: a free-flying or
-planar base is modelled in spatial natural coordinates (docs/spatial.md).  ``<mimic>`` is not
-applied: a mimicking joint has a coordinate of its own.
+(:func:`cmbs.model.robot.build_robot`) and the links' ``<visual>`` geometry, kept as data
+(:mod:`cmbs.model.visuals`; mesh files are named, and read only when drawn:
+:mod:`cmbs.surfaces`).  URDF's ``<origin xyz rpy>`` is the transform ``Trans(xyz) Rz(yaw)
+Ry(pitch) Rx(roll)`` (fixed axes x, y, z); yourdfpy returns it as a 4 x 4 matrix.  Floating and
+planar joints (six and three coordinates) are refused: a free-flying or planar base is modelled
+in spatial natural coordinates (docs/spatial.md).  ``<mimic>`` is not applied: a mimicking joint
+has a coordinate of its own.
 """
 
 from __future__ import annotations
@@ -20,14 +22,20 @@ from cmbs.errors import ModelError
 from cmbs.model.model import Model
 from cmbs.model.robot import Inertial, JointDriver, TreeJoint, TreeLink, build_robot
 from cmbs.model.robot_closures import Closure
+from cmbs.model.visuals import SHAPES, Visual
 
 __all__ = ["load_urdf"]
 
 _REFUSED = {"floating": "a free-flying base (6 coordinates)", "planar": "a planar base (3 coordinates)"}
-#: the attributes URDF gives as numbers, by element tag
-_NUMBERS = {"origin": ("xyz", "rpy"), "axis": ("xyz",), "mass": ("value",),
-            "inertia": ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"),
-            "limit": ("lower", "upper", "effort", "velocity"), "dynamics": ("damping", "friction")}
+#: the attributes URDF gives as numbers, by element tag, and the counts of numbers they may hold
+_NUMBERS = {"origin": {"xyz": (3,), "rpy": (3,)}, "axis": {"xyz": (3,)}, "mass": {"value": (1,)},
+            "inertia": dict.fromkeys(("ixx", "ixy", "ixz", "iyy", "iyz", "izz"), (1,)),
+            "limit": dict.fromkeys(("lower", "upper", "effort", "velocity"), (1,)),
+            "dynamics": {"damping": (1,), "friction": (1,)}, "box": {"size": (3,)},
+            "cylinder": {"radius": (1,), "length": (1,)}, "sphere": {"radius": (1,)}, "mesh": {"scale": (1, 3)},
+            "color": {"rgba": (4,)}}
+#: the attributes whose numbers may also be separated by commas (as yourdfpy reads them)
+_COMMAS = {"size", "scale"}
 
 
 def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81), closures: Sequence[Closure] = (),
@@ -43,14 +51,17 @@ def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81),
     source = str(path)
     if not Path(path).is_file():
         raise ModelError("no such file", source=source)
-    _check_numbers(Path(path), source)
+    _check_elements(Path(path), source)
     try:
         robot = yourdfpy.URDF.load(source, build_scene_graph=False, load_meshes=False,
                                    build_collision_scene_graph=False, load_collision_meshes=False).robot
     except Exception as error:  # yourdfpy raises bare ValueError, KeyError, AttributeError on bad input
         raise ModelError(f"not a valid URDF robot: {type(error).__name__}: {' '.join(str(error).split())}",
                          source=source) from None
-    links = [TreeLink(link.name, None if link.inertial is None else _inertial(link.inertial))
+    colours = {material.name: material.color.rgba for material in robot.materials
+               if material.name is not None and material.color is not None}
+    links = [TreeLink(link.name, None if link.inertial is None else _inertial(link.inertial),
+                      _visuals(link, colours, Path(path).parent))
              for link in robot.links]
     joints = []
     for joint in robot.joints:
@@ -86,27 +97,67 @@ def _inertial(inertial: object) -> Inertial:
                     inertia=np.zeros((3, 3)) if inertia is None else np.asarray(inertia, dtype=float))
 
 
-def _check_numbers(path: Path, source: str) -> None:
+def _visuals(link: object, colours: dict[str, np.ndarray], folder: Path) -> tuple[Visual, ...]:
+    """The link's ``<visual>`` elements (:mod:`cmbs.model.visuals`): a material's colour is its own
+    ``<color>`` or that of the robot's ``<material>`` of its name (``colours``); a mesh's file is
+    resolved by yourdfpy's ``filename_handler_magic`` from the URDF's ``folder`` (the name as
+    written when no file is found: the viewer then says so)."""
+    import yourdfpy
+
+    visuals = []
+    for visual in getattr(link, "visuals", ()):
+        geometry = visual.geometry
+        origin = np.eye(4) if visual.origin is None else np.asarray(visual.origin, dtype=float)
+        material = visual.material
+        rgba = None if material is None else material.color.rgba if material.color is not None \
+            else colours.get(material.name)
+        colour = None if rgba is None else tuple(float(x) for x in rgba)
+        if geometry.box is not None:
+            visuals.append(Visual("box", origin, tuple(float(x) for x in geometry.box.size), colour))
+        elif geometry.cylinder is not None:
+            visuals.append(Visual("cylinder", origin, (float(geometry.cylinder.radius),
+                                                       float(geometry.cylinder.length)), colour))
+        elif geometry.sphere is not None:
+            visuals.append(Visual("sphere", origin, (float(geometry.sphere.radius),), colour))
+        else:  # a mesh (_check_elements)
+            scale = geometry.mesh.scale
+            size = (1.0, 1.0, 1.0) if scale is None else tuple(float(x) for x in np.broadcast_to(scale, 3))
+            filename = yourdfpy.filename_handler_magic(geometry.mesh.filename, dir=str(folder))
+            visuals.append(Visual("mesh", origin, size, colour, str(filename)))
+    return tuple(visuals)
+
+
+def _check_elements(path: Path, source: str) -> None:
     """ModelError naming the element unless the file is well-formed XML whose numeric attributes
-    (:data:`_NUMBERS`) are numbers (the right count of them: 3 for xyz and rpy, else 1)."""
+    (:data:`_NUMBERS`) are numbers, as many as the attribute holds (3 for xyz, rpy and a box's
+    size, 4 for a colour's rgba, 1 or 3 for a mesh's scale, else 1), and whose visuals each have
+    a geometry of one shape (a mesh with a filename)."""
     try:
         root = ElementTree.parse(path).getroot()
     except ElementTree.ParseError as error:
         raise ModelError(f"not well-formed XML: {error}", source=source) from None
     for owner in root:
-        if owner.tag not in ("link", "joint"):
+        if owner.tag not in ("link", "joint", "material"):
             continue
         where = f"{owner.tag} {owner.get('name')!r}"
+        for k, visual in enumerate(owner.findall("visual")):
+            shapes = [shape for shape in visual.findall("geometry/*") if shape.tag in SHAPES]
+            if len(visual.findall("geometry/*")) != 1 or len(shapes) != 1:
+                raise ModelError(f"<visual> {k + 1}: its <geometry> must hold one of {', '.join(SHAPES)}",
+                                 source=source, entry=where)
+            if shapes[0].tag == "mesh" and not shapes[0].get("filename"):
+                raise ModelError(f"<visual> {k + 1}: <mesh> without a filename", source=source, entry=where)
         for element in owner.iter():
-            for attribute in _NUMBERS.get(element.tag, ()):
+            for attribute, counts in _NUMBERS.get(element.tag, {}).items():
                 text = element.get(attribute)
                 if text is None:
                     continue
-                count = 3 if attribute in ("xyz", "rpy") else 1
+                items = (text.replace(",", " ") if attribute in _COMMAS else text).split()
                 try:
-                    values = [float(item) for item in text.split()]
+                    values = [float(item) for item in items]
                 except ValueError:
                     values = []
-                if len(values) != count:
-                    raise ModelError(f"<{element.tag} {attribute}={text!r}>: expected {count} number"
-                                     f"{'s' if count > 1 else ''}", source=source, entry=where)
+                if len(values) not in counts:
+                    wanted = " or ".join(str(count) for count in counts)
+                    raise ModelError(f"<{element.tag} {attribute}={text!r}>: expected {wanted} number"
+                                     f"{'s' if counts[-1] > 1 else ''}", source=source, entry=where)
