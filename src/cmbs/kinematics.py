@@ -268,8 +268,10 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
     rows (nonholonomic rows constrain velocities only).
 
     The one assembly routine of cmbs: every position analysis (model files and library models,
-    prescribed motions, kinematic analysis, gait reconstruction, sweeps) goes through it, and it
-    refuses a solution with an angle half a turn away from its direction (:func:`half_turn_angles`).
+    prescribed motions, kinematic analysis, inverse kinematics of robots, gait reconstruction,
+    sweeps) goes through it, and it refuses a solution with an angle half a turn away from its
+    direction (:func:`half_turn_angles`) or a robot's link frame turned more than 90° from the
+    target orientation of its pose driver (``RobotEquations.turned_targets``).
 
     Parameters
     ----------
@@ -285,7 +287,8 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
     ConvergenceError
         Naming the iteration count, the largest residual and its constraint (``constraint``).
     BranchError
-        When Newton converged with an angle half a turn away from its direction.
+        When Newton converged with an angle half a turn away from its direction, or a pose
+        driver's frame at a spurious root of its orientation rows.
     """
     q = np.array(model.q0 if q is None else q, dtype=float)
     rows = np.flatnonzero(model.holonomic)
@@ -325,6 +328,17 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
 
 
 def _refuse_half_turns(model: Model, q: np.ndarray, t: float, A: np.ndarray) -> None:
+    equations = base_equations(model)[0]
+    turned = [(row, angle) for row, angle in equations.turned_targets(q, t) if row in model.constraint_names] \
+        if hasattr(equations, "turned_targets") else []
+    if turned:
+        row, angle = turned[0]
+        error = BranchError(
+            f"model {model.name!r}: assembly turned the frame of pose driver {row.rpartition('.')[0]!r} by "
+            f"{np.degrees(angle):.4g} degrees from its target orientation at t = {t:g} (a spurious root of the "
+            "orientation rows): start from joint values that put the frame nearer its target")
+        error.constraint = row
+        raise error
     wrong = half_turn_angles(model, q, t, A)
     if wrong:
         name, value = wrong[0]
