@@ -100,7 +100,9 @@ def _pose_driver(name: str, entry: _Entry) -> PoseDriver:
 def _read_driver(drivers: _Drivers, name: str, table: object, base: Path) -> None:
     """A ``[drivers.NAME]`` entry: a joint driver (``kind = "joint"``, the default; read as in the
     model files by :func:`cmbs.model.files._driver`) or a pose driver (``kind = "pose"``)."""
-    kind = table.get("kind", "joint") if isinstance(table, dict) else "joint"
+    if not isinstance(table, dict):
+        raise ModelError(f"expected a table of keys, got {table!r}", entry=f"drivers.{name}")
+    kind = table.get("kind", "joint")
     if kind not in DRIVER_KINDS:
         raise ModelError(f"kind: unknown kind {kind!r}{did_you_mean(str(kind), DRIVER_KINDS)}; kinds: "
                          f"{', '.join(DRIVER_KINDS)}", entry=f"drivers.{name}")

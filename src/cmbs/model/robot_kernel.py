@@ -76,8 +76,6 @@ REVOLUTE, PRISMATIC = 0, 1
 #: body-fixed vectors (1 row), a point difference along a vector of body b (1 row), and a body
 #: point on, or a body vector's dot product with a column of, a pose driver's target frame
 CLOSE_POINT, CLOSE_DOT, CLOSE_LINE, TARGET_POINT, TARGET_DOT = 0, 1, 2, 3, 4
-#: rows of each element kind
-ELEMENT_ROWS = (3, 1, 1, 3, 1)
 #: per element in ``closure_reals``: l_a or ū (3), l_b or v̄ (3), v̄ of a line element (3)
 ELEMENT_REALS = 9
 #: per body in ``placement``: E (3 x 3, row-major), then r (3)
