@@ -13,6 +13,7 @@ from cmbs.library import names
     ("pendulum", {}, 2, 1),
     ("double-pendulum", {}, 6, 2),
     ("four-bar", {}, 5, 0),
+    ("five-bar-robot", {}, 4, 2),
     ("chain", {"links": 7}, 14, 7),
     ("chain", {"links": 14, "closed": True}, 26, 12),
     ("slider-crank", {}, 6, 1),

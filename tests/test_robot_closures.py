@@ -71,9 +71,10 @@ def _placement(xyz, rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
     return matrix
 
 
-def _made_up_tree(closures):
+def _made_up_tree(closures, drivers=()):
     """Two branches from the ground (revolute and prismatic joints about oblique axes, turned joint
-    frames, a fixed joint between movable ones, turned inertial frames) closed by ``closures``."""
+    frames, a fixed joint between movable ones, turned inertial frames) closed by ``closures`` and
+    driven by ``drivers``."""
     def inertial(mass):
         return Inertial(mass, _placement((0.1, 0.05, -0.02), (0.3, 0.1, 0.2)), np.diag([0.02, 0.03, 0.04]))
 
@@ -84,7 +85,7 @@ def _made_up_tree(closures):
               TreeJoint("j3", "revolute", "base", "l3", _placement((0.5, 0.2, 0), (0.3, 0, 0)), (1, 0, 0.2)),
               TreeJoint("tip", "fixed", "l3", "tip", _placement((0.1, 0.2, 0.3), (0.4, 0.5, 0.6))),
               TreeJoint("j4", "revolute", "tip", "l4", _placement((0.2, 0, 0.1)), (0, 0.3, 1))]
-    return build_robot("made-up", links, joints, closures=closures, gravity=(0.3, -0.5, -9.81))
+    return build_robot("made-up", links, joints, closures=closures, drivers=drivers, gravity=(0.3, -0.5, -9.81))
 
 
 CLOSURES = {
@@ -95,6 +96,8 @@ CLOSURES = {
                                axis_b=(0, 1, 0)),
     "weld": Closure("c", "weld", "l4", "l0", (0.2, 0.1, 0), (0, 0.3, 0.1), rpy_a=(0.1, 0.2, 0.3),
                     rpy_b=(0.5, -0.2, 0.1)),
+    "line": Closure("c", "line", "l2", "tip", (0.1, 0.2, 0.3), (0.3, -0.1, 0.2), axis_b=(0.2, 1.0, -0.3)),
+    "line-ground": Closure("c", "line", "ground", "l4", (0.1, 0.2, 0.3), (0.3, -0.1, 0.2), axis_b=(0.2, 1.0, -0.3)),
 }
 
 
@@ -115,6 +118,20 @@ def test_closure_rows_against_finite_differences(kind):
         worst_gamma = max(worst_gamma, np.abs(model.gamma(q, qd) + Aqd_fd @ qd).max())
         assert np.all(model.constraints_t(q) == 0.0)
     assert worst_A < 1e-8 and worst_gamma < 1e-7, (worst_A, worst_gamma)     # measured 2.6e-10, 1.3e-9
+
+
+def test_line_rows_are_the_point_across_the_line():
+    """Φ of a line closure is p_a - p_b across the line: its two rows are the components of p_a -
+    p_b along an orthonormal pair perpendicular to the line's direction in link b's frame, so
+    their squares sum to the squared distance of p_a from the line."""
+    model = _made_up_tree([CLOSURES["line"]])
+    q = np.array([0.3, -0.2, 0.5, 0.7, -0.4])
+    (Ra, oa), (Rb, ob) = frame_placement(model, q, "l2"), frame_placement(model, q, "tip")
+    d = (oa + Ra @ [0.1, 0.2, 0.3]) - (ob + Rb @ [0.3, -0.1, 0.2])
+    u = Rb @ np.array([0.2, 1.0, -0.3]) / np.linalg.norm([0.2, 1.0, -0.3])
+    phi = model.constraints(q)
+    assert phi.shape == (2,) and model.constraint_names == ("c.line1", "c.line2")
+    np.testing.assert_allclose(phi @ phi, d @ d - (d @ u) ** 2, rtol=1e-14)
 
 
 def test_point_rows_are_the_frames_points():
@@ -270,9 +287,11 @@ def _bad(tmp_path, replace: tuple[str, str] = ("", ""), extra: str = "") -> str:
     (('axis_b = [1.0, 0.0, 0.0]', 'axis_b = [0.0, 0.0, 0.0]'), "",
      "closures.J5: axis_b must be nonzero, got (0.0, 0.0, 0.0)"),
     (('kind = "revolute"', 'kind = "hinge"'), "",
-     "closures.J5: kind: unknown kind 'hinge'; kinds: point, axis, revolute, weld"),
+     "closures.J5: kind: unknown kind 'hinge'"),
     (('axis_b = [1.0, 0.0, 0.0]\n', ''), "",
      "closures.J5: axis_b is required by kind 'revolute'"),
+    (('kind = "revolute"', 'kind = "line"'), "",
+     "closures.J5: axis_a is not used by kind 'line'"),
     (('point_b =', 'pont_b ='), "",
      "closures.J5: unknown key(s) 'pont_b' (did you mean 'point_b'?)"),
     (('urdf = "bricard.urdf"', 'urdf = "bricard2.urdf"'), "",

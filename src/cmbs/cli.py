@@ -243,6 +243,38 @@ def _kinematics(args: argparse.Namespace) -> int:
     return 0
 
 
+def _workspace(args: argparse.Namespace) -> int:
+    from cmbs.workspace import workspace
+
+    joint, start, stop, count = args.sweep
+    try:
+        values = np.linspace(float(start), float(stop), int(count))
+    except ValueError:
+        raise _UsageError(f"--sweep expects JOINT START STOP N (numbers, N an integer), got {' '.join(args.sweep)}") \
+            from None
+    if not (np.all(np.isfinite(values)) and int(count) >= 2 and float(stop) > float(start)):
+        raise _UsageError(f"--sweep: need START < STOP, finite, and N >= 2, got {' '.join(args.sweep)}")
+    model = _load(args)
+    result = workspace(model, joint, values, held=args.hold)
+    held = ", ".join(f"{name} held at {value:.6g}" for name, value in result.held.items())
+    print(f"{model.name}: sweep of {joint} over [{values[0]:.6g}, {values[-1]:.6g}] ({values.size} values)"
+          + (f", {held}" if held else ""))
+    print(f"  reached {joint} in [{result.low:.10g}, {result.high:.10g}] ({int(result.reached.sum())} of "
+          f"{values.size} values) on the branch of the start")
+    for limit in result.limits:
+        locks = "the chain gains a DOF" if limit.chain_relative_sigma < 1e-3 else "the inputs lock"
+        print(f"  limit at {joint} = {limit.value:.10g}: singular, {locks} (sigma_min/sigma_max {limit.relative_sigma:.2g} "
+              f"with the inputs held, {limit.chain_relative_sigma:.2g} of the chain)")
+    for configuration in result.singular:
+        print(f"  singular configuration at {joint} = {configuration.t:.10g}: rank {configuration.rank} < "
+              f"{configuration.nominal_rank} with the inputs held")
+    reached = result.q[result.reached]
+    for k, name in enumerate(model.coordinate_names):
+        if reached.size and name != joint and name not in result.held:
+            print(f"  {name:<18} min {reached[:, k].min(): .6g}  max {reached[:, k].max(): .6g}")
+    return 0
+
+
 def _simulate(args: argparse.Namespace) -> int:
     from cmbs.simulate import simulate
 
@@ -597,6 +629,14 @@ def build_parser() -> argparse.ArgumentParser:
     kinematics.add_argument("--out", help="result file (.npz or .csv)")
     kinematics.add_argument("--plot", help="figure of the motion (.png, .pdf or .svg)")
     kinematics.set_defaults(run=_kinematics)
+
+    sweep = model_command("workspace", "the range of an input coordinate on its assembly branch, the branch's limits "
+                                       "and singular configurations")
+    sweep.add_argument("--sweep", nargs=4, required=True, metavar=("JOINT", "START", "STOP", "N"),
+                       help="the input coordinate and N values from START to STOP")
+    sweep.add_argument("--hold", action="append", default=[], metavar="NAME",
+                       help="a coordinate held at its start value (another input; repeatable)")
+    sweep.set_defaults(run=_workspace)
 
     def dynamics_options(command: argparse.ArgumentParser) -> None:
         from cmbs.simulate import INTEGRATORS

@@ -59,21 +59,23 @@ def constraint_report(model: Model, q: np.ndarray, t: float = 0.0, *, tolerance:
     n, m = model.n, model.m
     if m == 0:
         return ConstraintReport(n, 0, 0, n, n, (), np.zeros(0), tolerance)
-
-    def numerical_rank(matrix: np.ndarray) -> tuple[int, np.ndarray]:
-        if matrix.shape[0] == 0:
-            return 0, np.zeros(0)
-        sigma = np.linalg.svd(matrix, compute_uv=False)
-        return int(np.sum(sigma > tolerance * max(sigma[0], 1.0))), sigma
-
-    rank, sigma = numerical_rank(A)
-    holonomic_rank = numerical_rank(A[model.holonomic])[0] if model.nonholonomic.any() else rank
+    rank, sigma = numerical_rank(A, tolerance)
+    holonomic_rank = numerical_rank(A[model.holonomic], tolerance)[0] if model.nonholonomic.any() else rank
     norms = np.linalg.norm(A, axis=1)
     scaled = A / np.where(norms > 0, norms, 1.0)[:, None]
     _, _, pivots = linalg.qr(scaled.T, pivoting=True, mode="economic")
     redundant = tuple(model.constraint_names[k] for k in sorted(pivots[rank:]))
     return ConstraintReport(n=n, m=m, rank=rank, dof=n - holonomic_rank, velocity_dof=n - rank, redundant=redundant,
                             singular_values=sigma, tolerance=tolerance)
+
+
+def numerical_rank(matrix: np.ndarray, tolerance: float) -> tuple[int, np.ndarray]:
+    """The rank of ``matrix`` (the singular values above ``tolerance · max(σ_max, 1)``) and its
+    singular values."""
+    if matrix.size == 0:
+        return 0, np.zeros(0)
+    sigma = np.linalg.svd(matrix, compute_uv=False)
+    return int(np.sum(sigma > tolerance * max(sigma[0], 1.0))), sigma
 
 
 def _free_mask(model: Model, fixed: Sequence[str | int]) -> np.ndarray:
@@ -268,8 +270,10 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
     rows (nonholonomic rows constrain velocities only).
 
     The one assembly routine of cmbs: every position analysis (model files and library models,
-    prescribed motions, kinematic analysis, gait reconstruction, sweeps) goes through it, and it
-    refuses a solution with an angle half a turn away from its direction (:func:`half_turn_angles`).
+    prescribed motions, kinematic analysis, inverse kinematics of robots, gait reconstruction,
+    sweeps) goes through it, and it refuses a solution with an angle half a turn away from its
+    direction (:func:`half_turn_angles`) or a robot's link frame turned more than 90° from the
+    target orientation of its pose driver (``RobotEquations.turned_targets``).
 
     Parameters
     ----------
@@ -285,7 +289,8 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
     ConvergenceError
         Naming the iteration count, the largest residual and its constraint (``constraint``).
     BranchError
-        When Newton converged with an angle half a turn away from its direction.
+        When Newton converged with an angle half a turn away from its direction, or a pose
+        driver's frame at a spurious root of its orientation rows.
     """
     q = np.array(model.q0 if q is None else q, dtype=float)
     rows = np.flatnonzero(model.holonomic)
@@ -325,6 +330,17 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
 
 
 def _refuse_half_turns(model: Model, q: np.ndarray, t: float, A: np.ndarray) -> None:
+    equations = base_equations(model)[0]
+    turned = [(row, angle) for row, angle in equations.turned_targets(q, t) if row in model.constraint_names] \
+        if hasattr(equations, "turned_targets") else []
+    if turned:
+        row, angle = turned[0]
+        error = BranchError(
+            f"model {model.name!r}: assembly turned the frame of pose driver {row.rpartition('.')[0]!r} by "
+            f"{np.degrees(angle):.4g} degrees from its target orientation at t = {t:g} (a spurious root of the "
+            "orientation rows): start from joint values that put the frame nearer its target")
+        error.constraint = row
+        raise error
     wrong = half_turn_angles(model, q, t, A)
     if wrong:
         name, value = wrong[0]
@@ -494,21 +510,29 @@ class SingularConfiguration:
 
 
 def singular_configurations(model: Model, trajectory: Trajectory, *, threshold: float = 1e-6,
-                            tolerance: float = 1e-9) -> list[SingularConfiguration]:
+                            tolerance: float = 1e-9, fixed: Sequence[str | int] = ()) -> list[SingularConfiguration]:
     """Find where A loses rank along a motion (e.g. the equal-link slider-crank at 90°).
 
     The nominal rank r is the largest rank seen over the samples; at each local minimum of
     ρ(t) = σ_r(A)/σ_1(A) over the samples, ρ is minimised between the neighbouring samples on a
     cubic Hermite interpolation of q (from q and q̇), and a singular configuration is reported
-    where the minimum falls below ``threshold``.
+    where the minimum falls below ``threshold``.  With ``fixed`` coordinates (the inputs of a
+    position analysis, held), A is restricted to the columns of the others: its rank drops where
+    the inputs no longer decide the configuration (the mechanism moves, or gains a branch, with
+    them held; :func:`cmbs.workspace.workspace`).
     """
     times, qs, qds = trajectory.t, trajectory.q, trajectory.qd
-    nominal = max(constraint_report(model, q, t, tolerance=tolerance).rank for t, q in zip(times, qs))
+    free = _free_mask(model, fixed)
+
+    def jacobian(q: np.ndarray, t: float) -> np.ndarray:
+        return model.jacobian(q, t)[:, free]
+
+    nominal = max(numerical_rank(jacobian(q, t), tolerance)[0] for t, q in zip(times, qs))
     if nominal == 0:
         return []
 
     def rho_at(q: np.ndarray, t: float) -> float:
-        sigma = np.linalg.svd(model.jacobian(q, t), compute_uv=False)
+        sigma = np.linalg.svd(jacobian(q, t), compute_uv=False)
         return float(sigma[nominal - 1] / max(sigma[0], 1e-300))
 
     def q_at(t: float, k: int) -> np.ndarray:
@@ -537,6 +561,6 @@ def singular_configurations(model: Model, trajectory: Trajectory, *, threshold: 
         t_min, value = (best.x, best.fun) if best is not None and best.fun < rho[k] else (times[k], rho[k])
         if value < threshold:
             j = min(segment(t_min), len(times) - 2)
-            rank = constraint_report(model, q_at(t_min, j), t_min, tolerance=max(tolerance, threshold)).rank
+            rank = numerical_rank(jacobian(q_at(t_min, j), t_min), max(tolerance, threshold))[0]
             found.append(SingularConfiguration(float(t_min), rank, nominal, float(value)))
     return found

@@ -18,8 +18,11 @@ closure rows' generalized force is ``-Aᵀλ`` (``M q̈ + Aᵀλ = Q``); by thei
 
     point  Φ = p_a - p_b (λ: 3 numbers):  the force -λ at p_a on body a, +λ at p_b on body b,
     dot    Φ = u·v (λ: 1 number):          the couple -λ (u × v) on body a, +λ (u × v) on body b,
+    line   Φ = (p_a - p_b)·v, v on body b:  the force -λ v at p_a on body a, +λ v at p_a on body b,
 
-since the rows' Jacobians are ``J_a - J_b`` at the points and ``(u × v)ᵀ (J_ω,a - J_ω,b)``.  A
+since the rows' Jacobians are ``J_a - J_b`` at the points, ``(u × v)ᵀ (J_ω,a - J_ω,b)`` and
+``vᵀ (J_a - J_b) + (v × d)ᵀ J_ω,b`` with d = p_a - p_b (the force +λ v at p_b and the couple
+-λ v × d on body b are the force +λ v at p_a).  A
 driver's row (``q_c - f(t)``) has the generalized force -λ on q_c alone: the actuation of joint c,
 part of what the joint transmits.  Hence the check ``S_kᵀ f^J_k = u_k - λ_drivers(k)``: the
 joint's torque (revolute) or force (prismatic) along its axis is the actuation of its
@@ -36,7 +39,7 @@ import numpy as np
 from cmbs.errors import CmbsError
 from cmbs.model.model import Model, base_equations, base_multipliers
 from cmbs.model.robot import RobotEquations
-from cmbs.model.robot_kernel import CLOSE_POINT, body_work
+from cmbs.model.robot_kernel import CLOSE_LINE, CLOSE_POINT, body_work
 
 __all__ = ["robot_reactions"]
 
@@ -76,14 +79,19 @@ def _closure_wrenches(equations: RobotEquations, R: np.ndarray, o: np.ndarray, l
         return local if body < 0 else R[body] @ local
 
     row = 0
-    for (kind, body_a, body_b), reals in zip(kernel.closure_ints, kernel.closure_reals):
+    for (kind, body_a, body_b, _), reals in zip(kernel.closure_ints, kernel.closure_reals):
         if kind == CLOSE_POINT:
             force = -lam[row:row + 3]
-            on_a = _wrench(world_point(body_a, reals[:3]), force)
-            on_b = -_wrench(world_point(body_b, reals[3:]), force)
+            on_a = _wrench(world_point(body_a, reals[0:3]), force)
+            on_b = -_wrench(world_point(body_b, reals[3:6]), force)
             row += 3
-        else:
-            couple = -lam[row] * np.cross(world_vector(body_a, reals[:3]), world_vector(body_b, reals[3:]))
+        elif kind == CLOSE_LINE:
+            point = world_point(body_a, reals[0:3])
+            on_a = _wrench(point, -lam[row] * world_vector(body_b, reals[6:9]))
+            on_b = -on_a
+            row += 1
+        else:                              # CLOSE_DOT (pose drivers' elements are refused before)
+            couple = -lam[row] * np.cross(world_vector(body_a, reals[0:3]), world_vector(body_b, reals[3:6]))
             on_a = np.concatenate([couple, np.zeros(3)])
             on_b = -on_a
             row += 1
@@ -114,6 +122,9 @@ def robot_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     equations, rows = base_equations(model)
     if not isinstance(equations, RobotEquations):
         raise CmbsError(f"model {model.name!r}: robot reactions need a robot (a URDF tree)")
+    if np.any(equations.kernel.closure_ints[:, 0] > CLOSE_LINE):
+        raise CmbsError(f"model {model.name!r}: reactions of pose-driven robots are not available (the target's "
+                        "wrench on the link); drive the joints instead")
     q, qd, qdd, lam = (np.asarray(a, dtype=float) for a in (q, qd, qdd, lam))
     if lam.shape != (model.m,):
         raise CmbsError(f"lam has shape {lam.shape}, expected ({model.m},)")

@@ -60,6 +60,7 @@ _FILES = [
     ("pendulum.toml", "simple pendulum, uniform rod 1 m 1 kg, 1 DOF"),
     ("double-pendulum.toml", "double pendulum of two uniform rods with angle coordinates, 2 DOF"),
     ("four-bar.toml", "thesis four-bar linkage, crank angle driven (fully driven, 0 DOF; 1 DOF undriven)"),
+    ("five-bar-robot.toml", "robot (URDF, joint angles): planar five-bar parallel manipulator, 2 motors, 2 DOF"),
 ]
 _BUILDERS = [
     ("chain", "chain", "chain", "N-link pendulum chain (links=N, closed=true pins the tip), N or N-2 DOF"),

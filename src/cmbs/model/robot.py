@@ -11,7 +11,8 @@ joint frame (URDF's kinematics, https://wiki.ros.org/urdf/XML/joint):
 
 Coordinates: one per revolute, continuous or prismatic joint, named by the joint, in the order
 the joints are given.  Constraints: the rows of the loop closures (:mod:`cmbs.model.robot_closures`),
-then one per driver, ``q_c - f(t) = 0`` on joint c (:class:`JointDriver`).  Actuators: the joints
+then those of the pose drivers (a link frame's target pose, :mod:`cmbs.model.robot_targets`), then
+one per joint driver, ``q_c - f(t) = 0`` on joint c (:class:`JointDriver`).  Actuators: the joints
 themselves, ``u_k`` the torque (revolute) or force (prismatic) of joint k on its child, so
 ``Q = u - C(q, q̇) q̇ - g(q)``.
 
@@ -38,13 +39,14 @@ import numpy as np
 from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, is_constant
 from cmbs.model.model import Model, Terms
-from cmbs.model.robot_closures import Closure, closure_elements
+from cmbs.model.robot_closures import Closure, closure_elements, rpy_rotation
+from cmbs.model.robot_targets import PoseDriver, target_elements
 from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, RobotKernel, body_poses, energies, \
     evaluate_terms, scratch_size
 from cmbs.model.visuals import Visual, checked_visual
 
-__all__ = ["Inertial", "TreeLink", "TreeJoint", "JointDriver", "RobotEquations", "build_robot", "frame_placement",
-           "frame_jacobian", "initial_value"]
+__all__ = ["Inertial", "TreeLink", "TreeJoint", "JointDriver", "PoseDriver", "RobotEquations", "build_robot",
+           "frame_placement", "frame_jacobian", "initial_value"]
 
 MOVABLE = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
 JOINT_TYPES = (*MOVABLE, "fixed")
@@ -116,7 +118,8 @@ class RobotEquations:
 
     def __init__(self, kernel: RobotKernel, link_names: tuple[str, ...], link_body: np.ndarray,
                  link_offset: np.ndarray, joints: tuple[TreeJoint, ...],
-                 time_functions: TimeFunctionPack | None = None, steady_drivers: frozenset[str] = frozenset()):
+                 time_functions: TimeFunctionPack | None = None, steady_drivers: frozenset[str] = frozenset(),
+                 orientation_targets: tuple[tuple[str, int, int], ...] = ()):
         self.kernel = kernel
         self.n = int(kernel.parent.shape[0])
         self.m = int(kernel.sizes[0])
@@ -130,6 +133,9 @@ class RobotEquations:
         self.python: tuple[tuple[int, TimeFunction], ...] = self.time_functions.python
         #: the drivers of a constant, which hold their joint and do no work
         self.steady_drivers = steady_drivers
+        #: the pose drivers' orientations: (name of their first row, link index, first of the three
+        #: time functions roll, pitch, yaw in :attr:`time_functions`)
+        self.orientation_targets = orientation_targets
         moving = [i for i, body in enumerate(link_body) if body >= 0]
         #: the links that move (every link but the root and those fixed to it), in the order of
         #: :attr:`link_names`: the bodies of :meth:`body_poses` and of the result files' pose columns
@@ -208,6 +214,23 @@ class RobotEquations:
                 rotations[r], origins[r] = R[self._moving], o[self._moving]
         shape = q.shape[:-1]
         return origins.reshape(*shape, count, 3), rotations.reshape(*shape, count, 3, 3)
+
+    def turned_targets(self, q: np.ndarray, t: float) -> list[tuple[str, float]]:
+        """The pose drivers whose link frame at (q, t) is turned by more than 90° from its target
+        orientation F_t = Rot(rpy(t)) (a spurious root of the orientation rows,
+        :mod:`cmbs.model.robot_targets`), as (first orientation row, angle in rad): the angle of
+        R_tᵀ R from ``cos θ = (tr(R_tᵀ R) - 1) / 2``."""
+        if not self.orientation_targets:
+            return []
+        rotations, _ = self.link_placements(np.asarray(q, dtype=float))
+        functions = self.time_functions.functions
+        turned = []
+        for row, link, first in self.orientation_targets:
+            target = rpy_rotation([functions[first + k](t)[0] for k in range(3)])
+            cosine = (np.trace(target.T @ rotations[link]) - 1.0) / 2.0
+            if cosine < 0.0:
+                turned.append((row, float(np.arccos(max(cosine, -1.0)))))
+        return turned
 
     def point_positions(self, q: np.ndarray) -> np.ndarray:
         """(L, 3): the origins of the link frames, in the order of :attr:`link_names`."""
@@ -288,11 +311,12 @@ def _combined_inertia(parts: list[tuple[float, np.ndarray, np.ndarray]]) -> np.n
 def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint], *,
                 gravity: Sequence[float] = (0.0, 0.0, -9.81), source: str | None = None,
                 description: str = "", closures: Sequence[Closure] = (),
-                drivers: Sequence[JointDriver] = ()) -> Model:
+                drivers: Sequence[JointDriver | PoseDriver] = ()) -> Model:
     """The :class:`~cmbs.model.model.Model` of the tree of ``links`` and ``joints`` closed by
-    ``closures`` and driven by ``drivers`` (module docstring); ``source`` names the file it came
-    from in errors and on the model.  ``model.q0`` is each coordinate's value nearest 0 within
-    its joint's limits (:func:`initial_value`; not assembled: :func:`cmbs.kinematics.assemble`).
+    ``closures`` and driven by ``drivers`` (joint and pose drivers; module docstring); ``source``
+    names the file it came from in errors and on the model.  ``model.q0`` is each coordinate's
+    value nearest 0 within its joint's limits (:func:`initial_value`; not assembled:
+    :func:`cmbs.kinematics.assemble`).
 
     Raises
     ------
@@ -301,8 +325,9 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
         link with two parents, a tree without exactly one root, a zero axis, non-finite numbers, a
         negative mass, a visual that is no shape (:func:`~cmbs.model.visuals.checked_visual`),
         limits with lower > upper, a movable joint that carries no mass nor inertia, a closure's
-        mistakes (:func:`~cmbs.model.robot_closures.closure_elements`), a driver of an unknown or
-        fixed joint, two drivers of one joint, or repeated constraint names.
+        mistakes (:func:`~cmbs.model.robot_closures.closure_elements`), a pose driver's
+        (:func:`~cmbs.model.robot_targets.target_elements`), a driver of an unknown or fixed
+        joint, two drivers of one joint, or repeated constraint names.
     """
     g = _finite(gravity, f"model {name!r}", "gravity", source)
     if g.shape != (3,):
@@ -395,9 +420,15 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
     bodies = np.array([link_body[l] for l in link_names], np.int64)
     offsets = np.array([link_offset[l] for l in link_names])
     closure_ints, closure_reals, constraint_names = closure_elements(closures, link_names, bodies, offsets)
-    functions: list[TimeFunction] = []
-    driver_rows: list[tuple[int, int]] = []
     for driver in drivers:
+        if not isinstance(driver, (JointDriver, PoseDriver)):
+            raise ModelError(f"a driver is a JointDriver or a PoseDriver, got {driver!r}", entry=f"model {name!r}")
+    joint_drivers = [driver for driver in drivers if isinstance(driver, JointDriver)]
+    pose_drivers = [driver for driver in drivers if isinstance(driver, PoseDriver)]
+    targets = target_elements(pose_drivers, link_names, bodies, offsets)
+    functions, labels = list(targets.functions), list(targets.labels)
+    driver_rows: list[tuple[int, int]] = []
+    for driver in joint_drivers:
         entry = f"driver {driver.name!r}"
         if driver.joint not in coordinate:
             fixed = " (a fixed joint has no coordinate)" if any(j.name == driver.joint for j in joints) else ""
@@ -409,21 +440,26 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
             functions.append(as_time_function(driver.function))
         except ModelError as error:
             raise ModelError(error.problem, entry=entry) from None
+        labels.append(f"driver {driver.name}")
         driver_rows.append((coordinate[driver.joint], len(functions) - 1))
-    constraint_names += tuple(driver.name for driver in drivers)
+    closure_rows = len(constraint_names)
+    constraint_names += targets.names + tuple(driver.name for driver in joint_drivers)
     repeated = sorted({c for c in constraint_names if constraint_names.count(c) > 1})
     if repeated:
         raise ModelError(f"repeated constraint names (closure rows and drivers share one namespace): "
                          f"{', '.join(repeated)}", entry=f"model {name!r}")
-    pack = TimeFunctionPack.build(functions, [f"driver {driver.name}" for driver in drivers])
+    pack = TimeFunctionPack.build(functions, labels)
     kernel = RobotKernel(parent, np.array(order, np.int64), kind, placement, axis, np.ascontiguousarray(inertia),
-                         g.copy(), closure_ints, closure_reals, np.array(driver_rows, np.int64).reshape(-1, 2),
+                         g.copy(), np.concatenate([closure_ints, targets.ints]),
+                         np.concatenate([closure_reals, targets.reals]), np.array(driver_rows, np.int64).reshape(-1, 2),
                          pack.table, pack.ops, pack.reals,
                          np.array([len(constraint_names), pack.depth], np.int64), np.zeros((0, 0)))
     for array in kernel:
         array.setflags(write=False)
-    equations = RobotEquations(kernel, link_names, bodies, offsets, tuple(movable), pack,
-                               frozenset(d.name for d, f in zip(drivers, functions) if is_constant(f)))
+    steady = targets.steady + tuple(driver.name for driver, (_, f) in zip(joint_drivers, driver_rows)
+                                    if is_constant(functions[f]))
+    equations = RobotEquations(kernel, link_names, bodies, offsets, tuple(movable), pack, frozenset(steady),
+                               targets.orientations)
     names = tuple(joint.name for joint in movable)
     index = {link: i for i, link in enumerate(link_names)}
     return Model(
@@ -431,7 +467,7 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
         coordinate_names=names,
         coordinate_kinds=tuple("distance" if joint.type == "prismatic" else "angle" for joint in movable),
         constraint_names=constraint_names,
-        drivers=np.array([False] * (len(constraint_names) - len(drivers)) + [True] * len(drivers), dtype=bool),
+        drivers=np.arange(len(constraint_names)) >= closure_rows,
         actuator_names=names,
         q0=np.array([initial_value(joint) for joint in movable], dtype=float).reshape(n),
         qd0=np.zeros(n),
@@ -445,7 +481,9 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                                 "velocity": j.velocity, "damping": j.damping, "friction": j.friction}
                                for j in movable],
                     "closures": [dict(vars(closure)) for closure in closures],
-                    "drivers": [{"name": d.name, "joint": d.joint, "function": f} for d, f in zip(drivers, functions)],
+                    "drivers": [{"name": d.name, "joint": d.joint, "function": functions[f]}
+                                for d, (_, f) in zip(joint_drivers, driver_rows)]
+                               + [dict(vars(driver)) for driver in pose_drivers],
                     "visuals": {link.name: tuple(link.visuals) for link in by_name.values() if link.visuals}},
         segment_masses=tuple((link.name, float(link.inertial.mass)) for link in by_name.values()
                              if link.inertial is not None and link.inertial.mass > 0),

@@ -12,6 +12,12 @@ their rows (Φ = 0; A, γ in :mod:`cmbs.model.robot_kernel`):
   the axes are parallel, whatever the turn about them: the rows are well conditioned at every
   joint angle (they vanish for antiparallel axes too: the same line);
 - ``revolute`` (5 rows): ``point`` and ``axis`` (a revolute joint that closes the loop);
+- ``line`` (2 rows ``.line1 .line2``): ``point_a`` of link a stays on the line of link b through
+  ``point_b`` along ``axis_b``, ``(p_a - p_b)·v_i = 0`` with (v_1, v_2) an orthonormal pair
+  perpendicular to axis_b fixed in link b (a cylindrical loop joint, or the sliding of a
+  prismatic one; with an ``axis`` closure of the same axes a cylindrical joint that also keeps
+  the axes parallel).  The rows' gradients in p_a are the unit vectors v_i: well conditioned
+  everywhere on the line;
 - ``weld`` (6 rows ``.x .y .z .rx .ry .rz``): ``point`` and the frames ``F_a = R_a Rot(rpy_a)``,
   ``F_b = R_b Rot(rpy_b)`` (rpy in URDF's convention, default 0) aligned: with their columns
   (x, y, z), ``y_a·z_b = z_a·x_b = x_a·y_b = 0``, whose Jacobian at alignment is the identity
@@ -30,13 +36,13 @@ from typing import Sequence
 import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
-from cmbs.model.robot_kernel import CLOSE_DOT, CLOSE_POINT
+from cmbs.model.robot_kernel import CLOSE_DOT, CLOSE_LINE, CLOSE_POINT, ELEMENT_REALS
 
 __all__ = ["Closure", "CLOSURE_KINDS", "GROUND", "closure_elements", "rpy_rotation"]
 
 #: the rows of each kind, by their suffix
 CLOSURE_KINDS = {"point": ("x", "y", "z"), "axis": ("axis1", "axis2"), "revolute": ("x", "y", "z", "axis1", "axis2"),
-                 "weld": ("x", "y", "z", "rx", "ry", "rz")}
+                 "weld": ("x", "y", "z", "rx", "ry", "rz"), "line": ("line1", "line2")}
 #: the name of the world frame as a closure's link
 GROUND = "ground"
 
@@ -45,7 +51,7 @@ GROUND = "ground"
 class Closure:
     """A loop closure (module docstring): ``name``, ``kind`` (:data:`CLOSURE_KINDS`), links a and
     b (:data:`GROUND` for the world), points in their frames, axes in their frames (``axis``,
-    ``revolute``) and frame turns (``weld``)."""
+    ``revolute``; ``line``: ``axis_b`` only) and frame turns (``weld``)."""
 
     name: str
     kind: str
@@ -98,7 +104,7 @@ def _vector(values: object, entry: str, field: str, source: str | None, *, unit:
 def closure_elements(closures: Sequence[Closure], link_names: Sequence[str], link_body: np.ndarray,
                      link_offset: np.ndarray, *, source: str | None = None
                      ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    """The kernel's closure elements (``closure_ints`` (e, 3), ``closure_reals`` (e, 6); see
+    """The kernel's closure elements (``closure_ints`` (e, 4), ``closure_reals`` (e, ELEMENT_REALS); see
     :class:`~cmbs.model.robot_kernel.RobotKernel`) and the row names, the points and vectors moved
     from the link frames into their bodies' frames (``link_offset``, ``link_body``: link i on body
     ``link_body[i]``, -1 the ground).
@@ -109,7 +115,7 @@ def closure_elements(closures: Sequence[Closure], link_names: Sequence[str], lin
         Naming the closure: a repeated name, an unknown kind or link, a closure of a link to
         itself, a vector that is not 3 finite numbers, a zero axis, or an axis missing.
     """
-    ints: list[tuple[int, int, int]] = []
+    ints: list[tuple[int, int, int, int]] = []
     reals: list[np.ndarray] = []
     names: list[str] = []
     seen: set[str] = set()
@@ -142,30 +148,35 @@ def closure_elements(closures: Sequence[Closure], link_names: Sequence[str], lin
         point_b = offset_b[:3, :3] @ _vector(closure.point_b, entry, "point_b", source) + offset_b[:3, 3]
         rpy_a = _vector(closure.rpy_a, entry, "rpy_a", source)
         rpy_b = _vector(closure.rpy_b, entry, "rpy_b", source)
-        uses_axes = closure.kind in ("axis", "revolute")
+        axes = {"axis": ("axis_a", "axis_b"), "revolute": ("axis_a", "axis_b"), "line": ("axis_b",)}.get(closure.kind, ())
         for field in ("axis_a", "axis_b"):
             given = getattr(closure, field) is not None
-            if given != uses_axes:
-                raise ModelError(f"{field} is {'required' if uses_axes else 'not used'} by kind {closure.kind!r}",
+            if given != (field in axes):
+                raise ModelError(f"{field} is {'required' if field in axes else 'not used'} by kind {closure.kind!r}",
                                  source=source, entry=entry)
         if closure.kind != "weld" and (np.any(rpy_a) or np.any(rpy_b)):
             raise ModelError(f"rpy_a and rpy_b are used by kind 'weld' only, not by {closure.kind!r}", source=source,
                              entry=entry)
-        if closure.kind != "axis":
-            ints.append((CLOSE_POINT, body_a, body_b))
-            reals.append(np.concatenate([point_a, point_b]))
-        if uses_axes:
+        if closure.kind in ("point", "revolute", "weld"):
+            ints.append((CLOSE_POINT, body_a, body_b, 0))
+            reals.append(np.concatenate([point_a, point_b, np.zeros(3)]))
+        if "axis_a" in axes:
             u = offset_a[:3, :3] @ _vector(closure.axis_a, entry, "axis_a", source, unit=True)
+        if axes:
             axis_b = offset_b[:3, :3] @ _vector(closure.axis_b, entry, "axis_b", source, unit=True)
             for v in _perpendicular_pair(axis_b):
-                ints.append((CLOSE_DOT, body_a, body_b))
-                reals.append(np.concatenate([u, v]))
+                if closure.kind == "line":
+                    ints.append((CLOSE_LINE, body_a, body_b, 0))
+                    reals.append(np.concatenate([point_a, point_b, v]))
+                else:
+                    ints.append((CLOSE_DOT, body_a, body_b, 0))
+                    reals.append(np.concatenate([u, v, np.zeros(3)]))
         if closure.kind == "weld":
             frame_a = offset_a[:3, :3] @ rpy_rotation(rpy_a)
             frame_b = offset_b[:3, :3] @ rpy_rotation(rpy_b)
             for i, j in ((1, 2), (2, 0), (0, 1)):
-                ints.append((CLOSE_DOT, body_a, body_b))
-                reals.append(np.concatenate([frame_a[:, i], frame_b[:, j]]))
+                ints.append((CLOSE_DOT, body_a, body_b, 0))
+                reals.append(np.concatenate([frame_a[:, i], frame_b[:, j], np.zeros(3)]))
         names += closure.row_names
-    return (np.array(ints, dtype=np.int64).reshape(-1, 3), np.array(reals, dtype=float).reshape(-1, 6),
+    return (np.array(ints, dtype=np.int64).reshape(-1, 4), np.array(reals, dtype=float).reshape(-1, ELEMENT_REALS),
             tuple(names))

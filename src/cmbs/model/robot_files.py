@@ -3,8 +3,9 @@
 
 ``urdf`` in ``[model]`` (a path relative to the TOML file) makes a file a robot file; its other
 sections are ``[closures.NAME]`` (:class:`~cmbs.model.robot_closures.Closure`), ``[drivers.NAME]``
-(a joint's prescribed motion, as in the natural-coordinate files: ``coordinate`` names the joint),
-``[initial_positions]`` (joint = value: the guess assembly starts from, default 0) and
+(a joint's prescribed motion, as in the natural-coordinate files: ``coordinate`` names the joint;
+or, with ``kind = "pose"``, a link frame's target pose: :class:`~cmbs.model.robot_targets.PoseDriver`),
+``[initial_positions]`` (joint = value: the guess assembly starts from, default ``model.q0``) and
 ``[initial_velocities]``.  The file is data, checked key by key before any work (unknown keys,
 wrong types, vectors of the wrong length, unknown links, joints and kinds are one-line errors
 naming the file, the entry and the field), then the model is assembled
@@ -17,23 +18,29 @@ import math
 from pathlib import Path
 
 from cmbs.errors import ModelError, did_you_mean
+from cmbs.model.drivers import TimeFunction, as_time_function, checked_at_start
 from cmbs.model.files import _driver, _Entry, _entries, _initial_velocities, assembled, coordinate_values
 from cmbs.model.model import Model
 from cmbs.model.robot import JointDriver
 from cmbs.model.robot_closures import CLOSURE_KINDS, Closure
+from cmbs.model.robot_targets import PoseDriver
 
 __all__ = ["SECTIONS", "read_robot_file"]
 
 SECTIONS = ("model", "closures", "drivers", "initial_positions", "initial_velocities")
 _CLOSURE_KEYS = ("kind", "link_a", "link_b", "point_a", "point_b", "axis_a", "axis_b", "rpy_a", "rpy_b")
 _VECTORS = ("point_a", "point_b", "axis_a", "axis_b", "rpy_a", "rpy_b")
+_POSE_KEYS = ("kind", "link", "point", "position", "rpy")
+#: a driver's kinds: a joint's motion (the default) or a link frame's pose
+DRIVER_KINDS = ("joint", "pose")
 
 
 class _Drivers:
-    """Collects the ``[drivers.NAME]`` entries (read by :func:`cmbs.model.files._driver`)."""
+    """Collects the ``[drivers.NAME]`` entries (read by :func:`cmbs.model.files._driver` and
+    :func:`_pose_driver`)."""
 
     def __init__(self) -> None:
-        self.drivers: list[JointDriver] = []
+        self.drivers: list[JointDriver | PoseDriver] = []
 
     def add_driver(self, coordinate: str, function: object, *, name: str) -> None:
         self.drivers.append(JointDriver(name, coordinate, function))
@@ -62,15 +69,63 @@ def _closure(name: str, table: object) -> Closure:
                    vectors["rpy_b"] or zero)
 
 
+def _target(entry: _Entry, key: str, axes: tuple[str, str, str]) -> tuple[TimeFunction, ...] | None:
+    """The three functions of time of a pose driver's ``position`` or ``rpy`` (numbers or
+    expressions of t), or None when not given."""
+    value = entry.get(key)
+    if value is None:
+        return None
+    if not (isinstance(value, list) and len(value) == 3 and all(
+            isinstance(v, (int, float, str)) and not isinstance(v, bool) for v in value)):
+        raise ModelError(f"{key} must be a list of 3 numbers or expressions of t, got {value!r}", entry=entry.label)
+    functions = []
+    for axis, item in zip(axes, value):
+        label = f"{entry.label}.{key}.{axis}"
+        try:
+            functions.append(checked_at_start(as_time_function(item), label))
+        except ModelError as error:
+            raise error.located(entry=label) from None
+    return tuple(functions)
+
+
+def _pose_driver(name: str, entry: _Entry) -> PoseDriver:
+    """A ``[drivers.NAME]`` entry of kind ``"pose"``: ``link``, ``point``, ``position``, ``rpy``."""
+    position = _target(entry, "position", ("x", "y", "z"))
+    rpy = _target(entry, "rpy", ("roll", "pitch", "yaw"))
+    if position is None and rpy is None:
+        raise ModelError("give the target's 'position', its orientation 'rpy', or both", entry=entry.label)
+    return PoseDriver(name, entry.string("link"), _vector(entry, "point") or (0.0, 0.0, 0.0), position, rpy)
+
+
+def _read_driver(drivers: _Drivers, name: str, table: object, base: Path) -> None:
+    """A ``[drivers.NAME]`` entry: a joint driver (``kind = "joint"``, the default; read as in the
+    model files by :func:`cmbs.model.files._driver`) or a pose driver (``kind = "pose"``)."""
+    if not isinstance(table, dict):
+        raise ModelError(f"expected a table of keys, got {table!r}", entry=f"drivers.{name}")
+    kind = table.get("kind", "joint")
+    if kind not in DRIVER_KINDS:
+        raise ModelError(f"kind: unknown kind {kind!r}{did_you_mean(str(kind), DRIVER_KINDS)}; kinds: "
+                         f"{', '.join(DRIVER_KINDS)}", entry=f"drivers.{name}")
+    if kind == "pose":
+        drivers.drivers.append(_pose_driver(name, _Entry(f"drivers.{name}", table, _POSE_KEYS, ("link",))))
+    else:
+        _driver(drivers, name, {key: value for key, value in table.items() if key != "kind"},  # type: ignore[arg-type]
+                base)
+
+
 def _initial_positions(document: dict, model: Model) -> Model:
     """``model`` with the joint values of ``[initial_positions]`` in its q0 (the assembly's guess)."""
     q0, _ = coordinate_values(document, "initial_positions", model, model.q0, noun="joint")
     return model.replace(q0=q0)
 
 
-def _entry_of(constraint: str, drivers: frozenset[str]) -> str:
-    """The file entry of a constraint row: ``closures.NAME`` for ``NAME.x`` etc., ``drivers.NAME``."""
-    return f"drivers.{constraint}" if constraint in drivers else f"closures.{constraint.rpartition('.')[0]}"
+def _entry_of(constraint: str, joint_drivers: frozenset[str], pose_drivers: frozenset[str]) -> str:
+    """The file entry of a constraint row: ``closures.NAME`` or ``drivers.NAME`` (a pose driver)
+    for ``NAME.x`` etc., ``drivers.NAME`` for a joint driver's row."""
+    if constraint in joint_drivers:
+        return f"drivers.{constraint}"
+    name = constraint.rpartition(".")[0]
+    return f"drivers.{name}" if name in pose_drivers else f"closures.{name}"
 
 
 def read_robot_file(document: dict, path: Path) -> Model:
@@ -91,7 +146,7 @@ def read_robot_file(document: dict, path: Path) -> Model:
         drivers = _Drivers()
         for name, table in _entries(document, "drivers"):
             try:
-                _driver(drivers, name, table, path.parent)  # type: ignore[arg-type]
+                _read_driver(drivers, name, table, path.parent)
             except ModelError as error:
                 raise error.located(entry=f"drivers.{name}") from None
         urdf = Path(header.string("urdf"))
@@ -118,5 +173,7 @@ def read_robot_file(document: dict, path: Path) -> Model:
         model, given_velocities = _initial_velocities(document, model)
     except ModelError as error:
         raise error.located(source=source) from None
-    drivers_named = frozenset(model.driver_names)
-    return assembled(model, source, given_velocities, lambda constraint: _entry_of(constraint, drivers_named))
+    joint_drivers = frozenset(d.name for d in drivers.drivers if isinstance(d, JointDriver))
+    pose_drivers = frozenset(d.name for d in drivers.drivers if isinstance(d, PoseDriver))
+    return assembled(model, source, given_velocities,
+                     lambda constraint: _entry_of(constraint, joint_drivers, pose_drivers))

@@ -32,10 +32,11 @@ with c the centre of mass and I_G the inertia about it, both in world axes (Feat
 rigid-body inertia moved to the origin); ``I v = (Ī ω + h × v_O, m v_O - h × ω)``, and composite
 inertias are sums of the ten numbers.
 
-Constraint rows (loop closures, :mod:`cmbs.model.robot_closures`; drivers) follow the tree's
-terms in the same evaluation.  A body point with local coordinates l is at ``p = o_k + R_k l``
-with velocity ``ṗ = v_O + ω × p`` and, at q̈ = 0, acceleration (Featherstone §2.11: the classical
-acceleration of a body point from the spatial one)::
+Constraint rows (loop closures, :mod:`cmbs.model.robot_closures`; pose drivers,
+:mod:`cmbs.model.robot_targets`; joint drivers) follow the tree's terms in the same evaluation.
+A body point with local coordinates l is at ``p = o_k + R_k l`` with velocity ``ṗ = v_O + ω × p``
+and, at q̈ = 0, acceleration (Featherstone §2.11: the classical acceleration of a body point from
+the spatial one)::
 
     J̇ q̇ (p) = a_O + α × p + ω × ṗ,      (α, a_O) = a_k + (0, g)  (the RNEA's a_k without the base's -g),
 
@@ -45,10 +46,19 @@ body-fixed vector ``u = R_k ū`` has ``u̇ = ω × u`` and the angular columns `
     point  (3):  Φ = p_a - p_b,   A = J_a - J_b,   γ = -(J̇_a q̇ - J̇_b q̇),
     dot    (1):  Φ = u·v (u on body a, v on body b),   A = (u × v)ᵀ (J_ω,a - J_ω,b),
                  γ = -[((ω_a × u) × v + u × (ω_b × v))·(ω_a - ω_b) + (u × v)·(α_a - α_b)],
+    line   (1):  Φ = d·v, d = p_a - p_b, v on body b,   A = vᵀ (J_a - J_b) + (v × d)ᵀ J_ω,b,
+                 γ = -[(J̇_a q̇ - J̇_b q̇)·v + 2 ḋ·(ω_b × v) + (v × d)·α_b + d·(ω_b × (ω_b × v))],
     driver (1):  Φ = q_c - f(t),   A = e_cᵀ,   γ = f''(t),   Φ_t = -f'(t),
 
-from Φ̇ = (u × v)·(ω_a - ω_b) (since u̇·v = ω_a·(u × v) and u·v̇ = -ω_b·(u × v)); Φ_t = 0 for the
-closures, and the ground (body -1) has p = l, u = ū and no motion.
+from Φ̇ = (u × v)·(ω_a - ω_b) (since u̇·v = ω_a·(u × v) and u·v̇ = -ω_b·(u × v)) and
+Φ̇ = ḋ·v + d·(ω_b × v) = ḋ·v + (v × d)·ω_b, whose derivative at q̈ = 0, with
+v̈ = α_b × v + ω_b × (ω_b × v), is the bracket of the line's γ; Φ_t = 0 for the closures, and
+the ground (body -1) has p = l, u = ū and no motion.  A pose driver's target frame moves with
+time instead of a body: its point p_t(t) (velocity ṗ_t, acceleration p̈_t) and the columns v of
+its rotation Rot(rpy(t)) (angular velocity ω_t, acceleration α_t; :func:`_target_frame`) take
+body b's place in the point and dot rows, with no Jacobian columns, Φ_t = -ṗ_t and
+Φ_t = -(u × v)·ω_t, and p̈_t, α_t in γ in place of body b's bias accelerations (the rows'
+Φ_tt: γ = -(Φ_qq q̇ q̇ + 2 Φ_qt q̇ + Φ_tt) exactly).
 """
 
 from __future__ import annotations
@@ -62,10 +72,12 @@ from cmbs.jit import borrow, njit
 from cmbs.model.drivers import evaluate_time_functions
 
 REVOLUTE, PRISMATIC = 0, 1
-#: closure elements: a point coincidence (3 rows) and a dot product of two body-fixed vectors (1 row)
-CLOSE_POINT, CLOSE_DOT = 0, 1
-#: rows of each closure element kind
-ELEMENT_ROWS = (3, 1)
+#: constraint elements (module docstring): a point coincidence (3 rows), a dot product of two
+#: body-fixed vectors (1 row), a point difference along a vector of body b (1 row), and a body
+#: point on, or a body vector's dot product with a column of, a pose driver's target frame
+CLOSE_POINT, CLOSE_DOT, CLOSE_LINE, TARGET_POINT, TARGET_DOT = 0, 1, 2, 3, 4
+#: per element in ``closure_reals``: l_a or ū (3), l_b or v̄ (3), v̄ of a line element (3)
+ELEMENT_REALS = 9
 #: per body in ``placement``: E (3 x 3, row-major), then r (3)
 PLACEMENT = 12
 #: per body in ``inertia``: mass, centre of mass (3, body frame), inertia about it (xx, xy, xz, yy, yz, zz; body axes)
@@ -87,8 +99,10 @@ class RobotKernel(NamedTuple):
     axis: np.ndarray         # (n, 3) unit axes in the joint frames
     inertia: np.ndarray      # (n, INERTIA)
     gravity: np.ndarray      # (3,)
-    closure_ints: np.ndarray     # (e, 3) int64: CLOSE_POINT or CLOSE_DOT, body a, body b (-1: the ground)
-    closure_reals: np.ndarray    # (e, 6): l_a, l_b (points) or ū, v̄ (vectors), in the bodies' frames
+    closure_ints: np.ndarray     # (e, 4) int64: element kind, body a, body b (-1: the ground) or the first of
+                                 # the target's three time functions (TARGET_*), the target frame's column (TARGET_DOT)
+    closure_reals: np.ndarray    # (e, ELEMENT_REALS): l_a, l_b (points) or ū, v̄ (vectors), then v̄ (CLOSE_LINE),
+                                 # in the bodies' frames
     drivers: np.ndarray          # (d, 2) int64: driven coordinate, time function
     tf_table: np.ndarray         # the drivers' time functions (:class:`cmbs.model.drivers.TimeFunctionPack`)
     tf_ops: np.ndarray
@@ -300,10 +314,10 @@ def evaluate_terms(kernel, q, qd, t, u, buf):
 
 @njit(cache=True, inline="always")
 def _point_motion(body, lx, ly, lz, gravity, W, w0):
-    """World position p and bias acceleration J̇ q̇ (q̈ = 0) of the point with local coordinates
-    l on ``body`` (-1: the ground; module docstring)."""
+    """World position p, velocity ṗ and bias acceleration J̇ q̇ (q̈ = 0) of the point with local
+    coordinates l on ``body`` (-1: the ground; module docstring)."""
     if body < 0:
-        return lx, ly, lz, 0.0, 0.0, 0.0
+        return lx, ly, lz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     base = w0 + WORK * body
     R, v, a = base + _R, base + _V, base + _A
     px = W[base + _O] + W[R] * lx + W[R + 1] * ly + W[R + 2] * lz
@@ -317,7 +331,7 @@ def _point_motion(body, lx, ly, lz, gravity, W, w0):
     bx = W[a + 3] + gravity[0] + ay * pz - az * py + wy * vz - wz * vy
     by = W[a + 4] + gravity[1] + az * px - ax * pz + wz * vx - wx * vz
     bz = W[a + 5] + gravity[2] + ax * py - ay * px + wx * vy - wy * vx
-    return px, py, pz, bx, by, bz
+    return px, py, pz, vx, vy, vz, bx, by, bz
 
 
 @njit(cache=True, inline="always")
@@ -332,6 +346,43 @@ def _vector_motion(body, ux, uy, uz, W, w0):
     wy = W[R + 3] * ux + W[R + 4] * uy + W[R + 5] * uz
     wz = W[R + 6] * ux + W[R + 7] * uy + W[R + 8] * uz
     return wx, wy, wz, W[v], W[v + 1], W[v + 2], W[a], W[a + 1], W[a + 2]
+
+
+@njit(cache=True, inline="always")
+def _cross(ax, ay, az, bx, by, bz):
+    """a × b."""
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@njit(cache=True, inline="always")
+def _target_frame(values, f0, column):
+    """Column ``column`` of a pose driver's target rotation ``Rz(ψ) Ry(θ) Rx(φ)`` (URDF's rpy: roll
+    φ, pitch θ, yaw ψ), its angular velocity ω and acceleration α (world axes), from the values
+    ``(f, f', f'')`` of φ, θ, ψ in rows f0, f0 + 1, f0 + 2 of ``values``.  With the axes of the
+    fixed-axis sequence z, y' = Rz(ψ) y and x'' = Rz(ψ) Ry(θ) x, ``ω = ψ' z + θ' y' + φ' x''`` and,
+    as z' = 0, (y')' = ψ' z × y' and (x'')' = (ψ' z + θ' y') × x'',
+    ``α = ψ'' z + θ'' y' + θ' ψ' (z × y') + φ'' x'' + φ' (ψ' z + θ' y') × x''``."""
+    roll, dr, ddr = values[f0, 0], values[f0, 1], values[f0, 2]
+    pitch, dp, ddp = values[f0 + 1, 0], values[f0 + 1, 1], values[f0 + 1, 2]
+    yaw, dy, ddy = values[f0 + 2, 0], values[f0 + 2, 1], values[f0 + 2, 2]
+    cr, sr, cp, sp, cy, sy = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch), math.cos(yaw), \
+        math.sin(yaw)
+    if column == 0:
+        vx, vy, vz = cy * cp, sy * cp, -sp
+    elif column == 1:
+        vx, vy, vz = cy * sp * sr - sy * cr, sy * sp * sr + cy * cr, cp * sr
+    else:
+        vx, vy, vz = cy * sp * cr + sy * sr, sy * sp * cr - cy * sr, cp * cr
+    yx, yy = -sy, cy                       # y' (z component 0)
+    xx, xy, xz = cy * cp, sy * cp, -sp     # x''
+    wx, wy, wz = dp * yx + dr * xx, dp * yy + dr * xy, dy + dr * xz
+    # ω without the roll rate, which turns x''
+    ox, oy, oz = dp * yx, dp * yy, dy
+    tx, ty, tz = _cross(ox, oy, oz, xx, xy, xz)
+    ax = ddp * yx + dp * dy * (-cy) + ddr * xx + dr * tx
+    ay = ddp * yy + dp * dy * (-sy) + ddr * xy + dr * ty
+    az = ddy + ddr * xz + dr * tz
+    return vx, vy, vz, wx, wy, wz, ax, ay, az
 
 
 @njit(cache=True, inline="always")
@@ -359,10 +410,26 @@ def _add_angular_columns(parent, body, sign, cx, cy, cz, buf, row, W, w0):
 
 
 @njit(cache=True, inline="always")
+def _add_directed_columns(parent, body, sign, px, py, pz, cx, cy, cz, buf, row, W, w0):
+    """Adds ``sign`` times c·(S_j,lin + S_j,ang × p) (the point p's velocity column along c) to the
+    entries j of A's row at buf index ``row`` along the path."""
+    j = body
+    while j >= 0:
+        s = w0 + WORK * j + _S
+        sx, sy, sz = W[s], W[s + 1], W[s + 2]
+        buf[row + j] += sign * (cx * (W[s + 3] + sy * pz - sz * py) + cy * (W[s + 4] + sz * px - sx * pz)
+                                + cz * (W[s + 5] + sx * py - sy * px))
+        j = parent[j]
+
+
+@njit(cache=True, inline="always")
 def _constraint_rows(kernel, q, n, m, s0, w0, buf):
-    """Φ, A, γ, Φ_t of the closure elements and the drivers (module docstring) from the poses,
-    velocities and accelerations of the forward pass."""
+    """Φ, A, γ, Φ_t of the constraint elements and the drivers (module docstring) from the
+    poses, velocities and accelerations of the forward pass; the time functions' values are at
+    buf[s0:] (k, 3)."""
     parent, gravity, ints, reals = kernel.parent, kernel.gravity, kernel.closure_ints, kernel.closure_reals
+    ntf = kernel.tf_table.shape[0]
+    values = buf[s0:s0 + 3 * ntf].reshape((ntf, 3))
     W = buf
     o_A = n + m
     o_gam = o_A + m * n
@@ -373,38 +440,73 @@ def _constraint_rows(kernel, q, n, m, s0, w0, buf):
         buf[o_pt + i] = 0.0
     row = 0
     for e in range(ints.shape[0]):
-        ba, bb = ints[e, 1], ints[e, 2]
-        if ints[e, 0] == CLOSE_POINT:
-            ax, ay, az, gax, gay, gaz = _point_motion(ba, reals[e, 0], reals[e, 1], reals[e, 2], gravity, W, w0)
-            bx, by, bz, gbx, gby, gbz = _point_motion(bb, reals[e, 3], reals[e, 4], reals[e, 5], gravity, W, w0)
+        kind, ba, bb = ints[e, 0], ints[e, 1], ints[e, 2]
+        if kind == CLOSE_POINT or kind == TARGET_POINT:
+            ax, ay, az, _, _, _, gax, gay, gaz = _point_motion(ba, reals[e, 0], reals[e, 1], reals[e, 2], gravity, W,
+                                                               w0)
+            if kind == CLOSE_POINT:
+                bx, by, bz, _, _, _, gbx, gby, gbz = _point_motion(bb, reals[e, 3], reals[e, 4], reals[e, 5], gravity,
+                                                                   W, w0)
+                _add_point_columns(parent, bb, -1.0, bx, by, bz, buf, o_A + row * n, n, W, w0)
+            else:
+                # the target point p_t(t): Φ_t = -ṗ_t, its acceleration p̈_t in place of J̇_b q̇
+                bx, by, bz = values[bb, 0], values[bb + 1, 0], values[bb + 2, 0]
+                gbx, gby, gbz = values[bb, 2], values[bb + 1, 2], values[bb + 2, 2]
+                buf[o_pt + row], buf[o_pt + row + 1], buf[o_pt + row + 2] = -values[bb, 1], -values[bb + 1, 1], \
+                    -values[bb + 2, 1]
             buf[n + row], buf[n + row + 1], buf[n + row + 2] = ax - bx, ay - by, az - bz
             buf[o_gam + row], buf[o_gam + row + 1], buf[o_gam + row + 2] = gbx - gax, gby - gay, gbz - gaz
             _add_point_columns(parent, ba, 1.0, ax, ay, az, buf, o_A + row * n, n, W, w0)
-            _add_point_columns(parent, bb, -1.0, bx, by, bz, buf, o_A + row * n, n, W, w0)
             row += 3
+        elif kind == CLOSE_LINE:
+            ax, ay, az, vax, vay, vaz, gax, gay, gaz = _point_motion(ba, reals[e, 0], reals[e, 1], reals[e, 2],
+                                                                     gravity, W, w0)
+            bx, by, bz, vbx, vby, vbz, gbx, gby, gbz = _point_motion(bb, reals[e, 3], reals[e, 4], reals[e, 5],
+                                                                     gravity, W, w0)
+            vx, vy, vz, wbx, wby, wbz, abx, aby, abz = _vector_motion(bb, reals[e, 6], reals[e, 7], reals[e, 8], W,
+                                                                      w0)
+            dx, dy, dz = ax - bx, ay - by, az - bz
+            ex, ey, ez = _cross(vx, vy, vz, dx, dy, dz)                  # v × d
+            wvx, wvy, wvz = _cross(wbx, wby, wbz, vx, vy, vz)            # ω_b × v = v̇
+            wwx, wwy, wwz = _cross(wbx, wby, wbz, wvx, wvy, wvz)         # ω_b × (ω_b × v)
+            buf[n + row] = dx * vx + dy * vy + dz * vz
+            buf[o_gam + row] = -((gax - gbx) * vx + (gay - gby) * vy + (gaz - gbz) * vz
+                                 + 2.0 * ((vax - vbx) * wvx + (vay - vby) * wvy + (vaz - vbz) * wvz)
+                                 + ex * abx + ey * aby + ez * abz + dx * wwx + dy * wwy + dz * wwz)
+            _add_directed_columns(parent, ba, 1.0, ax, ay, az, vx, vy, vz, buf, o_A + row * n, W, w0)
+            _add_directed_columns(parent, bb, -1.0, bx, by, bz, vx, vy, vz, buf, o_A + row * n, W, w0)
+            _add_angular_columns(parent, bb, 1.0, ex, ey, ez, buf, o_A + row * n, W, w0)
+            row += 1
         else:
             ux, uy, uz, wax, way, waz, aax, aay, aaz = _vector_motion(ba, reals[e, 0], reals[e, 1], reals[e, 2], W, w0)
-            vx, vy, vz, wbx, wby, wbz, abx, aby, abz = _vector_motion(bb, reals[e, 3], reals[e, 4], reals[e, 5], W, w0)
-            cx, cy, cz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+            if kind == CLOSE_DOT:
+                vx, vy, vz, wbx, wby, wbz, abx, aby, abz = _vector_motion(bb, reals[e, 3], reals[e, 4], reals[e, 5], W,
+                                                                          w0)
+            else:
+                vx, vy, vz, wbx, wby, wbz, abx, aby, abz = _target_frame(values, bb, ints[e, 3])
+            cx, cy, cz = _cross(ux, uy, uz, vx, vy, vz)
             buf[n + row] = ux * vx + uy * vy + uz * vz
             # u̇ = ω_a × u, v̇ = ω_b × v; d/dt (u × v) = u̇ × v + u × v̇
-            dux, duy, duz = way * uz - waz * uy, waz * ux - wax * uz, wax * uy - way * ux
-            dvx, dvy, dvz = wby * vz - wbz * vy, wbz * vx - wbx * vz, wbx * vy - wby * vx
+            dux, duy, duz = _cross(wax, way, waz, ux, uy, uz)
+            dvx, dvy, dvz = _cross(wbx, wby, wbz, vx, vy, vz)
             dcx = duy * vz - duz * vy + uy * dvz - uz * dvy
             dcy = duz * vx - dux * vz + uz * dvx - ux * dvz
             dcz = dux * vy - duy * vx + ux * dvy - uy * dvx
             buf[o_gam + row] = -(dcx * (wax - wbx) + dcy * (way - wby) + dcz * (waz - wbz)
                                  + cx * (aax - abx) + cy * (aay - aby) + cz * (aaz - abz))
             _add_angular_columns(parent, ba, 1.0, cx, cy, cz, buf, o_A + row * n, W, w0)
-            _add_angular_columns(parent, bb, -1.0, cx, cy, cz, buf, o_A + row * n, W, w0)
+            if kind == CLOSE_DOT:
+                _add_angular_columns(parent, bb, -1.0, cx, cy, cz, buf, o_A + row * n, W, w0)
+            else:
+                buf[o_pt + row] = -(cx * wbx + cy * wby + cz * wbz)
             row += 1
     drivers = kernel.drivers
     for d in range(drivers.shape[0]):
         c, f = drivers[d, 0], drivers[d, 1]
-        buf[n + row] = q[c] - buf[s0 + 3 * f]
+        buf[n + row] = q[c] - values[f, 0]
         buf[o_A + row * n + c] = 1.0
-        buf[o_pt + row] = -buf[s0 + 3 * f + 1]
-        buf[o_gam + row] = buf[s0 + 3 * f + 2]
+        buf[o_pt + row] = -values[f, 1]
+        buf[o_gam + row] = values[f, 2]
         row += 1
 
 
