@@ -94,9 +94,9 @@ def _robot_mass_fault(model: Model, robot: RobotEquations, body: str, factor: fl
     added[k] = kernel.inertia[k]
     added[k, 0] *= factor - 1.0
     added[k, 4:] *= factor - 1.0          # (m, centre of mass, inertia about it): m and I scale
-    delta = kernel._replace(inertia=added, closure_ints=kernel.closure_ints[:0], closure_reals=kernel.closure_reals[:0],
-                            drivers=kernel.drivers[:0], tf_table=kernel.tf_table[:0],
-                            sizes=np.array([0, kernel.sizes[1]], np.int64))
+    delta = kernel._replace(inertia=added, closure_ints=kernel.closure_ints[:0],
+                            closure_reals=kernel.closure_reals[:0], drivers=kernel.drivers[:0],
+                            tf_table=kernel.tf_table[:0], sizes=np.array([0, kernel.sizes[1]], np.int64))
     return _RobotMassFaultEquations(model.equations, delta, t0)
 
 
