@@ -24,9 +24,10 @@ since the rows' Jacobians are ``J_a - J_b`` at the points, ``(u × v)ᵀ (J_ω,a
 ``vᵀ (J_a - J_b) + (v × d)ᵀ J_ω,b`` with d = p_a - p_b (the force +λ v at p_b and the couple
 -λ v × d on body b are the force +λ v at p_a).  A
 driver's row (``q_c - f(t)``) has the generalized force -λ on q_c alone: the actuation of joint c,
-part of what the joint transmits.  Hence the check ``S_kᵀ f^J_k = u_k - λ_drivers(k)``: the
-joint's torque (revolute) or force (prismatic) along its axis is the actuation of its
-coordinate.  The rest of f^J_k is carried by the bearing.
+part of what the joint transmits, and so does a mimic row's (``q_j - r q_k - o``: -λ on q_j
+and rλ on q_k, a transmission between the two joints).  Hence the check
+``S_kᵀ f^J_k = u_k - λ_drivers(k) - (mimic rows' Aᵀλ)_k``: the joint's torque (revolute) or force
+(prismatic) along its axis is the actuation of its coordinate.  The rest of f^J_k is carried by the bearing.
 
 Result (world axes): the force of f^J_k and its moment about the joint origin o_k (the child
 link frame's origin), ``n_k = n_O - o_k × f``; per movable joint, named by the joint.
@@ -39,7 +40,7 @@ import numpy as np
 from cmbs.errors import CmbsError
 from cmbs.model.model import Model, base_equations, base_multipliers
 from cmbs.model.robot import RobotEquations
-from cmbs.model.robot_kernel import CLOSE_LINE, CLOSE_POINT, body_work
+from cmbs.model.robot_kernel import CLOSE_LINE, CLOSE_POINT, JOINT_COUPLING, TARGET_DOT, TARGET_POINT, body_work
 
 __all__ = ["robot_reactions"]
 
@@ -90,6 +91,9 @@ def _closure_wrenches(equations: RobotEquations, R: np.ndarray, o: np.ndarray, l
             on_a = _wrench(point, -lam[row] * world_vector(body_b, reals[6:9]))
             on_b = -on_a
             row += 1
+        elif kind == JOINT_COUPLING:       # a transmission between two joints: their actuation, no wrench
+            row += 1
+            continue
         else:                              # CLOSE_DOT (pose drivers' elements are refused before)
             couple = -lam[row] * np.cross(world_vector(body_a, reals[0:3]), world_vector(body_b, reals[3:6]))
             on_a = np.concatenate([couple, np.zeros(3)])
@@ -122,7 +126,7 @@ def robot_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     equations, rows = base_equations(model)
     if not isinstance(equations, RobotEquations):
         raise CmbsError(f"model {model.name!r}: robot reactions need a robot (a URDF tree)")
-    if np.any(equations.kernel.closure_ints[:, 0] > CLOSE_LINE):
+    if np.any(np.isin(equations.kernel.closure_ints[:, 0], (TARGET_POINT, TARGET_DOT))):
         raise CmbsError(f"model {model.name!r}: reactions of pose-driven robots are not available (the target's "
                         "wrench on the link); drive the joints instead")
     q, qd, qdd, lam = (np.asarray(a, dtype=float) for a in (q, qd, qdd, lam))

@@ -39,7 +39,7 @@ import numpy as np
 from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, is_constant
 from cmbs.model.model import Model, Terms
-from cmbs.model.robot_closures import Closure, closure_elements, rpy_rotation
+from cmbs.model.robot_closures import Closure, closure_elements, coupling_elements, rpy_rotation
 from cmbs.model.robot_targets import PoseDriver, target_elements
 from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, RobotKernel, body_poses, energies, \
     evaluate_terms, scratch_size
@@ -77,7 +77,9 @@ class TreeJoint:
     """A joint: type (:data:`JOINT_TYPES`), parent and child link, placement ``origin`` (4 x 4,
     the joint frame in the parent link frame), axis (joint frame), and the data kept unenforced:
     position limits ``lower``/``upper``, ``effort`` and ``velocity`` limits (None: not given),
-    ``damping`` and ``friction``."""
+    ``damping`` and ``friction``; ``mimic``: URDF's ``<mimic>`` as (joint, multiplier, offset),
+    the joint's value ``multiplier·q_joint + offset`` when mimic joints are coupled
+    (``build_robot(..., mimic=True)``), else None."""
 
     name: str
     type: str
@@ -91,6 +93,7 @@ class TreeJoint:
     velocity: float | None = None
     damping: float = 0.0
     friction: float = 0.0
+    mimic: tuple[str, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -311,9 +314,11 @@ def _combined_inertia(parts: list[tuple[float, np.ndarray, np.ndarray]]) -> np.n
 def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint], *,
                 gravity: Sequence[float] = (0.0, 0.0, -9.81), source: str | None = None,
                 description: str = "", closures: Sequence[Closure] = (),
-                drivers: Sequence[JointDriver | PoseDriver] = ()) -> Model:
+                drivers: Sequence[JointDriver | PoseDriver] = (), mimic: bool = False) -> Model:
     """The :class:`~cmbs.model.model.Model` of the tree of ``links`` and ``joints`` closed by
-    ``closures`` and driven by ``drivers`` (joint and pose drivers; module docstring); ``source``
+    ``closures`` and driven by ``drivers`` (joint and pose drivers; module docstring), with a
+    row ``JOINT.mimic`` coupling each joint that has a ``mimic`` to the joint it mimics when
+    ``mimic`` is True (:func:`~cmbs.model.robot_closures.coupling_elements`); ``source``
     names the file it came from in errors and on the model.  ``model.q0`` is each coordinate's
     value nearest 0 within its joint's limits (:func:`initial_value`; not assembled:
     :func:`cmbs.kinematics.assemble`).
@@ -420,6 +425,11 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
     bodies = np.array([link_body[l] for l in link_names], np.int64)
     offsets = np.array([link_offset[l] for l in link_names])
     closure_ints, closure_reals, constraint_names = closure_elements(closures, link_names, bodies, offsets)
+    if mimic:
+        coupling_ints, coupling_reals, coupling_names = coupling_elements(movable, source=source)
+        closure_ints = np.concatenate([closure_ints, coupling_ints])
+        closure_reals = np.concatenate([closure_reals, coupling_reals])
+        constraint_names += coupling_names
     for driver in drivers:
         if not isinstance(driver, (JointDriver, PoseDriver)):
             raise ModelError(f"a driver is a JointDriver or a PoseDriver, got {driver!r}", entry=f"model {name!r}")
@@ -478,7 +488,8 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
         source=source or "",
         parameters={"builder": "robot", "gravity": tuple(float(x) for x in g),
                     "joints": [{"name": j.name, "type": j.type, "lower": j.lower, "upper": j.upper, "effort": j.effort,
-                                "velocity": j.velocity, "damping": j.damping, "friction": j.friction}
+                                "velocity": j.velocity, "damping": j.damping, "friction": j.friction,
+                                "mimic": j.mimic}
                                for j in movable],
                     "closures": [dict(vars(closure)) for closure in closures],
                     "drivers": [{"name": d.name, "joint": d.joint, "function": functions[f]}

@@ -36,7 +36,7 @@ from typing import Sequence
 import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
-from cmbs.model.robot_kernel import CLOSE_DOT, CLOSE_LINE, CLOSE_POINT, ELEMENT_REALS
+from cmbs.model.robot_kernel import CLOSE_DOT, CLOSE_LINE, CLOSE_POINT, ELEMENT_REALS, JOINT_COUPLING
 
 __all__ = ["Closure", "CLOSURE_KINDS", "GROUND", "closure_elements", "rpy_rotation"]
 
@@ -178,5 +178,38 @@ def closure_elements(closures: Sequence[Closure], link_names: Sequence[str], lin
                 ints.append((CLOSE_DOT, body_a, body_b, 0))
                 reals.append(np.concatenate([frame_a[:, i], frame_b[:, j], np.zeros(3)]))
         names += closure.row_names
+    return (np.array(ints, dtype=np.int64).reshape(-1, 4), np.array(reals, dtype=float).reshape(-1, ELEMENT_REALS),
+            tuple(names))
+
+
+def coupling_elements(joints: Sequence, *, source: str | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """The kernel's elements (``closure_ints`` (e, 4), ``closure_reals`` (e, ELEMENT_REALS)) and
+    row names ``JOINT.mimic`` of the movable ``joints`` (in coordinate order) that mimic another:
+    URDF's ``<mimic joint multiplier offset>``, the row ``q_joint - multiplier·q_mimicked -
+    offset = 0`` (:mod:`cmbs.model.robot_kernel`, JOINT_COUPLING).
+
+    Raises
+    ------
+    ModelError
+        Naming the joint: it mimics a joint that is not a movable joint of the tree, or itself.
+    """
+    coordinate = {joint.name: k for k, joint in enumerate(joints)}
+    ints, reals, names = [], [], []
+    for k, joint in enumerate(joints):
+        if joint.mimic is None:
+            continue
+        mimicked, multiplier, offset = joint.mimic
+        entry = f"joint {joint.name!r}"
+        if mimicked == joint.name:
+            raise ModelError("<mimic> names the joint itself", source=source, entry=entry)
+        if mimicked not in coordinate:
+            raise ModelError(f"<mimic joint={mimicked!r}>: not a movable joint of the tree"
+                             f"{did_you_mean(mimicked, coordinate)}", source=source, entry=entry)
+        ints.append((JOINT_COUPLING, k, coordinate[mimicked], 0))
+        values = np.zeros(ELEMENT_REALS)
+        values[0], values[1] = multiplier, offset
+        reals.append(values)
+        names.append(f"{joint.name}.mimic")
     return (np.array(ints, dtype=np.int64).reshape(-1, 4), np.array(reals, dtype=float).reshape(-1, ELEMENT_REALS),
             tuple(names))

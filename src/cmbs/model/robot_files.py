@@ -1,7 +1,8 @@
 """Robot model files: a small TOML file that names a URDF robot and closes its loops
 (docs/robots.md, "Loop closures").
 
-``urdf`` in ``[model]`` (a path relative to the TOML file) makes a file a robot file; its other
+``urdf`` in ``[model]`` (a path relative to the TOML file) makes a file a robot file
+(``mimic = true`` there couples the URDF's mimic joints to the joints they mimic); its other
 sections are ``[closures.NAME]`` (:class:`~cmbs.model.robot_closures.Closure`), ``[drivers.NAME]``
 (a joint's prescribed motion, as in the natural-coordinate files: ``coordinate`` names the joint;
 or, with ``kind = "pose"``, a link frame's target pose: :class:`~cmbs.model.robot_targets.PoseDriver`),
@@ -139,9 +140,12 @@ def read_robot_file(document: dict, path: Path) -> Model:
         if unknown:
             raise ModelError(f"unknown section(s) {', '.join(map(repr, unknown))} for a robot file (allowed: "
                              f"{', '.join(SECTIONS)})")
-        header = _Entry("model", document.get("model", {}), ("name", "description", "source", "urdf", "gravity"),
-                        ("urdf",))
+        header = _Entry("model", document.get("model", {}),
+                        ("name", "description", "source", "urdf", "gravity", "mimic"), ("urdf",))
         gravity = _vector(header, "gravity") or (0.0, 0.0, -9.81)
+        mimic = header.get("mimic", False)
+        if not isinstance(mimic, bool):
+            raise ModelError(f"mimic must be true or false, got {mimic!r}", entry="model")
         closures = [_closure(name, table) for name, table in _entries(document, "closures")]
         drivers = _Drivers()
         for name, table in _entries(document, "drivers"):
@@ -156,7 +160,7 @@ def read_robot_file(document: dict, path: Path) -> Model:
     except ModelError as error:
         raise error.located(source=source) from None
     try:
-        robot = load_urdf(urdf, gravity=gravity, closures=closures, drivers=drivers.drivers)
+        robot = load_urdf(urdf, gravity=gravity, closures=closures, drivers=drivers.drivers, mimic=mimic)
     except ModelError as error:
         if error.source is None:      # a closure's or driver's mistake: name this file's entry
             entry = error.entry or ""

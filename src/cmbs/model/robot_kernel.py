@@ -48,6 +48,7 @@ body-fixed vector ``u = R_k ū`` has ``u̇ = ω × u`` and the angular columns `
                  γ = -[((ω_a × u) × v + u × (ω_b × v))·(ω_a - ω_b) + (u × v)·(α_a - α_b)],
     line   (1):  Φ = d·v, d = p_a - p_b, v on body b,   A = vᵀ (J_a - J_b) + (v × d)ᵀ J_ω,b,
                  γ = -[(J̇_a q̇ - J̇_b q̇)·v + 2 ḋ·(ω_b × v) + (v × d)·α_b + d·(ω_b × (ω_b × v))],
+    mimic  (1):  Φ = q_j - r q_k - o (joint j mimics joint k),   A = e_jᵀ - r e_kᵀ,   γ = 0,
     driver (1):  Φ = q_c - f(t),   A = e_cᵀ,   γ = f''(t),   Φ_t = -f'(t),
 
 from Φ̇ = (u × v)·(ω_a - ω_b) (since u̇·v = ω_a·(u × v) and u·v̇ = -ω_b·(u × v)) and
@@ -73,9 +74,10 @@ from cmbs.model.drivers import evaluate_time_functions
 
 REVOLUTE, PRISMATIC = 0, 1
 #: constraint elements (module docstring): a point coincidence (3 rows), a dot product of two
-#: body-fixed vectors (1 row), a point difference along a vector of body b (1 row), and a body
-#: point on, or a body vector's dot product with a column of, a pose driver's target frame
-CLOSE_POINT, CLOSE_DOT, CLOSE_LINE, TARGET_POINT, TARGET_DOT = 0, 1, 2, 3, 4
+#: body-fixed vectors (1 row), a point difference along a vector of body b (1 row), a body
+#: point on, or a body vector's dot product with a column of, a pose driver's target frame, and
+#: a joint coupled to another (URDF's mimic; 1 row)
+CLOSE_POINT, CLOSE_DOT, CLOSE_LINE, TARGET_POINT, TARGET_DOT, JOINT_COUPLING = 0, 1, 2, 3, 4, 5
 #: per element in ``closure_reals``: l_a or ū (3), l_b or v̄ (3), v̄ of a line element (3)
 ELEMENT_REALS = 9
 #: per body in ``placement``: E (3 x 3, row-major), then r (3)
@@ -100,8 +102,10 @@ class RobotKernel(NamedTuple):
     inertia: np.ndarray      # (n, INERTIA)
     gravity: np.ndarray      # (3,)
     closure_ints: np.ndarray     # (e, 4) int64: element kind, body a, body b (-1: the ground) or the first of
-                                 # the target's three time functions (TARGET_*), the target frame's column (TARGET_DOT)
-    closure_reals: np.ndarray    # (e, ELEMENT_REALS): l_a, l_b (points) or ū, v̄ (vectors), then v̄ (CLOSE_LINE),
+                                 # the target's three time functions (TARGET_*), the target frame's column (TARGET_DOT);
+                                 # JOINT_COUPLING: the mimicking and the mimicked coordinate
+    closure_reals: np.ndarray    # (e, ELEMENT_REALS): l_a, l_b (points) or ū, v̄ (vectors), then v̄ (CLOSE_LINE);
+                                 # JOINT_COUPLING: multiplier, offset;
                                  # in the bodies' frames
     drivers: np.ndarray          # (d, 2) int64: driven coordinate, time function
     tf_table: np.ndarray         # the drivers' time functions (:class:`cmbs.model.drivers.TimeFunctionPack`)
@@ -458,6 +462,14 @@ def _constraint_rows(kernel, q, n, m, s0, w0, buf):
             buf[o_gam + row], buf[o_gam + row + 1], buf[o_gam + row + 2] = gbx - gax, gby - gay, gbz - gaz
             _add_point_columns(parent, ba, 1.0, ax, ay, az, buf, o_A + row * n, n, W, w0)
             row += 3
+        elif kind == JOINT_COUPLING:
+            # ba mimics bb (coordinates): q_a - r q_b - o = 0, a linear row (γ = 0, Φ_t = 0)
+            ratio = reals[e, 0]
+            buf[n + row] = q[ba] - ratio * q[bb] - reals[e, 1]
+            buf[o_A + row * n + ba] += 1.0
+            buf[o_A + row * n + bb] -= ratio
+            buf[o_gam + row] = 0.0
+            row += 1
         elif kind == CLOSE_LINE:
             ax, ay, az, vax, vay, vaz, gax, gay, gaz = _point_motion(ba, reals[e, 0], reals[e, 1], reals[e, 2],
                                                                      gravity, W, w0)

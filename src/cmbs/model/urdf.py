@@ -6,8 +6,10 @@ The file is parsed by yourdfpy (no meshes loaded) into the links and joints of a
 :mod:`cmbs.surfaces`).  URDF's ``<origin xyz rpy>`` is the transform ``Trans(xyz) Rz(yaw)
 Ry(pitch) Rx(roll)`` (fixed axes x, y, z); yourdfpy returns it as a 4 x 4 matrix.  Floating and
 planar joints (six and three coordinates) are refused: a free-flying or planar base is modelled
-in spatial natural coordinates (docs/spatial.md).  ``<mimic>`` is not applied: a mimicking joint
-has a coordinate of its own.
+in spatial natural coordinates (docs/spatial.md).  A ``<mimic joint multiplier offset>`` is kept
+with its joint (``TreeJoint.mimic``); it is applied, as a constraint row ``JOINT.mimic``
+(``q_joint = multiplier·q_mimicked + offset``), when ``mimic=True``; otherwise a mimicking joint
+has a coordinate of its own (as in Pinocchio's default).
 """
 
 from __future__ import annotations
@@ -33,15 +35,16 @@ _NUMBERS = {"origin": {"xyz": (3,), "rpy": (3,)}, "axis": {"xyz": (3,)}, "mass":
             "limit": dict.fromkeys(("lower", "upper", "effort", "velocity"), (1,)),
             "dynamics": {"damping": (1,), "friction": (1,)}, "box": {"size": (3,)},
             "cylinder": {"radius": (1,), "length": (1,)}, "sphere": {"radius": (1,)}, "mesh": {"scale": (1, 3)},
-            "color": {"rgba": (4,)}}
+            "color": {"rgba": (4,)}, "mimic": {"multiplier": (1,), "offset": (1,)}}
 #: the attributes whose numbers may also be separated by commas (as yourdfpy reads them)
 _COMMAS = {"size", "scale"}
 
 
 def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81), closures: Sequence[Closure] = (),
-              drivers: Sequence[JointDriver] = ()) -> Model:
+              drivers: Sequence[JointDriver] = (), mimic: bool = False) -> Model:
     """The robot of the URDF file ``path`` (module docstring), gravity ``gravity`` (m/s², world
-    axes), closed by ``closures`` and driven by ``drivers`` (:func:`~cmbs.model.robot.build_robot`;
+    axes), closed by ``closures``, driven by ``drivers``, its mimic joints coupled when ``mimic``
+    (:func:`~cmbs.model.robot.build_robot`;
     not assembled: a robot file does that, :mod:`cmbs.model.robot_files`).  Every problem of the
     URDF is a one-line :class:`~cmbs.errors.ModelError` naming the file and the element: a missing
     file, XML that is not well formed, a number that is not one, an unknown, floating or planar
@@ -79,9 +82,13 @@ def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81),
             effort=None if limit is None else _optional(limit.effort),
             velocity=None if limit is None else _optional(limit.velocity),
             damping=0.0 if dynamics is None or dynamics.damping is None else float(dynamics.damping),
-            friction=0.0 if dynamics is None or dynamics.friction is None else float(dynamics.friction)))
+            friction=0.0 if dynamics is None or dynamics.friction is None else float(dynamics.friction),
+            mimic=None if joint.mimic is None else (
+                str(joint.mimic.joint), 1.0 if joint.mimic.multiplier is None else float(joint.mimic.multiplier),
+                0.0 if joint.mimic.offset is None else float(joint.mimic.offset))))
     return build_robot(robot.name, links, joints, gravity=gravity, source=source,
-                       description=f"robot {robot.name!r} from {Path(path).name}", closures=closures, drivers=drivers)
+                       description=f"robot {robot.name!r} from {Path(path).name}", closures=closures, drivers=drivers,
+                       mimic=mimic)
 
 
 def _optional(value: object) -> float | None:
