@@ -28,7 +28,7 @@ _SECTIONS = ("model", "points", "segments", "bodies", "angles", "distances", "sl
              "torques", "moments", "springs", "actuators", "initial_velocities")
 
 
-class _Entry:
+class Entry:
     """One table of the file (e.g. ``segments.crank``) with typed accessors naming it in errors."""
 
     def __init__(self, label: str, table: object, allowed: tuple[str, ...], required: tuple[str, ...] = ()):
@@ -78,7 +78,7 @@ class _Entry:
     def time_function(self, key: str, base: Path, interpolation: str | None = None) -> TimeFunction:
         value = self.table.get(key, 0.0)
         if isinstance(value, dict):
-            function: TimeFunction = _table(_Entry(f"{self.label}.{key}", value, ("t", "value", "interpolation")),
+            function: TimeFunction = _table(Entry(f"{self.label}.{key}", value, ("t", "value", "interpolation")),
                                             base, interpolation)
         elif isinstance(value, bool) or not isinstance(value, (int, float, str)):
             raise ModelError(f"{key} must be a number, an expression of t or a table, got {value!r}",
@@ -91,7 +91,7 @@ class _Entry:
         return checked_at_start(function, f"{self.label}.{key}")
 
 
-def _table(entry: _Entry, base: Path, default_interpolation: str | None = None) -> Table:
+def _table(entry: Entry, base: Path, default_interpolation: str | None = None) -> Table:
     if default_interpolation is not None and "interpolation" in entry.table:
         raise ModelError("'interpolation' is given both in the driver and in its table; give it once",
                          entry=entry.label)
@@ -105,7 +105,7 @@ def _table(entry: _Entry, base: Path, default_interpolation: str | None = None) 
         raise ModelError(error.problem, entry=entry.label) from None
 
 
-def _file_table(entry: _Entry, path_text: str, base: Path, interpolation: str) -> Table:
+def _file_table(entry: Entry, path_text: str, base: Path, interpolation: str) -> Table:
     """A driver table read from a two-column CSV file (t, value) relative to the model file."""
     path = (base / path_text) if not Path(path_text).is_absolute() else Path(path_text)
     try:
@@ -143,16 +143,21 @@ def _is_number(text: str) -> bool:
         return False
 
 
-def _entries(document: dict, section: str) -> list[tuple[str, object]]:
+def entries(document: dict, section: str) -> list[tuple[str, object]]:
+    """The (name, table) pairs of the section ``[section.NAME]`` (none when it is absent); a
+    section that is not a table of named entries is a ModelError naming it."""
     tables = document.get(section, {})
     if not isinstance(tables, dict):
         raise ModelError(f"[{section}] must be a table of named entries", entry=section)
     return list(tables.items())
 
 
-def _driver(builder: NaturalModelBuilder, name: str, table: object, base: Path) -> None:
-    entry = _Entry(f"drivers.{name}", table, ("coordinate", "expression", "table", "file", "interpolation"),
-                   ("coordinate",))
+def read_driver(builder: NaturalModelBuilder, name: str, table: object, base: Path) -> None:
+    """The entry ``[drivers.NAME]`` (``coordinate`` and one of ``expression``, ``table``,
+    ``file``; docs/model-format.md section 4) added to ``builder`` (anything with
+    ``add_driver(coordinate, function, name=...)``); files relative to ``base``."""
+    entry = Entry(f"drivers.{name}", table, ("coordinate", "expression", "table", "file", "interpolation"),
+                  ("coordinate",))
     given = [key for key in ("expression", "table", "file") if key in entry.table]
     if len(given) != 1:
         raise ModelError("give exactly one of 'expression', 'table' or 'file'", entry=entry.label)
@@ -180,7 +185,7 @@ def _read_builder(document: dict, base: Path, default_name: str) -> NaturalModel
         raise ModelError(f"unknown section(s) {', '.join(map(repr, unknown))} (allowed: {', '.join(_SECTIONS)})")
     if not any(document.get(section) for section in _SECTIONS if section != "model"):
         raise ModelError("the file defines no points (an empty model)", entry="points")
-    header = _Entry("model", document.get("model", {}), ("name", "description", "source", "gravity", "dimension"))
+    header = Entry("model", document.get("model", {}), ("name", "description", "source", "gravity", "dimension"))
     builder = NaturalModelBuilder(header.string("name") or default_name, gravity=header.pair("gravity") or (0.0, -9.81),
                                   description=header.string("description") or "", source=header.string("source") or "")
     handlers: dict[str, Callable[[str, object], None]] = {
@@ -190,12 +195,12 @@ def _read_builder(document: dict, base: Path, default_name: str) -> NaturalModel
         "distances": lambda name, t: _distance(builder, name, t),
         "angles": lambda name, t: _angle(builder, name, t),
         "sliders": lambda name, t: _slider(builder, name, t),
-        "drivers": lambda name, t: _driver(builder, name, t, base),
+        "drivers": lambda name, t: read_driver(builder, name, t, base),
         "forces": lambda name, t: _force(builder, name, t, base),
         "torques": lambda name, t: _torque(builder, name, t, base),
         "moments": lambda name, t: _moment(builder, name, t, base),
         "springs": lambda name, t: _spring(builder, name, t),
-        "actuators": lambda name, t: _actuator(builder, name, t),
+        "actuators": lambda name, t: read_actuator(builder, name, t),
     }
     apply_sections(document, handlers)
     return builder
@@ -205,7 +210,7 @@ def apply_sections(document: dict, handlers: dict[str, Callable[[str, object], N
     """Call each section's handler on the section's named entries, in the order of ``handlers``;
     an error is located at its entry ``SECTION.NAME``."""
     for section, handler in handlers.items():
-        for name, table in _entries(document, section):
+        for name, table in entries(document, section):
             try:
                 handler(name, table)
             except ModelError as error:
@@ -213,7 +218,7 @@ def apply_sections(document: dict, handlers: dict[str, Callable[[str, object], N
 
 
 def _point(builder: NaturalModelBuilder, name: str, table: object) -> None:
-    entry = _Entry(f"points.{name}", table, ("x", "z", "fixed", "mass"), ("x", "z"))
+    entry = Entry(f"points.{name}", table, ("x", "z", "fixed", "mass"), ("x", "z"))
     fixed = entry.get("fixed", False)
     if not isinstance(fixed, bool):
         raise ModelError(f"fixed must be true or false, got {fixed!r}", entry=entry.label)
@@ -221,69 +226,70 @@ def _point(builder: NaturalModelBuilder, name: str, table: object) -> None:
 
 
 def _segment(builder: NaturalModelBuilder, name: str, table: object) -> None:
-    entry = _Entry(f"segments.{name}", table, ("points", "mass", "com", "inertia", "length"), ("points", "mass"))
+    entry = Entry(f"segments.{name}", table, ("points", "mass", "com", "inertia", "length"), ("points", "mass"))
     i, j = entry.pair("points", str)
     builder.add_segment(name, i, j, mass=entry.number("mass"), com=entry.pair("com"),
                         inertia=entry.number("inertia"), length=entry.number("length"))
 
 
 def _body(builder: NaturalModelBuilder, name: str, table: object) -> None:
-    entry = _Entry(f"bodies.{name}", table, ("points", "mass", "com", "inertia", "length", "local"),
-                   ("points", "mass"))
+    entry = Entry(f"bodies.{name}", table, ("points", "mass", "com", "inertia", "length", "local"),
+                  ("points", "mass"))
     given = entry.get("local", {})
-    local = _Entry(f"{entry.label}.local", given, tuple(given) if isinstance(given, dict) else ())
+    local = Entry(f"{entry.label}.local", given, tuple(given) if isinstance(given, dict) else ())
     builder.add_body(name, entry.get("points"), mass=entry.number("mass"), com=entry.pair("com"),
                      inertia=entry.number("inertia"), length=entry.number("length"),
                      local={point: local.pair(point) for point in local.table})
 
 
 def _distance(builder: NaturalModelBuilder, name: str, table: object) -> None:
-    entry = _Entry(f"distances.{name}", table, ("points", "initial"), ("points",))
+    entry = Entry(f"distances.{name}", table, ("points", "initial"), ("points",))
     i, j = entry.pair("points", str)
     builder.add_distance(name, i, j, initial=entry.number("initial"))
 
 
 def _angle(builder: NaturalModelBuilder, name: str, table: object) -> None:
-    entry = _Entry(f"angles.{name}", table, ("segment", "from", "to", "initial"))
+    entry = Entry(f"angles.{name}", table, ("segment", "from", "to", "initial"))
     builder.add_angle(name, segment=entry.get("segment"), from_segment=entry.get("from"),
                       to_segment=entry.get("to"), initial=entry.number("initial"))
 
 
 def _slider(builder: NaturalModelBuilder, name: str, table: object) -> None:
-    entry = _Entry(f"sliders.{name}", table, ("point", "line", "segment", "through", "direction", "lock"),
-                   ("point",))
+    entry = Entry(f"sliders.{name}", table, ("point", "line", "segment", "through", "direction", "lock"),
+                  ("point",))
     builder.add_slider(name, point=entry.string("point"), line=entry.pair("line", str),
                        segment=entry.string("segment"), through=entry.pair("through"),
                        direction=entry.pair("direction"), lock=entry.string("lock"))
 
 
 def _force(builder: NaturalModelBuilder, name: str, table: object, base: Path) -> None:
-    entry = _Entry(f"forces.{name}", table, ("point", "segment", "at", "frame", "fx", "fz"))
+    entry = Entry(f"forces.{name}", table, ("point", "segment", "at", "frame", "fx", "fz"))
     builder.add_force(name, point=entry.string("point"), fx=entry.time_function("fx", base),
                       fz=entry.time_function("fz", base), segment=entry.string("segment"), at=entry.pair("at"),
                       frame=entry.get("frame", "ground"))
 
 
 def _torque(builder: NaturalModelBuilder, name: str, table: object, base: Path) -> None:
-    entry = _Entry(f"torques.{name}", table, ("angle", "torque"), ("angle", "torque"))
+    entry = Entry(f"torques.{name}", table, ("angle", "torque"), ("angle", "torque"))
     builder.add_torque(name, angle=entry.string("angle"), torque=entry.time_function("torque", base))
 
 
 def _moment(builder: NaturalModelBuilder, name: str, table: object, base: Path) -> None:
-    entry = _Entry(f"moments.{name}", table, ("segment", "moment"), ("segment", "moment"))
+    entry = Entry(f"moments.{name}", table, ("segment", "moment"), ("segment", "moment"))
     builder.add_moment(name, segment=entry.string("segment"), moment=entry.time_function("moment", base))
 
 
 def _spring(builder: NaturalModelBuilder, name: str, table: object) -> None:
-    entry = _Entry(f"springs.{name}", table, ("points", "stiffness", "damping", "rest_length"),
-                   ("points", "stiffness"))
+    entry = Entry(f"springs.{name}", table, ("points", "stiffness", "damping", "rest_length"),
+                  ("points", "stiffness"))
     i, j = entry.pair("points", str)
     builder.add_spring(name, i, j, stiffness=entry.number("stiffness"), damping=entry.number("damping", 0.0),
                        rest_length=entry.number("rest_length"))
 
 
-def _actuator(builder: NaturalModelBuilder, name: str, table: object) -> None:
-    entry = _Entry(f"actuators.{name}", table, ("coordinate", "gain"), ("coordinate",))
+def read_actuator(builder: NaturalModelBuilder, name: str, table: object) -> None:
+    """The entry ``[actuators.NAME]`` (``coordinate``, ``gain``) added to ``builder``."""
+    entry = Entry(f"actuators.{name}", table, ("coordinate", "gain"), ("coordinate",))
     builder.add_actuator(name, coordinate=entry.string("coordinate"), gain=entry.number("gain", 1.0))
 
 
@@ -412,7 +418,7 @@ def coordinate_values(document: dict, section: str, model: Model, start: np.ndar
     return values, tuple(table)
 
 
-def _initial_velocities(document: dict, model: Model) -> tuple[Model, tuple[str, ...]]:
+def initial_velocities(document: dict, model: Model) -> tuple[Model, tuple[str, ...]]:
     """``model`` with the velocities of ``[initial_velocities]`` ({coordinate: value}) in its
     q̇0, and their coordinate names."""
     qd0, names = coordinate_values(document, "initial_velocities", model, model.qd0, quantity="velocity")
@@ -477,7 +483,7 @@ def load_model_file(path: str | Path) -> Model:
             entry_of = functools.partial(entry_of_constraint, drivers=frozenset(model.driver_names))
         else:
             model = _read_builder(document, path.parent, path.stem).build()
-        model, given_velocities = _initial_velocities(document, model)
+        model, given_velocities = initial_velocities(document, model)
     except ModelError as error:
         raise error.located(source=source) from None
     return assembled(model, source, given_velocities, entry_of)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.drivers import TimeFunction, as_time_function, checked_at_start
-from cmbs.model.files import _driver, _Entry, _entries, _initial_velocities, assembled, coordinate_values
+from cmbs.model.files import Entry, assembled, coordinate_values, entries, initial_velocities, read_driver
 from cmbs.model.model import Model
 from cmbs.model.robot import JointDriver
 from cmbs.model.robot_closures import CLOSURE_KINDS, Closure
@@ -37,7 +37,7 @@ DRIVER_KINDS = ("joint", "pose")
 
 
 class _Drivers:
-    """Collects the ``[drivers.NAME]`` entries (read by :func:`cmbs.model.files._driver` and
+    """Collects the ``[drivers.NAME]`` entries (read by :func:`cmbs.model.files.read_driver` and
     :func:`_pose_driver`)."""
 
     def __init__(self) -> None:
@@ -47,7 +47,7 @@ class _Drivers:
         self.drivers.append(JointDriver(name, coordinate, function))
 
 
-def _vector(entry: _Entry, key: str) -> tuple[float, float, float] | None:
+def _vector(entry: Entry, key: str) -> tuple[float, float, float] | None:
     value = entry.get(key)
     if value is None:
         return None
@@ -58,7 +58,7 @@ def _vector(entry: _Entry, key: str) -> tuple[float, float, float] | None:
 
 
 def _closure(name: str, table: object) -> Closure:
-    entry = _Entry(f"closures.{name}", table, _CLOSURE_KEYS, ("kind", "link_a", "link_b"))
+    entry = Entry(f"closures.{name}", table, _CLOSURE_KEYS, ("kind", "link_a", "link_b"))
     kind = entry.string("kind")
     if kind not in CLOSURE_KINDS:
         raise ModelError(f"kind: unknown kind {kind!r}{did_you_mean(kind, CLOSURE_KINDS)}; kinds: "
@@ -70,7 +70,7 @@ def _closure(name: str, table: object) -> Closure:
                    vectors["rpy_b"] or zero)
 
 
-def _target(entry: _Entry, key: str, axes: tuple[str, str, str]) -> tuple[TimeFunction, ...] | None:
+def _target(entry: Entry, key: str, axes: tuple[str, str, str]) -> tuple[TimeFunction, ...] | None:
     """The three functions of time of a pose driver's ``position`` or ``rpy`` (numbers or
     expressions of t), or None when not given."""
     value = entry.get(key)
@@ -89,7 +89,7 @@ def _target(entry: _Entry, key: str, axes: tuple[str, str, str]) -> tuple[TimeFu
     return tuple(functions)
 
 
-def _pose_driver(name: str, entry: _Entry) -> PoseDriver:
+def _pose_driver(name: str, entry: Entry) -> PoseDriver:
     """A ``[drivers.NAME]`` entry of kind ``"pose"``: ``link``, ``point``, ``position``, ``rpy``."""
     position = _target(entry, "position", ("x", "y", "z"))
     rpy = _target(entry, "rpy", ("roll", "pitch", "yaw"))
@@ -100,7 +100,7 @@ def _pose_driver(name: str, entry: _Entry) -> PoseDriver:
 
 def _read_driver(drivers: _Drivers, name: str, table: object, base: Path) -> None:
     """A ``[drivers.NAME]`` entry: a joint driver (``kind = "joint"``, the default; read as in the
-    model files by :func:`cmbs.model.files._driver`) or a pose driver (``kind = "pose"``)."""
+    model files by :func:`cmbs.model.files.read_driver`) or a pose driver (``kind = "pose"``)."""
     if not isinstance(table, dict):
         raise ModelError(f"expected a table of keys, got {table!r}", entry=f"drivers.{name}")
     kind = table.get("kind", "joint")
@@ -108,9 +108,9 @@ def _read_driver(drivers: _Drivers, name: str, table: object, base: Path) -> Non
         raise ModelError(f"kind: unknown kind {kind!r}{did_you_mean(str(kind), DRIVER_KINDS)}; kinds: "
                          f"{', '.join(DRIVER_KINDS)}", entry=f"drivers.{name}")
     if kind == "pose":
-        drivers.drivers.append(_pose_driver(name, _Entry(f"drivers.{name}", table, _POSE_KEYS, ("link",))))
+        drivers.drivers.append(_pose_driver(name, Entry(f"drivers.{name}", table, _POSE_KEYS, ("link",))))
     else:
-        _driver(drivers, name, {key: value for key, value in table.items() if key != "kind"},  # type: ignore[arg-type]
+        read_driver(drivers, name, {key: value for key, value in table.items() if key != "kind"},  # type: ignore[arg-type]
                 base)
 
 
@@ -140,15 +140,15 @@ def read_robot_file(document: dict, path: Path) -> Model:
         if unknown:
             raise ModelError(f"unknown section(s) {', '.join(map(repr, unknown))} for a robot file (allowed: "
                              f"{', '.join(SECTIONS)})")
-        header = _Entry("model", document.get("model", {}),
-                        ("name", "description", "source", "urdf", "gravity", "mimic"), ("urdf",))
+        header = Entry("model", document.get("model", {}),
+                       ("name", "description", "source", "urdf", "gravity", "mimic"), ("urdf",))
         gravity = _vector(header, "gravity") or (0.0, 0.0, -9.81)
         mimic = header.get("mimic", False)
         if not isinstance(mimic, bool):
             raise ModelError(f"mimic must be true or false, got {mimic!r}", entry="model")
-        closures = [_closure(name, table) for name, table in _entries(document, "closures")]
+        closures = [_closure(name, table) for name, table in entries(document, "closures")]
         drivers = _Drivers()
-        for name, table in _entries(document, "drivers"):
+        for name, table in entries(document, "drivers"):
             try:
                 _read_driver(drivers, name, table, path.parent)
             except ModelError as error:
@@ -174,7 +174,7 @@ def read_robot_file(document: dict, path: Path) -> Model:
                               description=header.string("description") or robot.description,
                               source=header.string("source") or robot.source)
         model = _initial_positions(document, model)
-        model, given_velocities = _initial_velocities(document, model)
+        model, given_velocities = initial_velocities(document, model)
     except ModelError as error:
         raise error.located(source=source) from None
     joint_drivers = frozenset(d.name for d in drivers.drivers if isinstance(d, JointDriver))
