@@ -40,7 +40,7 @@ import numpy as np
 from cmbs.errors import CmbsError
 from cmbs.model.model import Model, base_equations, base_multipliers
 from cmbs.model.robot import RobotEquations
-from cmbs.model.robot_kernel import CLOSE_LINE, CLOSE_POINT, JOINT_COUPLING, TARGET_DOT, TARGET_POINT, body_work
+from cmbs.model.robot_kernel import CLOSE_LINE, CLOSE_POINT, JOINT_COUPLING, body_work
 
 __all__ = ["robot_reactions"]
 
@@ -126,7 +126,7 @@ def robot_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     equations, rows = base_equations(model)
     if not isinstance(equations, RobotEquations):
         raise CmbsError(f"model {model.name!r}: robot reactions need a robot (a URDF tree)")
-    if np.any(np.isin(equations.kernel.closure_ints[:, 0], (TARGET_POINT, TARGET_DOT))):
+    if equations.pose_driven:
         raise CmbsError(f"model {model.name!r}: reactions of pose-driven robots are not available (the target's "
                         "wrench on the link); drive the joints instead")
     q, qd, qdd, lam = (np.asarray(a, dtype=float) for a in (q, qd, qdd, lam))
