@@ -244,6 +244,20 @@ def test_cmbs_inverse_actuated_joints_of_the_five_bar(tmp_path, capsys):
         np.testing.assert_allclose(saved["driver_forces"], api.forces, rtol=1e-12)
 
 
+@needs_pinocchio
+def test_projected_on_a_joint_driven_ur5_equals_the_driver_forces(tmp_path):
+    """Method 'projected' asked for on a robot driven joint by joint: the same torques as the
+    drivers' multipliers (lagrange) and Pinocchio's rnea, to 1e-12 relative."""
+    from test_robot_closures import _ur5_file
+
+    model = cmbs.load(_ur5_file(tmp_path))
+    times = np.linspace(0.0, 1.0, 3)
+    projected = cmbs.inverse_dynamics(model, times, method="projected")
+    lagrange = cmbs.inverse_dynamics(model, times)
+    assert lagrange.method == "lagrange" and projected.driven_coordinates == lagrange.driven_coordinates
+    assert np.abs(projected.forces - lagrange.forces).max() < 1e-12 * np.abs(lagrange.forces).max()
+
+
 # ------------------------------------------------------------------ mistakes
 @pytest.mark.parametrize("arguments, expected", [
     (["--method", "matrix-r"], "a pose driver prescribes a link's pose, not a joint's force: its joint torques come "
@@ -253,13 +267,17 @@ def test_cmbs_inverse_actuated_joints_of_the_five_bar(tmp_path, capsys):
     (["--actuated", "left_motor"], "passive coordinate(s) left_elbow, right_motor, right_elbow cannot be left "
                                    "unactuated"),
     (["--method", "projected", "--option", "alpha=1e8"], "method 'projected' takes no formulation options"),
+    (["--reactions"], "reactions of pose-driven robots are not available"),
 ])
 def test_inverse_dynamics_mistakes_are_one_line_errors(tmp_path, capsys, arguments, expected):
     from cmbs.cli import main
 
     status = main(["inverse", str(_five_bar_task_file(tmp_path)), "--t-end", "0.2", "--dt", "0.1", *arguments])
-    error = capsys.readouterr().err
+    printed = capsys.readouterr()
+    error = printed.err
     assert status != 0 and expected in error and len(error.strip().splitlines()) == 1, error
+    if "passive" not in expected:       # refused before the analysis: nothing printed
+        assert printed.out == ""
 
 
 def test_projected_needs_a_robot_and_actuated_needs_projected():
