@@ -28,8 +28,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from cmbs.errors import CmbsError
-from cmbs.kinematics import accelerations
 from cmbs.inverse.projected import passive_joint_torque, pidc_torque
+from cmbs.kinematics import accelerations
 from cmbs.model.model import Model
 from cmbs.trajectory import Trajectory
 
