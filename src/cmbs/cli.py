@@ -406,8 +406,13 @@ def _inverse(args: argparse.Namespace) -> int:
     model = _load(args)
     if args.motion:
         model = _prescribed(model, args)
-    result = inverse_dynamics(model, times, method=args.method, **_formulation_options(args))
-    print(f"{model.name}: inverse dynamics ({args.method}) over {len(times)} instants")
+    if args.reactions:
+        from cmbs.inverse.robot_reactions import refuse_pose_driven
+
+        refuse_pose_driven(model)
+    actuated = [name.strip() for name in args.actuated.split(",")] if args.actuated is not None else None
+    result = inverse_dynamics(model, times, method=args.method, actuated=actuated, **_formulation_options(args))
+    print(f"{model.name}: inverse dynamics ({result.method}) over {len(times)} instants")
     for name in result.driven_coordinates:
         force = result.force(name) + 0.0         # + 0.0: no "-0" for a zero force
         print(f"  force on {name + bracketed(force_unit(model, name)):<20} min {force.min(): .6g}  "
@@ -674,8 +679,12 @@ def build_parser() -> argparse.ArgumentParser:
     inverse = model_command("inverse", "inverse dynamics: the forces on the driven coordinates of a driven model")
     inverse.add_argument("--t-end", type=float, required=True, help="final time [s]")
     inverse.add_argument("--dt", type=float, required=True, help="time step of the output grid [s]")
-    inverse.add_argument("--method", default="lagrange", choices=("lagrange", "baumgarte", "penalty", "matrix-r"),
-                         help="driver multipliers of a formulation, or matrix-R Q_IDA")
+    inverse.add_argument("--method", choices=("lagrange", "baumgarte", "penalty", "matrix-r", "projected"),
+                         help="driver multipliers of a formulation, matrix-R Q_IDA, or a robot's joint torques "
+                              "(projected; the default for a pose-driven robot, else lagrange)")
+    inverse.add_argument("--actuated", metavar="A,B",
+                         help="method projected: the joints that carry torque (default all: the minimum-norm "
+                              "torques)")
     inverse.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                          help="option of the method's formulation, e.g. alpha=1e8 for penalty")
     inverse.add_argument("--motion", metavar="FILE|EXPR",

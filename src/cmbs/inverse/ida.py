@@ -16,6 +16,12 @@ The two must agree (a test).  ``method`` chooses how the multipliers are obtaine
 formulation of that name evaluated on the kinematic motion (``lagrange``, ``baumgarte``,
 ``penalty`` — the thesis's Figure 4.3 compares them), or ``matrix-r`` (Q_IDA above).
 
+A robot's joints carry its actuation (:mod:`cmbs.inverse.joint_torques`): method ``projected``
+gives the joint torques that produce the drivers' motion on the robot without its drivers — the
+minimum-norm τ = P (M q̈ - Q) of Aghili's projected inverse dynamics, or zero on the joints not
+``actuated`` — with the drivers' rows' multipliers zero.  It is the method of a robot driven by
+a pose driver (a link frame's pose is no joint's force), and the only one there.
+
 One rule for every method: the motion is the one the model's drivers impose.  Each method takes
 q and q̇ from the motion and the accelerations the drivers impose there (A q̈ = γ, which holds
 the drivers' f''(t)); a motion given as a :class:`~cmbs.trajectory.Trajectory` must agree with
@@ -27,20 +33,22 @@ names the instant and the coordinate — drive the model by that motion with
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from cmbs.dynamics import formulation as make_formulation
 from cmbs.errors import CmbsError, SingularSystemError, did_you_mean
 from cmbs.kinematics import accelerations, kinematic_analysis
-from cmbs.model.model import Model
+from cmbs.inverse.joint_torques import checked_actuated, joint_torques
+from cmbs.model.model import Model, base_equations
+from cmbs.model.robot import RobotEquations
 from cmbs.trajectory import Trajectory
 
 if TYPE_CHECKING:
     from cmbs.simulate import Inputs
 
-METHODS = ("lagrange", "baumgarte", "penalty", "matrix-r")
+METHODS = ("lagrange", "baumgarte", "penalty", "matrix-r", "projected")
 #: A given motion's q, q̇ and q̈ must equal the drivers' to this, relative to the largest value
 #: of each over the motion (positions: the constraint errors as displacements relative to the
 #: model's size).
@@ -50,7 +58,8 @@ MOTION_TOLERANCE = 1e-6
 @dataclass(frozen=True)
 class InverseDynamics:
     """Result: the ``motion`` (q, q̇, q̈ with extras ``driver_forces`` (k, d) and ``lam``),
-    the names of the driven coordinates and of the drivers, and the method used."""
+    the names of the driven coordinates (method ``projected``: the joints that carry torque) and
+    of the drivers, and the method used."""
 
     motion: Trajectory
     driven_coordinates: tuple[str, ...]
@@ -83,9 +92,11 @@ def driven_columns(model: Model) -> np.ndarray:
     return np.array(columns, dtype=np.int64)
 
 
-def inverse_dynamics(model: Model, times: np.ndarray | Trajectory, *, method: str = "lagrange",
-                     u: Inputs | np.ndarray | None = None, **options: object) -> InverseDynamics:
-    """Forces on the driven coordinates that produce the motion imposed by the model's drivers.
+def inverse_dynamics(model: Model, times: np.ndarray | Trajectory, *, method: str | None = None,
+                     u: Inputs | np.ndarray | None = None, actuated: Sequence[str] | None = None,
+                     **options: object) -> InverseDynamics:
+    """Forces on the driven coordinates (method ``projected``: on the robot's joints) that produce
+    the motion imposed by the model's drivers.
 
     Parameters
     ----------
@@ -93,33 +104,58 @@ def inverse_dynamics(model: Model, times: np.ndarray | Trajectory, *, method: st
         Output instants (the kinematic analysis runs on them), or a motion of this model that
         agrees with its drivers (see the module docstring).
     method
-        ``lagrange``, ``baumgarte``, ``penalty`` (their multipliers of the driver rows) or
-        ``matrix-r`` (Q_IDA = Rᵀ(M q̈ - Q)); ``options`` go to the formulation.
+        ``lagrange``, ``baumgarte``, ``penalty`` (their multipliers of the driver rows),
+        ``matrix-r`` (Q_IDA = Rᵀ(M q̈ - Q)); ``options`` go to the formulation; or, for a robot,
+        ``projected`` (the joints' torques, :mod:`cmbs.inverse.joint_torques`).  Default
+        ``projected`` for a robot with a pose driver, else ``lagrange``.
     u
         The model's actuator inputs during the motion, as for :func:`cmbs.simulate`: a constant
         (n_u,) array or a function u(t, q, q̇); zero by default.  The driver forces are what the
         drivers add to them.
+    actuated
+        Method ``projected``: the joints that carry torque (default all: the minimum-norm torques).
     """
     from cmbs.simulate import input_law
 
+    equations = base_equations(model)[0]
+    robot = isinstance(equations, RobotEquations)
+    pose_driven = robot and equations.pose_driven
+    method = method if method is not None else "projected" if pose_driven else "lagrange"
     if method not in METHODS:
-        raise CmbsError(f"unknown inverse-dynamics method {method!r}; choose one of {', '.join(METHODS)}")
+        raise CmbsError(f"unknown inverse-dynamics method {method!r}{did_you_mean(method, METHODS)}; choose one of "
+                        f"{', '.join(METHODS)}")
     if not model.drivers.any():
         raise CmbsError(f"model {model.name!r} has no drivers: nothing prescribes the motion")
+    if method == "projected":
+        if not robot:
+            raise CmbsError(f"model {model.name!r}: method 'projected' gives a robot's joint torques; this model is "
+                            "not a robot (a URDF tree): use lagrange, baumgarte, penalty or matrix-r")
+        if options:
+            raise CmbsError(f"method 'projected' takes no formulation options, got {', '.join(sorted(options))}")
+        columns = checked_actuated(model, actuated)
+    elif pose_driven:
+        raise CmbsError(f"model {model.name!r}: a pose driver prescribes a link's pose, not a joint's force: its "
+                        f"joint torques come from method 'projected' (the default for it), not {method!r}")
+    elif actuated is not None:
+        raise CmbsError(f"actuated is for method 'projected' (a robot's joint torques); method {method!r} gives "
+                        "the forces of the driven coordinates")
+    else:
+        columns = driven_columns(model)
     inputs = input_law(model, u)
     if isinstance(times, Trajectory):
         motion = times
         check_motion(model, motion)
     else:
         motion = kinematic_analysis(model, np.asarray(times, dtype=float))
-    columns = driven_columns(model)
     driver_rows = np.flatnonzero(model.drivers)
     k = motion.t.size
     forces = np.zeros((k, columns.size))
     lam = np.zeros((k, model.m))
     applied = np.zeros((k, model.n_u))
     terms = model.new_terms()
-    if method == "matrix-r":
+    if method == "projected":
+        forces, lam, applied = joint_torques(model, motion, inputs, columns)
+    elif method == "matrix-r":
         free = model.without_drivers()
         solver = make_formulation("matrix-r", independent=tuple(model.coordinate_names[c] for c in columns),
                                   **options).bind(free)

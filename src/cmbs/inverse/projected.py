@@ -41,10 +41,12 @@ class ControllabilityError(CmbsError):
 
 
 def projection_terms(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, t: float, threshold: float,
-                     weight: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                     weight: np.ndarray | None, u: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``b = M q̈ - Q_ext``, the projector ``P = I - A_W⁺A_W`` and ``A_W⁺`` (A_W = A W⁻¹, or A) at
-    the state, after checking that ``qdd`` satisfies A q̈ = γ."""
-    terms = model.evaluate(np.asarray(q, float), np.asarray(qd, float), t)
+    the state, after checking that ``qdd`` satisfies A q̈ = γ; Q_ext is the model's Q with the
+    inputs ``u`` (zero when None)."""
+    terms = model.evaluate(np.asarray(q, float), np.asarray(qd, float), t, u)
     qdd = np.asarray(qdd, dtype=float)
     residual = terms.A @ qdd - terms.gamma
     scale = max(1.0, np.abs(terms.A @ qdd).max(initial=0.0), np.abs(terms.gamma).max(initial=0.0))
@@ -59,10 +61,10 @@ def projection_terms(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarra
 
 
 def pidc_torque(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, t: float = 0.0, *,
-                weight: np.ndarray | None = None, threshold: float = 1e-9) -> np.ndarray:
+                weight: np.ndarray | None = None, threshold: float = 1e-9, u: np.ndarray | None = None) -> np.ndarray:
     """Minimum-norm (or minimum |W⁻¹τ|) generalized force producing the consistent acceleration
-    ``qdd`` at (q, q̇, t); Q_ext is the model's Q with zero inputs."""
-    b, P, _ = projection_terms(model, q, qd, qdd, t, threshold, weight)
+    ``qdd`` at (q, q̇, t); Q_ext is the model's Q with the inputs ``u`` (zero by default)."""
+    b, P, _ = projection_terms(model, q, qd, qdd, t, threshold, weight, u)
     if weight is None:
         return P @ b
     weight = np.asarray(weight, dtype=float)
@@ -70,9 +72,10 @@ def pidc_torque(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, t:
 
 
 def passive_joint_torque(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, t: float = 0.0, *,
-                         actuated: Sequence[str], threshold: float = 1e-9, tolerance: float = 1e-8) -> np.ndarray:
+                         actuated: Sequence[str], threshold: float = 1e-9, tolerance: float = 1e-8,
+                         u: np.ndarray | None = None) -> np.ndarray:
     """Generalized force producing ``qdd`` with zero force on every coordinate not in
-    ``actuated`` (Aghili §VII-D).
+    ``actuated`` (Aghili §VII-D); Q_ext is the model's Q with the inputs ``u`` (zero by default).
 
     Raises
     ------
@@ -81,7 +84,7 @@ def passive_joint_torque(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.nd
         left free at this state (e.g. the equal-link slider-crank with joint B passive at its
         singular position), naming the coordinates and the residual.
     """
-    b, P, _ = projection_terms(model, q, qd, qdd, t, threshold, None)
+    b, P, _ = projection_terms(model, q, qd, qdd, t, threshold, None, u)
     tau = P @ b
     passive = np.ones(model.n)
     passive[model.coordinate_indices(list(actuated))] = 0.0

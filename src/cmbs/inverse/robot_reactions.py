@@ -40,7 +40,7 @@ import numpy as np
 from cmbs.errors import CmbsError
 from cmbs.model.model import Model, base_equations, base_multipliers
 from cmbs.model.robot import RobotEquations
-from cmbs.model.robot_kernel import CLOSE_LINE, CLOSE_POINT, JOINT_COUPLING, TARGET_DOT, TARGET_POINT, body_work
+from cmbs.model.robot_kernel import CLOSE_LINE, CLOSE_POINT, JOINT_COUPLING, body_work
 
 __all__ = ["robot_reactions"]
 
@@ -105,6 +105,15 @@ def _closure_wrenches(equations: RobotEquations, R: np.ndarray, o: np.ndarray, l
     return wrenches
 
 
+def refuse_pose_driven(model: Model) -> None:
+    """A :class:`CmbsError` when ``model`` is a robot driven by a pose driver: its reactions are not
+    available (checked before an analysis whose reactions are asked for)."""
+    equations = base_equations(model)[0]
+    if isinstance(equations, RobotEquations) and equations.pose_driven:
+        raise CmbsError(f"model {model.name!r}: reactions of pose-driven robots are not available (the target's "
+                        "wrench on the link); drive the joints instead")
+
+
 def robot_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, lam: np.ndarray,
                     u: np.ndarray | None = None, t: float = 0.0) -> dict:
     """Forces and moments transmitted by every movable joint of a robot at a consistent state
@@ -126,9 +135,7 @@ def robot_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     equations, rows = base_equations(model)
     if not isinstance(equations, RobotEquations):
         raise CmbsError(f"model {model.name!r}: robot reactions need a robot (a URDF tree)")
-    if np.any(np.isin(equations.kernel.closure_ints[:, 0], (TARGET_POINT, TARGET_DOT))):
-        raise CmbsError(f"model {model.name!r}: reactions of pose-driven robots are not available (the target's "
-                        "wrench on the link); drive the joints instead")
+    refuse_pose_driven(model)
     q, qd, qdd, lam = (np.asarray(a, dtype=float) for a in (q, qd, qdd, lam))
     if lam.shape != (model.m,):
         raise CmbsError(f"lam has shape {lam.shape}, expected ({model.m},)")

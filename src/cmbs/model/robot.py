@@ -41,8 +41,8 @@ from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function,
 from cmbs.model.model import Model, Terms
 from cmbs.model.robot_closures import Closure, closure_elements, coupling_elements, rpy_rotation
 from cmbs.model.robot_targets import PoseDriver, target_elements
-from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, RobotKernel, body_poses, energies, \
-    evaluate_terms, scratch_size
+from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, TARGET_DOT, TARGET_POINT, RobotKernel, \
+    body_poses, energies, evaluate_terms, scratch_size
 from cmbs.model.visuals import Visual, checked_visual
 
 __all__ = ["Inertial", "TreeLink", "TreeJoint", "JointDriver", "PoseDriver", "RobotEquations", "build_robot",
@@ -149,6 +149,11 @@ class RobotEquations:
     def gravity(self) -> tuple[float, float, float]:
         """The acceleration of gravity (m/s², world axes)."""
         return tuple(float(value) for value in self.kernel.gravity)
+
+    @property
+    def pose_driven(self) -> bool:
+        """True when a pose driver (:mod:`cmbs.model.robot_targets`) prescribes a link frame's pose."""
+        return bool(np.any(np.isin(self.kernel.closure_ints[:, 0], (TARGET_POINT, TARGET_DOT))))
 
     @property
     def body_names(self) -> tuple[str, ...]:
