@@ -123,14 +123,22 @@ def test_simulate_and_compare_print_the_compile_time_apart_from_the_run_time(mon
         assert float(row.split()[-2]) < 50 and float(row.split()[-1]) >= 100
 
 
-def test_a_sweep_prints_the_compile_time_apart_from_the_run_time(monkeypatch, capsys):
+@pytest.fixture
+def unbatched(monkeypatch):
+    """``cmbs sweep`` with its variants run one at a time (the single-run loops other tests
+    compile): these tests read what it prints, the same for either path; the batched path is
+    tests/test_sweep.py's."""
+    module = sys.modules["cmbs.sweep"]
+    original = module.sweep
+    monkeypatch.setattr(module, "sweep", lambda *args, **kwargs: original(*args, **{**kwargs, "batched": False}))
+
+
+def test_a_sweep_prints_the_compile_time_apart_from_the_run_time(unbatched, monkeypatch, capsys):
     module = sys.modules["cmbs.sweep"]
     original = module.sweep
 
     def compiling(*args, **kwargs):
-        # the variants one at a time (the single-run loop other tests compile): only the printed
-        # times matter here, not the batched path (tests/test_sweep.py)
-        result = original(*args, **{**kwargs, "batched": False})
+        result = original(*args, **kwargs)
         result.info["wall_time"] += 100.0
         result.info["compile_time"] += 100.0
         return result
@@ -214,7 +222,7 @@ def test_inverse_prints_and_plots_each_force_with_its_unit(tmp_path, capsys):
     plt.close(figure)
 
 
-def test_sweep_labels_read_as_a_mass_factor_and_a_speed(capsys):
+def test_sweep_labels_read_as_a_mass_factor_and_a_speed(unbatched, capsys):
     assert main(["sweep", "four-bar", "--undriven", "--speed", "alpha=-2,0", "--t-end", "0.01", "--dt", "1e-3",
                  "--integrator", "rk4"]) == 0
     out = capsys.readouterr().out

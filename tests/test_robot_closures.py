@@ -220,27 +220,35 @@ def four_bar_urdf() -> tuple[str, dict[str, np.ndarray]]:
     return "\n".join(parts) + "\n", start
 
 
+def write_four_bar(folder: Path, kind: str) -> tuple[Path, dict[str, np.ndarray]]:
+    """:func:`four_bar_urdf` and its robot file in ``folder``, closed at P2 between the coupler's
+    end and the rocker's by a closure of ``kind`` (``revolute``: about y; ``line``: P2 on the
+    rocker's line along y); the robot file's path and the start points."""
+    text, start = four_bar_urdf()
+    (folder / "four-bar.urdf").write_text(text)
+    axes = ('axis_a = [0.0, 1.0, 0.0]\n' if kind == "revolute" else "") + 'axis_b = [0.0, 1.0, 0.0]\n'
+    path = folder / "four-bar.toml"
+    path.write_text(f"""\
+[model]
+urdf = "four-bar.urdf"
+
+[closures.P2]
+kind = "{kind}"
+link_a = "coupler"
+point_a = [{', '.join(map(repr, (start['P2'] - start['P1']).tolist()))}]
+link_b = "rocker"
+point_b = [{', '.join(map(repr, (start['P2'] - start['B']).tolist()))}]
+""" + axes)
+    return path, start
+
+
 @pytest.mark.parametrize("formulation", ["projection", "udwadia-kalaba"])
 def test_four_bar_in_joint_coordinates_moves_as_four_bar_3d(tmp_path, formulation):
     """Three joint angles closed by a revolute joint between the coupler's end and the rocker's
     (5 rows of rank 2: the out-of-plane rows are identically zero) move as the natural-coordinate
     ``four-bar-3d`` from rest: P1 and P2 to 1e-8 m over 2 s (DOP853, rtol 1e-11)."""
-    text, start = four_bar_urdf()
-    (tmp_path / "four-bar.urdf").write_text(text)
-    (tmp_path / "four-bar.toml").write_text(f"""\
-[model]
-urdf = "four-bar.urdf"
-
-[closures.P2]
-kind = "revolute"
-link_a = "coupler"
-point_a = [{', '.join(map(repr, (start['P2'] - start['P1']).tolist()))}]
-link_b = "rocker"
-point_b = [{', '.join(map(repr, (start['P2'] - start['B']).tolist()))}]
-axis_a = [0.0, 1.0, 0.0]
-axis_b = [0.0, 1.0, 0.0]
-""")
-    model, natural = cmbs.load(tmp_path / "four-bar.toml"), cmbs.load("four-bar-3d")
+    path, start = write_four_bar(tmp_path, "revolute")
+    model, natural = cmbs.load(path), cmbs.load("four-bar-3d")
     report = cmbs.constraint_report(model, model.q0)
     assert (model.n, model.m, report.rank, report.dof) == (3, 5, 2, 1)
     options = dict(t_end=2.0, dt=0.05, integrator="dop853", rtol=1e-11, atol=1e-12)

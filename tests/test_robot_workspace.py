@@ -17,7 +17,7 @@ import pytest
 import cmbs
 from cmbs.model.robot import frame_placement
 from cmbs.workspace import workspace
-from test_robot_closures import four_bar_urdf
+from test_robot_closures import write_four_bar
 
 #: the five-bar's dimensions (five-bar-robot.urdf): motors at x = ∓D/2, proximal L1, distal L2
 D, L1, L2 = 0.2, 0.3, 0.25
@@ -115,22 +115,8 @@ def four_bar(tmp_path_factory):
     """The thesis four-bar (crank a = 2 from A, coupler b = 10, rocker c = 6 from B, ground g = 10:
     Grashof, s + l = 12 <= p + q = 16, the crank the shortest: a crank-rocker) as three joint
     angles about y closed at P2 by a line closure along y; its start points."""
-    folder = tmp_path_factory.mktemp("four-bar")
-    text, start = four_bar_urdf()
-    (folder / "four-bar.urdf").write_text(text)
-    (folder / "four-bar.toml").write_text(f"""\
-[model]
-urdf = "four-bar.urdf"
-
-[closures.P2]
-kind = "line"
-link_a = "coupler"
-point_a = [{', '.join(map(repr, (start['P2'] - start['P1']).tolist()))}]
-link_b = "rocker"
-point_b = [{', '.join(map(repr, (start['P2'] - start['B']).tolist()))}]
-axis_b = [0.0, 1.0, 0.0]
-""")
-    return cmbs.load(folder / "four-bar.toml"), start
+    path, start = write_four_bar(tmp_path_factory.mktemp("four-bar"), "line")
+    return cmbs.load(path), start
 
 
 def _angle(v: np.ndarray) -> float:
