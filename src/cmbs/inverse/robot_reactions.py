@@ -130,7 +130,8 @@ def robot_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
         ``joint_forces``: {joint: float} — its component along the joint's axis: the torque
         (revolute) or force (prismatic) that actuates the joint;
         ``closures``: {constraint row: float} — ``-λ`` of each loop-closure row (the force along a
-        point row's world axis on link a, or the couple about u × v of an axis row).
+        point row's world axis on link a, or the couple about u × v of an axis row) and of each
+        mimic row (the torque on the mimicking joint; r times it, opposite, on the mimicked one).
     """
     equations, rows = base_equations(model)
     if not isinstance(equations, RobotEquations):
