@@ -69,11 +69,6 @@ def same_kind(value: tuple, items: tuple) -> tuple:
     return type(value)(*items)
 
 
-def _items(values: tuple) -> tuple:
-    """The items of tuple ``values``, each borrowed (:func:`borrow`), as a plain tuple."""
-    return values
-
-
 if _numba is not None:
     from cffi import FFI as _FFI
     from numba.core import types as _types
@@ -81,33 +76,55 @@ if _numba is not None:
 
     _ffi = _FFI()
 
-    @_overload(borrow)
-    def _borrow_typed(value):
-        if isinstance(value, _types.Array) and value.layout == "C" and value.mutable:
-            return lambda value: _numba.carray(_ffi.from_buffer(value), value.shape)
-        if isinstance(value, _types.BaseNamedTuple):
-            make = value.instance_class
-            return lambda value: make(*_items(value))
-        if isinstance(value, _types.BaseTuple):
-            return lambda value: _items(value)
-        return lambda value: value
+    @_numba.njit(cache=True)
+    def _borrowed_array(array):
+        """``array``'s memory as an array numba does not reference-count (``numba.carray`` over
+        cffi's ``from_buffer`` pointer): the compiled :func:`borrow` of one C-contiguous array."""
+        return _numba.carray(_ffi.from_buffer(array), array.shape)
 
     @_overload(same_kind)
     def _same_kind_typed(value, items):
         make = value.instance_class
         return lambda value, items: make(*items)
 
-    @_overload(_items)
-    def _items_typed(values):
-        # halves, not head and tail: numba types a recursion one item deep per level in time
-        # that grows quickly with the depth (compiling a function of an 11-array tuple: 4.5 s, halving: 0.5 s)
-        count = len(values)
-        if count == 0:
-            return lambda values: ()
-        if count == 1:
-            return lambda values: (borrow(values[0]),)
-        half = count // 2
-        return lambda values: _items(values[:half]) + _items(values[half:])
+    def _compile_borrow() -> None:
+        """Type a compiled ``borrow(value)`` as returning ``value``'s own type and lower it member by
+        member (numba's ``infer_global``/``AbstractTemplate`` typing and ``lower_builtin``): a tuple
+        is rebuilt from its borrowed members in the caller's own code, each C-contiguous
+        writeable array by a call of :func:`_borrowed_array`.  No function is compiled per tuple
+        type, as an overload would for every tuple a run passes (900 small compilations in the
+        test suite, a tenth of its compile time)."""
+        from numba.core.typing.templates import AbstractTemplate, infer_global, signature
+        from numba.extending import lower_builtin
+
+        @infer_global(borrow)
+        class _Typed(AbstractTemplate):
+            def generic(self, args, kws):
+                if len(args) == 1 and not kws:
+                    return signature(args[0], args[0])
+                return None
+
+        @lower_builtin(borrow, _types.Any)
+        def _lowered(context, builder, sig, args):
+            return _borrowed(context, builder, sig.args[0], args[0])
+
+        def _borrowed(context, builder, kind, value):
+            """``value`` of numba type ``kind`` with its arrays borrowed, as a new reference (the
+            members not borrowed are counted once more, as the caller's own)."""
+            if isinstance(kind, _types.Array) and kind.layout == "C" and kind.mutable:
+                function = _types.Dispatcher(_borrowed_array)
+                call = function.get_call_type(context.typing_context, (kind,), {})
+                return context.get_function(function, call)(builder, [value])
+            if isinstance(kind, _types.BaseTuple):
+                for index, member in enumerate(kind):
+                    item = _borrowed(context, builder, member, builder.extract_value(value, index))
+                    value = builder.insert_value(value, item, index)
+                return value
+            if context.enable_nrt:
+                context.nrt.incref(builder, kind, value)
+            return value
+
+    _compile_borrow()
 
 
 def interpreted(kernel: Callable) -> Callable:
