@@ -1,5 +1,5 @@
 """cmbs.integrate.compiled_lanes: blocks of variants in lanes give, bit for bit, the one-variant
-compiled loop's numbers (cmbs.integrate.compiled_rk4.rk4_batch, itself its rk4 per variant),
+compiled loop's numbers (cmbs.integrate.variants.rk4_variants: its rk4 per variant),
 including variants that leave their lanes at a singular position or when the motion diverges."""
 
 import functools
@@ -12,8 +12,8 @@ import cmbs
 from cmbs.dynamics.base import NON_FINITE, OK, SINGULAR
 from cmbs.integrate import compiled_lanes
 from cmbs.integrate.compiled_plan import compiled_run
-from cmbs.integrate.compiled_rk4 import rk4_batch
 from cmbs.integrate.continuity import LEFT_BRANCH
+from cmbs.integrate.variants import rk4_variants
 from cmbs.dynamics import Baumgarte, formulation as make_formulation
 from cmbs.simulate import simulate
 from cmbs.sweep import Variant, sweep
@@ -41,7 +41,7 @@ def _both(model, QD0, chosen, steps, every, h=1e-3, U0=None):
         records = steps // every + 1
         out = (np.full((count, records, model.n), np.nan), np.full((count, records, model.n), np.nan),
                np.full((count, records), np.nan), np.full(count, -9, dtype=np.int64), np.zeros(count, dtype=np.int64))
-        run = functools.partial(compiled_lanes.rk4_lanes, lanes=setup) if lanes else rk4_batch
+        run = functools.partial(compiled_lanes.rk4_lanes, lanes=setup) if lanes else rk4_variants
         run(model_part, formulation, inputs, Q0, QD0, U0, h, steps, every, buffer_size, model.m, *out)
         results.append(out)
     return results

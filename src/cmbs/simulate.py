@@ -24,6 +24,7 @@ import numpy as np
 
 from cmbs.blas import small_matrix_loop
 from cmbs.dynamics import Formulation, drift, formulation as make_formulation
+from cmbs.dynamics.base import StatelessSolver
 from cmbs.dynamics.matrix_r import MatrixRSolver, rounding_note
 from cmbs.dynamics.matrix_r_kernels import PythonEquations
 from cmbs.errors import CmbsError, SingularSystemError, did_you_mean
@@ -297,6 +298,9 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     plan = compiled_plan(model, chosen, solver, integrator, u, project, t_end, dt,
                          projection_tolerance=projection_tolerance)
     reason = _python_loop_reason(plan, compiled)
+    if not reason and compiled is None and integrator in EXPLICIT and _singular_start(model, solver, inputs, q_start,
+                                                                                     qd_start):
+        reason = "the formulation cannot solve the start state, where the run ends (nothing to compile)"
     if compiled and reason:
         raise CmbsError(f"the compiled loop cannot run this simulation of model {model.name!r}: {reason}")
     if reason:
@@ -325,6 +329,23 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     trajectory.info["compile_time"] = compile_seconds() - compiled_before
     _explain_failure(model, trajectory, grid)
     return trajectory
+
+
+def _singular_start(model: Model, solver, inputs: Inputs, q: np.ndarray, qd: np.ndarray) -> bool:
+    """True when a stateless formulation (Lagrange, Baumgarte: :class:`~cmbs.dynamics.base.StatelessSolver`)
+    finds the system at the start state singular, so that a run would end at t = 0: it then
+    takes the Python loop, which ends there with the same message, and no loop is compiled
+    for it (20-40 s on a first run)."""
+    if not isinstance(solver, StatelessSolver):
+        return False
+    try:
+        terms = model.evaluate(q, qd, 0.0, inputs(0.0, q, qd))
+        solver.accelerations(terms, q, qd, 0.0)
+    except SingularSystemError:
+        return True
+    except (CmbsError, FloatingPointError, np.linalg.LinAlgError):
+        return False            # the run meets it and says so, as it would without this check
+    return False
 
 
 def short_last_step_message(integrator: str, t_end: float, dt: float) -> str:

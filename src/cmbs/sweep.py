@@ -6,14 +6,13 @@ with a leading variant dimension, on one common time grid).  It chooses how to r
 ``batched``
     Variants that differ only in the initial state and constant inputs, on a run the compiled
     loops take (:mod:`cmbs.integrate.compiled_plan`: rk4, rk45, rk23 or dop853, no drift
-    projection, no matrix R), run as one compiled call parallel over the variants (numba
-    threads).  rk4: natural-coordinate models under lagrange, baumgarte (without
-    ``least_squares``) or projection in blocks of eight variants that share each stage's
-    bookkeeping (:func:`cmbs.integrate.compiled_lanes.rk4_lanes`), other runs one variant at a time
-    (:func:`cmbs.integrate.compiled_rk4.rk4_batch`); both give the numbers of
-    :func:`cmbs.integrate.compiled_rk4.rk4` bit for bit.  rk45, rk23, dop853: one variant at a
-    time in the adaptive loop :func:`cmbs.simulate` runs
-    (:func:`cmbs.integrate.compiled_batch.adaptive_batch`), with its outputs at every dt.
+    projection), run in parallel over the variants.  rk4: natural-coordinate models under
+    lagrange, baumgarte (without ``least_squares``) or projection in blocks of eight variants
+    that share each stage's bookkeeping, on numba's threads
+    (:func:`cmbs.integrate.compiled_lanes.rk4_lanes`); other runs, and rk45, rk23, dop853, one
+    variant at a time by the compiled loop a single run takes, on Python threads
+    (:mod:`cmbs.integrate.variants`; the adaptive ones with their outputs at every dt).  All give
+    the numbers of :func:`cmbs.simulate`'s compiled loops bit for bit.
 ``processes``
     Anything else (library-model parameters, mass faults, other formulations and integrators)
     runs :func:`cmbs.simulate` once per variant, in a local pool of worker processes
@@ -507,28 +506,27 @@ def _block_runner(model: Model, settings: RunSettings, plan: tuple) -> Callable[
     buffer_size, m = model.new_terms().buffer.size, model.m
     if settings.integrator == "rk4":
         from cmbs.integrate.compiled_lanes import lane_setup, rk4_lanes
-        from cmbs.integrate.compiled_rk4 import rk4_batch
+        from cmbs.integrate.variants import rk4_variants
 
         lanes = lane_setup(model_part, formulation, m, model.n)
-        loop = rk4_batch if lanes is None else functools.partial(rk4_lanes, lanes=lanes)
+        loop = rk4_variants if lanes is None else functools.partial(rk4_lanes, lanes=lanes)
 
         def run(Q0, QD0, U0, Qs, QDs, PHIs, statuses, stops, recorded):
             loop(model_part, formulation, inputs, Q0, QD0, U0, settings.dt, steps, settings.every, buffer_size, m, Qs,
                  QDs, PHIs, statuses, recorded)
             stops[:] = recorded * settings.every * settings.dt    # a failed run: the first output it missed
         return run
-    from cmbs.integrate.compiled_adaptive import MAX_STEPS, loop_method
-    from cmbs.integrate.compiled_batch import adaptive_batch
     from cmbs.integrate.tableaus import tableau
+    from cmbs.integrate.variants import adaptive_variants
     from cmbs.simulate import output_times
 
     t_out = output_times(settings.t_end, settings.dt)       # every dt, as run_variant's simulate records
     kept = _output_rows(t_out, settings).astype(np.int64)
-    method = loop_method(tableau(settings.integrator), adjusts_state)
+    method = tableau(settings.integrator)
 
     def run(Q0, QD0, U0, Qs, QDs, PHIs, statuses, stops, recorded):
-        adaptive_batch(model_part, formulation, Q0, QD0, U0, t_out, kept, float(settings.rtol), float(settings.atol),
-                       method, MAX_STEPS, buffer_size, m, Qs, QDs, PHIs, statuses, stops, recorded)
+        adaptive_variants(model_part, formulation, Q0, QD0, U0, t_out, kept, float(settings.rtol), float(settings.atol),
+                          method, adjusts_state, buffer_size, m, Qs, QDs, PHIs, statuses, stops, recorded)
     return run
 
 

@@ -471,9 +471,7 @@ class MatrixRKernel(NamedTuple):
     chosen automatically and κ₂'s growth that calls for a new one (``condition_growth``), the
     ``conditions`` (κ₂ entries REFERENCE, MET) and the number of ``repartitions`` (one
     entry), zero inputs for the recovery's evaluations, ``worst`` = [κ₁, t], the largest κ₁ a
-    recovery met, and the work arrays of :func:`accelerations_work`, each a field (a tuple
-    inside the tuple would keep numba from running a batch of kernels in parallel, as
-    :func:`cmbs.integrate.compiled_rk4.rk4_batch` does).  Made once by
+    recovery met, and the work arrays of :func:`accelerations_work`, each a field.  Made once by
     :class:`~cmbs.dynamics.matrix_r.MatrixRSolver`, whose state it is."""
 
     m: int

@@ -185,7 +185,7 @@ def adaptive(model: NamedTuple, formulation: NamedTuple, q0: np.ndarray, qd0: np
     Python loop)."""
     method = loop_method(tableau, adjusts_state)
     times = np.ascontiguousarray(t_out, dtype=float)
-    y, y_new, k1, stages, counts, where, buffer, records = interpreted(run_arrays)(
+    y, y_new, k1, stages, counts, where, buffer, records = run_arrays(
         np.asarray(q0, dtype=float), np.asarray(qd0, dtype=float), times, m, method[0], method[6], buffer_size)
     watch = interpreted(watch_array)(q0.shape[0], m)
     status, t_stop = _steps(model, formulation, y, y_new, k1, stages, counts, where, records, buffer, times,
@@ -203,14 +203,11 @@ def loop_method(tableau: Tableau, adjusts_state: bool) -> tuple:
             bool(tableau.first_same_as_last and not adjusts_state))
 
 
-@njit(cache=True)
 def run_arrays(q0, qd0, t_out, m, c, dense_c, buffer_size):
     """The arrays of an adaptive run from (q0, q̇0) with outputs at ``t_out`` and a method with
     the nodes ``c`` and the continuous extension's ``dense_c``: the state y = (q, q̇), the step's
     new state, the derivative at y, the stages (the step's, then the extension's), the counts of
-    :func:`_steps`, the state of a failure, the terms buffer and the records.  Plain numpy:
-    :func:`adaptive` calls it interpreted, :func:`cmbs.integrate.compiled_batch.adaptive_batch`
-    compiled, once per variant."""
+    :func:`_steps`, the state of a failure, the terms buffer and the records."""
     n = q0.shape[0]
     d = 2 * n
     count = t_out.shape[0]
@@ -232,7 +229,7 @@ def _method_arrays(tableau: Tableau) -> tuple[np.ndarray, ...]:
                  (tableau.c, tableau.a, tableau.b, tableau.b_error, low, *extension))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _steps(model, formulation, y, y_new, k1, stages, counts, where, records, buffer, t_out, rtol, atol, u, c, a, b,
            b_error, b_error_low, dense_a, dense_c, dense_d, exponent, start_exponent, first_same_as_last, max_steps,
            watch):

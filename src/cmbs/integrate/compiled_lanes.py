@@ -125,7 +125,7 @@ def _lists(nested: list, shape: int | tuple, longest: int) -> np.ndarray:
 def rk4_lanes(model: NamedTuple, formulation: NamedTuple, inputs: NamedTuple, Q0: np.ndarray, QD0: np.ndarray,
               U0: np.ndarray, h: float, steps: int, every: int, buffer_size: int, m: int, Qs: np.ndarray,
               QDs: np.ndarray, PHIs: np.ndarray, statuses: np.ndarray, recorded: np.ndarray, lanes: tuple) -> None:
-    """:func:`cmbs.integrate.compiled_rk4.rk4_batch` (same arguments, then the :func:`lane_setup`
+    """:func:`cmbs.integrate.variants.rk4_variants` (same arguments, then the :func:`lane_setup`
     made for the model and formulation; same outputs, bit for bit) in blocks of LANES variants,
     parallel over the blocks (numba threads, :func:`_run_blocks`); then each variant that left its
     lanes goes on in the one-variant loop from the step it left at, one after the other (a sweep
@@ -142,7 +142,7 @@ def rk4_lanes(model: NamedTuple, formulation: NamedTuple, inputs: NamedTuple, Q0
     statuses[states != LEFT] = OK
     recorded[states != LEFT] = records_total
     for v in np.flatnonzero(states == LEFT):
-        single, records, work = interpreted(_rk4_arrays)(resume_q[v], resume_qd[v], U0[v], m, records_total,
+        single, records, work = _rk4_arrays(resume_q[v], resume_qd[v], U0[v], m, records_total,
                                                          buffer_size)
         own = fresh(formulation)
         own_schur = workspace_views(own.floats, own.integers, own.layout)

@@ -9,9 +9,9 @@ batch).  The index-3 integrators (backward Euler, generalized-α:
 :mod:`cmbs.integrate.compiled_index3`) bring their own formulation: they need the model's and
 the inputs' kernels only (a held law with t_end a multiple of dt); so does the trapezoidal rule
 in matrix R's independent coordinates (:mod:`cmbs.integrate.compiled_reduced`), with constant
-inputs.  :func:`cmbs.simulate` and :func:`cmbs.sweep` ask here; a batch of runs in one compiled
-call (:func:`cmbs.integrate.compiled_rk4.rk4_batch`) takes every formulation kernel, each run
-with its own copy (matrix R: its own partition too).
+inputs.  :func:`cmbs.simulate` and :func:`cmbs.sweep` ask here; a batch of runs
+(:mod:`cmbs.integrate.variants`) takes every formulation kernel, each run with its own copy
+(matrix R: its own partition too).
 """
 
 from __future__ import annotations
@@ -68,8 +68,8 @@ def compiled_plan(model: Model, chosen: Formulation, solver: object, integrator:
     """The kernel tuples of :func:`compiled_run`, or the reason in a few words why no compiled loop
     can run the simulation (the note of a run on the Python loop).  The formulation's tuple is
     None for an index-3 integrator (:data:`INDEX3`) and the trapezoidal rule, which bring their
-    own.  ``batched``: for many runs in one compiled call
-    (:func:`cmbs.integrate.compiled_rk4.rk4_batch`), without drift projection.  ``project``: drift
+    own.  ``batched``: for many runs of a sweep (:mod:`cmbs.integrate.variants`,
+    :mod:`cmbs.integrate.compiled_lanes`), without drift projection.  ``project``: drift
     projection to ``projection_tolerance`` after each step (explicit integrators only)."""
     if project and batched:
         return "drift projection is not batched"

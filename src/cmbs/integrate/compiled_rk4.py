@@ -6,8 +6,8 @@ The loop is written once: it takes the model, the formulation and the inputs as 
 at each stage, after the formulation's stage hook, and its after-step hook on each new state
 (matrix R recovers its dependent coordinates there, and chooses a new partition when its
 condition calls for one); numba compiles one specialisation per combination of their classes,
-containing only the code that combination needs, and caches it.  :func:`rk4_batch` runs many
-initial states and inputs in parallel (numba threads).
+containing only the code that combination needs, and caches it.  The loop releases the GIL
+(``nogil``): a sweep runs its variants on Python threads (:mod:`cmbs.integrate.variants`).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import numpy as np
 from cmbs.dynamics.base import OK
 from cmbs.dynamics.field import after_step, field, stage_state
 from cmbs.integrate.continuity import LEFT_BRANCH, jump_message, kept_records, left_branch, watch_array
-from cmbs.jit import borrow, interpreted, njit, prange, type_dispatch
+from cmbs.jit import borrow, interpreted, njit, type_dispatch
 from cmbs.model.compiled import terms_views
 
 #: ``apply(inputs, step, stage, q, qd, t, u)``: the inputs at a stage into ``u``.
@@ -48,7 +48,7 @@ def rk4(model: NamedTuple, formulation: NamedTuple, inputs: NamedTuple, q0: np.n
     The inputs start at ``u0``; the ``inputs`` kernel may change them at each stage.  The
     recorded u at t_n is the input applied from t_n on, with q̈, λ evaluated with it.
     """
-    state, records, work = interpreted(_rk4_arrays)(q0, qd0, u0, m, steps // every + 1, buffer_size)
+    state, records, work = _rk4_arrays(q0, qd0, u0, m, steps // every + 1, buffer_size)
     q, qd, u, sq, sv = state
     watch = interpreted(watch_array)(q0.shape[0], m)
     recorded, status, t_stop, step = _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, work,
@@ -59,13 +59,10 @@ def rk4(model: NamedTuple, formulation: NamedTuple, inputs: NamedTuple, q0: np.n
     return *records, recorded, OK, steps * h, steps, q, qd, u, ""
 
 
-@njit(cache=True)
 def _rk4_arrays(q0, qd0, u0, m, records, buffer_size):
     """The arrays of an RK4 run from (q0, q̇0) with inputs u0: its state (q, q̇, u; the stage
     state), its records (t, q, q̇, q̈, λ, u, |Φ|max, |Φ̇|max, f_c) and its workspace (terms
-    buffer, the stages' slopes of q and q̇, λ at the step and at a stage).  Plain numpy:
-    :func:`rk4` calls it interpreted, which loads no compiled code; :func:`rk4_batch` compiled,
-    once per variant."""
+    buffer, the stages' slopes of q and q̇, λ at the step and at a stage)."""
     n, n_u = q0.shape[0], u0.shape[0]
     state = (q0.copy(), qd0.copy(), u0.copy(), np.empty(n), np.empty(n))
     records = (np.zeros(records), np.zeros((records, n)), np.zeros((records, n)), np.zeros((records, n)),
@@ -75,7 +72,7 @@ def _rk4_arrays(q0, qd0, u0, m, records, buffer_size):
     return state, records, work
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _rk4_steps(model, formulation, inputs, h, steps, every, q, qd, u, sq, sv, work, records, start_step, recorded,
                watch):
     """The loop of :func:`rk4` on the arrays :func:`_rk4_arrays` allocated (state q, q̇, u
@@ -167,23 +164,3 @@ def record_constraints(terms, qd, lam, PHI, PHID, FORCE, k):
 
 #: ``fresh(kernel)``: a copy of a formulation's kernel with work arrays of its own.
 fresh = type_dispatch("fresh")
-
-
-@njit(cache=True, parallel=True)
-def rk4_batch(model, formulation, inputs, Q0, QD0, U0, h, steps, every, buffer_size, m, Qs, QDs, PHIs, statuses,
-              recorded):
-    """:func:`rk4` with :class:`ConstantInputs` ``inputs`` for N variants of the initial state and the inputs (rows
-    of Q0, QD0, U0), in parallel over the variants (numba threads), each with its own copy of the
-    formulation's work arrays (:func:`fresh`).  Writes each variant's recorded q, q̇ and
-    |Φ|max into Qs (N, records, n), QDs and PHIs (N, records), its status and the number of
-    records it reached."""
-    for v in prange(Q0.shape[0]):
-        state, records, work = _rk4_arrays(Q0[v], QD0[v], U0[v], m, steps // every + 1, buffer_size)
-        q, qd, u, sq, sv = state
-        count, status, _, _ = _rk4_steps(model, fresh(formulation), inputs, h, steps, every, q, qd, u, sq, sv, work,
-                                         records, 0, 0, watch_array(q.shape[0], m))
-        Qs[v, :count] = records[1][:count]
-        QDs[v, :count] = records[2][:count]
-        PHIs[v, :count] = records[6][:count]
-        statuses[v] = status
-        recorded[v] = count
