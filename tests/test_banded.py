@@ -11,7 +11,7 @@ from cmbs.dynamics.kkt import cholesky_in_place, packed_workspace, workspace_vie
 from cmbs.dynamics.lagrange import BandLagrangeKernel
 from cmbs.dynamics.projection import BandProjectionKernel
 from cmbs.dynamics.udwadia_kalaba import BandUdwadiaKalabaKernel
-from cmbs.integrate.compiled_rk4 import fresh
+from cmbs.integrate.variants import fresh
 
 
 def _band_storage(K, order, width):

@@ -2,7 +2,8 @@
 
 The loops borrow a run's arrays once at their top; what they then write must land in the
 caller's arrays (the records, the state), and a borrowed tuple must have the type of the tuple
-it came from, or every kernel below would be compiled a second time for it."""
+it came from, or every kernel below would be compiled a second time for it.  A sweep's variants
+run on copies of a formulation's kernel tuple (``cmbs.integrate.variants.fresh``)."""
 
 from typing import NamedTuple
 
@@ -10,6 +11,7 @@ import numpy as np
 import pytest
 
 from cmbs import jit
+from cmbs.integrate.variants import fresh
 
 
 class Inner(NamedTuple):
@@ -72,19 +74,17 @@ class Wider(Inner):
     __slots__ = ()
 
 
-@jit.njit
-def _renewed(value):
-    return jit.same_kind(value, (value.values.copy(), 2.0 * value.scale))
-
-
 @pytest.mark.parametrize("kind", [Inner, Wider])
-def test_same_kind_rebuilds_a_named_tuple_in_its_own_class(kind):
-    """A kernel tuple copied by a compiled ``fresh`` keeps its class (the class chooses its
-    kernels: a copy of a band-LU kernel must not come back as the Schur-complement one), with the
-    new members; interpreted, the same."""
-    value = kind(np.arange(3.0), 0.5)
-    for renew in (_renewed, jit.interpreted(_renewed)):
-        renewed = renew(value)
-        assert type(renewed) is kind
-        np.testing.assert_array_equal(renewed.values, value.values)
-        assert renewed.values is not value.values and renewed.scale == 1.0
+def test_fresh_gives_a_kernel_of_its_class_with_arrays_of_its_own(kind):
+    """A sweep's variants each run on a copy of the formulation's kernel: of its class (the class
+    chooses its kernels: a copy of a band-LU kernel must not come back as the Schur-complement
+    one), each writeable array copied, nested tuples too, read-only data shared (a copy would be
+    writeable: another type to compile the loops for)."""
+    read_only = np.arange(2.0)
+    read_only.setflags(write=False)
+    value = Outer(kind(np.arange(3.0), 0.5), read_only, True, 4)
+    copy = fresh(value)
+    assert type(copy) is Outer and type(copy.inner) is kind
+    assert copy.inner.values is not value.inner.values
+    np.testing.assert_array_equal(copy.inner.values, value.inner.values)
+    assert copy.matrix is read_only and copy.inner.scale == 0.5 and (copy.flag, copy.count) == (True, 4)

@@ -63,16 +63,9 @@ def borrow(value):
     return value
 
 
-def same_kind(value: tuple, items: tuple) -> tuple:
-    """A named tuple of ``value``'s class holding ``items``: a kernel tuple whose class carries its
-    kernels (:func:`type_dispatch`), rebuilt with new members without naming its class."""
-    return type(value)(*items)
-
-
 if _numba is not None:
     from cffi import FFI as _FFI
     from numba.core import types as _types
-    from numba.extending import overload as _overload
 
     _ffi = _FFI()
 
@@ -81,11 +74,6 @@ if _numba is not None:
         """``array``'s memory as an array numba does not reference-count (``numba.carray`` over
         cffi's ``from_buffer`` pointer): the compiled :func:`borrow` of one C-contiguous array."""
         return _numba.carray(_ffi.from_buffer(array), array.shape)
-
-    @_overload(same_kind)
-    def _same_kind_typed(value, items):
-        make = value.instance_class
-        return lambda value, items: make(*items)
 
     def _compile_borrow() -> None:
         """Type a compiled ``borrow(value)`` as returning ``value``'s own type and lower it member by

@@ -88,18 +88,14 @@ def field(model, formulation, q, qd, t, u, buffer, terms, qdd, lam):
 
 
 @njit(cache=True)
-def _field_at(model, formulation, buffer, q, qd, t, u, qdd, lam):
-    """:func:`field` with the terms' views made here."""
-    model, formulation, buffer, q, qd, u, qdd, lam = borrow((model, formulation, buffer, q, qd, u, qdd, lam))
+def _bound_field_at(bound, q, qd, t, u, qdd, lam):
+    """:func:`field` with the model, formulation and terms buffer of a :class:`Bound` (the call
+    of :meth:`CompiledDynamics.into`), the terms' views made here: one compiled function between
+    Python and the field, which numba links and optimises once."""
+    model, formulation, buffer, q, qd, u, qdd, lam = borrow((bound.model, bound.formulation, bound.buffer, q, qd, u,
+                                                             qdd, lam))
     terms = terms_views(model, q.shape[0], lam.shape[0], buffer)
     return field(model, formulation, q, qd, t, u, buffer, terms, qdd, lam)
-
-
-@njit(cache=True)
-def _bound_field_at(bound, q, qd, t, u, qdd, lam):
-    """:func:`_field_at` with the model, formulation and buffer of a :class:`Bound` (the call of
-    :meth:`CompiledDynamics.into`)."""
-    return _field_at(bound.model, bound.formulation, bound.buffer, q, qd, t, u, qdd, lam)
 
 
 if COMPILED:

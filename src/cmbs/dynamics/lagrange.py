@@ -28,7 +28,7 @@ from cmbs.dynamics.field import unchanged
 from cmbs.dynamics.kkt import assemble_kkt, band_kkt, banded, certify, full_system, gram_singular, packed_workspace, \
     schur_solve, unpack_workspace
 from cmbs.errors import SingularSystemError
-from cmbs.jit import njit, same_kind
+from cmbs.jit import njit
 from cmbs.lazy import on_first_use
 from cmbs.model.model import Model, Terms
 
@@ -295,24 +295,8 @@ def _minimum_norm(M, Q, A, K, rhs, qdd, lam):
     return OK
 
 
-@njit(cache=True)
-def _fresh(kernel):
-    """A copy of ``kernel`` with work arrays of its own (for runs beside each other)."""
-    return same_kind(kernel, (kernel.xi, kernel.omega, kernel.tolerance, kernel.row_scale, kernel.floats.copy(),
-                              kernel.integers.copy(), kernel.layout, np.empty_like(kernel.K),
-                              np.empty_like(kernel.rhs)))
-
-
-@njit(cache=True)
-def _fresh_least_squares(kernel):
-    """A copy of ``kernel`` with work arrays of its own (for runs beside each other)."""
-    return LeastSquaresKernel(kernel.xi, kernel.omega, np.empty_like(kernel.K), np.empty_like(kernel.rhs))
-
-
 LagrangeKernel.solve = staticmethod(_solve)
 LagrangeKernel.stage_state = LagrangeKernel.after_step = staticmethod(unchanged)
-LagrangeKernel.fresh = staticmethod(_fresh)
 BandLagrangeKernel.solve = staticmethod(_solve_band)
 LeastSquaresKernel.solve = staticmethod(_solve_least_squares)
 LeastSquaresKernel.stage_state = LeastSquaresKernel.after_step = staticmethod(unchanged)
-LeastSquaresKernel.fresh = staticmethod(_fresh_least_squares)

@@ -605,19 +605,6 @@ def _after_step(kernel, model, q, qd, t, buffer):
     return _recovered(kernel, model, q, qd, t, buffer)
 
 
-@njit(cache=True)
-def _fresh(kernel):
-    """A copy of ``kernel`` with a partition, conditions, counts and work arrays of its own (for
-    runs beside each other)."""
-    return MatrixRKernel(kernel.m, kernel.rows.copy(), kernel.dependent.copy(), kernel.independent.copy(),
-                         kernel.tolerance, kernel.iterations, kernel.recovery_limit, kernel.automatic,
-                         kernel.condition_growth, kernel.conditions.copy(), kernel.repartitions.copy(),
-                         kernel.no_input, kernel.worst.copy(), kernel.Ad.copy(), kernel.pivots.copy(),
-                         kernel.side.copy(), kernel.R.copy(), kernel.reduced.copy(), kernel.reduced_rhs.copy(),
-                         kernel.S.copy(), kernel.MR.copy(), kernel.force.copy())
-
-
 MatrixRKernel.solve = staticmethod(_solve)
 MatrixRKernel.stage_state = staticmethod(_stage_state)
 MatrixRKernel.after_step = staticmethod(_after_step)
-MatrixRKernel.fresh = staticmethod(_fresh)

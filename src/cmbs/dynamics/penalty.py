@@ -268,14 +268,5 @@ def _kernel_solve(kernel, terms, t, qd, qdd, lam):
     return status
 
 
-@njit(cache=True)
-def _fresh(kernel):
-    """A copy of ``kernel`` with λ*, work arrays and worst residual of its own."""
-    return PenaltyKernel(kernel.alpha, kernel.mu, kernel.Omega, kernel.iterations, kernel.tolerance,
-                         kernel.lam_star.copy(), kernel.factor.copy(), kernel.vectors_n.copy(), kernel.vectors_m.copy(),
-                         kernel.force.copy(), kernel.worst.copy())
-
-
 PenaltyKernel.solve = staticmethod(_kernel_solve)
 PenaltyKernel.stage_state = PenaltyKernel.after_step = staticmethod(unchanged)
-PenaltyKernel.fresh = staticmethod(_fresh)

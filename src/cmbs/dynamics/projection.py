@@ -38,7 +38,7 @@ from cmbs.dynamics.field import unchanged
 from cmbs.dynamics.kkt import band_kkt, banded, bounds_meeting, packed_workspace, schur_solve, solve_in_place, \
     unpack_workspace
 from cmbs.errors import CmbsError, SingularSystemError
-from cmbs.jit import njit, same_kind
+from cmbs.jit import njit
 from cmbs.model.model import Model, Terms
 
 #: The constraint inertia matrices; a :class:`ProjectionKernel` carries one by its index here.
@@ -351,16 +351,6 @@ def _by_svd(M, Q, A, gamma, row_scale, threshold, inertia, mu, scale, semi_defin
     return True
 
 
-@njit(cache=True)
-def _fresh(kernel):
-    """A copy of ``kernel`` with work arrays of its own (for runs beside each other)."""
-    return same_kind(kernel, (kernel.inertia, kernel.mu, kernel.threshold, kernel.scale, kernel.semi_definite,
-                              kernel.row_scale, kernel.floats.copy(), kernel.integers.copy(), kernel.layout,
-                              kernel.mass_low, kernel.dependent_floats.copy(), kernel.dependent_order.copy(),
-                              kernel.last_path.copy()))
-
-
 ProjectionKernel.solve = staticmethod(_solve)
 ProjectionKernel.stage_state = ProjectionKernel.after_step = staticmethod(unchanged)
-ProjectionKernel.fresh = staticmethod(_fresh)
 BandProjectionKernel.solve = staticmethod(_solve_band)

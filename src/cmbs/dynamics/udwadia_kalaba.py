@@ -41,7 +41,7 @@ from cmbs.dynamics.kkt import DENSE, band_kkt, banded, bounds_meeting, cholesky_
     schur_solve, solve_lower, solve_lower_transposed, unpack_workspace
 from cmbs.dynamics.projection import PROJECTION_REGULAR, reference_row_scale, row_scaled_svd_agrees
 from cmbs.errors import CmbsError, SingularSystemError
-from cmbs.jit import njit, same_kind
+from cmbs.jit import njit
 from cmbs.model.compiled import model_kernel
 from cmbs.model.model import Model, Terms
 
@@ -426,20 +426,8 @@ def _kernel_solve_band(kernel, terms, t, qd, qdd, lam):
     return _solve_with_band(kernel, M, Q, A, gamma, kernel.no_nonideal, qdd, lam)
 
 
-@njit(cache=True)
-def _fresh(kernel):
-    """A copy of ``kernel`` with work arrays of its own (the constant factor copied too)."""
-    return same_kind(kernel, (kernel.augmentation, kernel.factored, kernel.threshold, kernel.row_scale,
-                              kernel.mass_scale, kernel.factor.copy(), kernel.work_matrix.copy(),
-                              kernel.vectors_n.copy(), kernel.vectors_m.copy(), kernel.force.copy(),
-                              kernel.no_nonideal, kernel.regular_path, kernel.floats.copy(), kernel.integers.copy(),
-                              kernel.layout, kernel.mass_low, kernel.dependent_floats.copy(),
-                              kernel.dependent_order.copy(), kernel.last_path.copy()))
-
-
 UdwadiaKalabaKernel.solve = staticmethod(_kernel_solve)
 UdwadiaKalabaKernel.stage_state = UdwadiaKalabaKernel.after_step = staticmethod(unchanged)
-UdwadiaKalabaKernel.fresh = staticmethod(_fresh)
 UdwadiaKalabaKernel.solve_with = staticmethod(_solve_with)
 BandUdwadiaKalabaKernel.solve = staticmethod(_kernel_solve_band)
 BandUdwadiaKalabaKernel.solve_with = staticmethod(_solve_with_band)

@@ -37,8 +37,9 @@ from cmbs.dynamics.base import OK
 from cmbs.dynamics.kkt import gram_bounds, has_structure, workspace_views
 from cmbs.dynamics.lagrange import LagrangeKernel
 from cmbs.dynamics.projection import PROJECTION_REGULAR, ProjectionKernel
-from cmbs.integrate.compiled_rk4 import _rk4_arrays, _rk4_steps, fresh
+from cmbs.integrate.compiled_rk4 import _rk4_arrays, _rk4_steps
 from cmbs.integrate.continuity import left_branch, watch_array
+from cmbs.integrate.variants import fresh
 from cmbs.jit import borrow, interpreted, njit, prange
 from cmbs.model.natural import NaturalKernel, _evaluate
 
@@ -142,8 +143,7 @@ def rk4_lanes(model: NamedTuple, formulation: NamedTuple, inputs: NamedTuple, Q0
     statuses[states != LEFT] = OK
     recorded[states != LEFT] = records_total
     for v in np.flatnonzero(states == LEFT):
-        single, records, work = _rk4_arrays(resume_q[v], resume_qd[v], U0[v], m, records_total,
-                                                         buffer_size)
+        single, records, work = _rk4_arrays(resume_q[v], resume_qd[v], U0[v], m, records_total, buffer_size)
         own = fresh(formulation)
         own_schur = workspace_views(own.floats, own.integers, own.layout)
         own_schur[27][:] = resume_reference[v]

@@ -162,5 +162,3 @@ def record_constraints(terms, qd, lam, PHI, PHID, FORCE, k):
         FORCE[k, j] = total
 
 
-#: ``fresh(kernel)``: a copy of a formulation's kernel with work arrays of its own.
-fresh = type_dispatch("fresh")

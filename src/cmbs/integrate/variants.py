@@ -19,9 +19,19 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from cmbs.integrate.compiled_adaptive import adaptive
-from cmbs.integrate.compiled_rk4 import fresh, rk4
+from cmbs.integrate.compiled_rk4 import rk4
 from cmbs.integrate.tableaus import Tableau
 from cmbs.jit import threads
+
+
+def fresh(kernel: tuple) -> tuple:
+    """A copy of a formulation's kernel tuple for a run beside others: of the same class (the
+    class chooses the kernels: a band-LU kernel stays one), each writeable array copied (work
+    arrays, matrix R's partition, the penalty's λ*), in nested tuples too; read-only data shared
+    (a copy would be writeable, a type the loops would be compiled for again)."""
+    items = [fresh(item) if isinstance(item, tuple) else
+             item.copy() if isinstance(item, np.ndarray) and item.flags.writeable else item for item in kernel]
+    return type(kernel)(*items) if hasattr(kernel, "_fields") else tuple(items)
 
 
 def each_variant(run: Callable[[int], None], count: int) -> None:
