@@ -32,6 +32,9 @@ run = cmbs.simulate(model.without_drivers(), t_end=10, formulation="projection",
 print(run.info["status"])
 """
 
+#: The targets (issue "One engine"): seconds of a first run on an empty cache.
+SIMULATE_TARGET, EXAMPLE_TARGET = 20.0, 40.0
+
 #: (label, commands): each command a ``cmbs`` argument list, or ["python", source].
 CASES = [
     ("the README's first command (four-bar, projection, RK45, drift projection)",
@@ -84,11 +87,26 @@ def main() -> None:
         trees.insert(0, ("before", options.before.resolve() / "src"))
     print("| case | " + " | ".join(label for label, _ in trees) + (" | after / before |" if options.before else " |"))
     print("|---" * (len(trees) + 1 + bool(options.before)) + "|")
+    simulations, example = [], None
     for label, commands in CASES[:3] if options.quick else CASES:
         seconds = [run_case(commands, source) for _, source in trees]
         cells = [" + ".join(f"{value:.1f} s" for value in each) for each in seconds]
         ratio = f" {sum(seconds[1]) / sum(seconds[0]):.2f} |" if options.before else ""
         print(f"| {label} | " + " | ".join(cells) + " |" + ratio, flush=True)
+        if commands[0][0] == "simulate":
+            simulations.append(seconds[-1][0])
+        else:
+            example = seconds[-1][0]
+    print(f"\ntarget: a first `cmbs simulate` <= {SIMULATE_TARGET:g} s: {verdict(max(simulations), SIMULATE_TARGET)} "
+          f"(the largest of {len(simulations)}, {max(simulations):.1f} s)")
+    if example is not None:
+        print(f"target: the README's Python example <= {EXAMPLE_TARGET:g} s: {verdict(example, EXAMPLE_TARGET)} "
+              f"({example:.1f} s)")
+
+
+def verdict(seconds: float, target: float) -> str:
+    """PASS or MISS with the ratio to the target."""
+    return f"{'PASS' if seconds <= target else 'MISS'} ({seconds / target:.2f})"
 
 
 if __name__ == "__main__":

@@ -38,6 +38,7 @@ def commands(out: Path, quick: bool) -> dict[str, list[str]]:
                            str(out / "work-precision.json")],
         "sweep": ["bench_sweep.py", *fast],
         "launch": ["bench_launch.py", *(["--repeat", "5", "--no-cold"] if quick else [])],
+        "first-use": ["bench_first_use.py", *fast],
         "control": ["bench_control.py", *fast],
         "servo": ["bench_servo.py", *fast, "--json", str(out / "servo.json")],
         "gait": ["bench_gait.py", *(["--repeat", "2"] if quick else [])],
