@@ -15,8 +15,6 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numpy as np
-
 from cmbs.jit import njit, type_dispatch
 from cmbs.model.model import Model
 
@@ -27,25 +25,8 @@ evaluate = type_dispatch("evaluate")
 def model_kernel(model: Model) -> NamedTuple | None:
     """The compiled kernel tuple of ``model``, or None when its terms cannot be evaluated by
     compiled code alone (user-equation models, Python-callable time functions)."""
-    make = getattr(model.equations, "compiled_kernel", None)
-    kernel = make() if make is not None else None
-    return None if kernel is None else _read_only(kernel)
-
-
-def _read_only(value: object) -> object:
-    """``value`` with each array, in it or in its (named) tuples, a read-only view.  The kernels
-    only read the model's data,
-    and one flag for all of it keeps one compiled type per kernel class: a model's arrays are
-    read-only where it was built and writeable where it was unpickled (a sweep's worker
-    process), which used to compile every loop a second time there."""
-    if isinstance(value, tuple):
-        items = [_read_only(item) for item in value]
-        return type(value)(*items) if hasattr(value, "_fields") else tuple(items)
-    if not isinstance(value, np.ndarray):
-        return value
-    view = value.view()
-    view.setflags(write=False)
-    return view
+    kernel = getattr(model.equations, "compiled_kernel", None)
+    return kernel() if kernel is not None else None
 
 
 @njit(cache=True, inline="always")
