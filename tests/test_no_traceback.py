@@ -55,6 +55,19 @@ def test_a_run_that_fails_at_its_first_instant_prints_the_library_message(capsys
     assert "Use formulation 'projection'" in captured.err
 
 
+def test_a_start_the_formulation_cannot_solve_compiles_no_loop_and_ends_as_the_compiled_loop_does():
+    """The dead centre stops Lagrange at t = 0: the run takes the Python loop (no loop compiled for
+    an instant), with the status, instants and message of the compiled loop's run."""
+    model = cmbs.load("slider-crank", crank_angle=90)
+    run = cmbs.simulate(model, t_end=0.1)
+    compiled = cmbs.simulate(model, t_end=0.1, compiled=True)
+    assert run.info["note"].startswith("Python loop: the formulation cannot solve the start state")
+    assert compiled.info["compiled"] and not run.info.get("compiled")
+    assert run.info["status"] == compiled.info["status"] == "failed" and run.t.size == compiled.t.size == 0
+    assert run.info["message"] == compiled.info["message"]
+    assert "rank 4 < 5" in run.info["message"]
+
+
 def test_a_run_that_fails_at_its_first_instant_still_writes_its_empty_result(tmp_path, capsys):
     """What it computed (nothing) goes to --out; a figure or animation of no instant is not drawn,
     and the output says so."""
