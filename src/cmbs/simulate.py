@@ -24,7 +24,7 @@ import numpy as np
 
 from cmbs.blas import small_matrix_loop
 from cmbs.dynamics import Formulation, drift, formulation as make_formulation
-from cmbs.dynamics.base import StatelessSolver
+from cmbs.dynamics.lagrange import KKTSolver
 from cmbs.dynamics.matrix_r import MatrixRSolver, rounding_note
 from cmbs.dynamics.matrix_r_kernels import PythonEquations
 from cmbs.errors import CmbsError, SingularSystemError, did_you_mean
@@ -332,11 +332,13 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
 
 
 def _singular_start(model: Model, solver, inputs: Inputs, q: np.ndarray, qd: np.ndarray) -> bool:
-    """True when a stateless formulation (Lagrange, Baumgarte: :class:`~cmbs.dynamics.base.StatelessSolver`)
-    finds the system at the start state singular, so that a run would end at t = 0: it then
-    takes the Python loop, which ends there with the same message, and no loop is compiled
-    for it (20-40 s on a first run)."""
-    if not isinstance(solver, StatelessSolver):
+    """True when Lagrange or Baumgarte (:class:`~cmbs.dynamics.lagrange.KKTSolver`, the
+    formulations that stop at a singular configuration) finds the system at the start state
+    singular, so that a run would end at t = 0: it then takes the Python loop, which ends there
+    with the same message, and no loop is compiled for it (20-40 s on a first run).  The check
+    calls the solve the loop would compile; the other formulations' Python paths would compile
+    code of their own (Udwadia-Kalaba: 18 s), and they do not stop there."""
+    if not isinstance(solver, KKTSolver):
         return False
     try:
         terms = model.evaluate(q, qd, 0.0, inputs(0.0, q, qd))
