@@ -29,6 +29,7 @@ from typing import Protocol, Sequence
 import numpy as np
 
 from cmbs.errors import ModelError, did_you_mean
+from cmbs.model.read_only import make_read_only, read_only_paths
 
 
 class Terms:
@@ -204,6 +205,17 @@ class Model:
             frozen.setflags(write=False)
             object.__setattr__(self, label, frozen)
         object.__setattr__(self, "_no_input", np.zeros(len(self.actuator_names)))
+
+    # ---------------------------------------------------------------- pickling
+    def __getstate__(self) -> tuple[dict, list]:
+        """The attributes and the paths of the read-only arrays among them (numpy's pickle
+        restores arrays writeable; :mod:`cmbs.model.read_only`)."""
+        return dict(vars(self)), read_only_paths(vars(self))
+
+    def __setstate__(self, state: tuple[dict, list]) -> None:
+        attributes, read_only = state
+        vars(self).update(attributes)
+        make_read_only(vars(self), read_only)
 
     # ---------------------------------------------------------------- sizes and names
     @property
