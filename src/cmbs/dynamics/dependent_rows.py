@@ -98,18 +98,21 @@ def solve_dependent_rows(mass_low, floats, order, inverse_mass, Q, A, gamma, row
                 count += 1
                 trace_gram += value * value * row_scale[r] * row_scale[r]
         counts[r] = count
+        for i in range(n):                  # row r of X = Σ_t A[r, c_t] M⁻¹[c_t, :] (M⁻¹ symmetric)
+            X[r, i] = 0.0
+        for t in range(count):
+            value = A[r, columns[r, t]]
+            for i in range(n):
+                X[r, i] += inverse_mass[columns[r, t], i] * value
         for i in range(n):
-            total = 0.0
-            for t in range(count):
-                total += inverse_mass[i, columns[r, t]] * A[r, columns[r, t]]
-            X[r, i] = total * row_scale[r]
+            X[r, i] *= row_scale[r]
     for i in range(n):
         total = 0.0
         for j in range(n):
             total += inverse_mass[i, j] * Q[j]
         y[i] = total
     largest = 0.0
-    for a in range(m):                      # S and z, lower triangle
+    for a in range(m):                      # S (its upper triangle) and z
         order[a] = a
         total = -gamma[a]
         for t in range(counts[a]):
@@ -119,7 +122,7 @@ def solve_dependent_rows(mass_low, floats, order, inverse_mass, Q, A, gamma, row
             value = 0.0
             for t in range(counts[a]):
                 value += A[a, columns[a, t]] * X[b, columns[a, t]]
-            S[a, b] = value * row_scale[a]
+            S[b, a] = value * row_scale[a]
         largest = max(largest, S[a, a])
     rank = _pivoted_cholesky(S, z, order, STOP * largest)
     if rank <= 0:                           # not semi-definite, or no row to keep: nothing certified
@@ -127,12 +130,13 @@ def solve_dependent_rows(mass_low, floats, order, inverse_mass, Q, A, gamma, row
     _solve_kept(S, rank, z)
     kept_low = mass_low / _inverse_frobenius_squared(S, rank, T)
     dependent = m - rank
-    for k in range(dependent):              # C_k = L_II⁻ᵀ l_k (l_k: row rank + k of L)
+    for k in range(dependent):              # C_k = L_II⁻ᵀ l_k (l_k: row rank + k of L), by rows of L⁻¹
         for j in range(rank):
-            total = 0.0
-            for i in range(j, rank):
-                total += T[i, j] * S[rank + k, i]
-            C[k, j] = total
+            C[k, j] = 0.0
+        for i in range(rank):
+            value = S[rank + k, i]
+            for j in range(i + 1):
+                C[k, j] += T[i, j] * value
     residual_squared = _dependency_residual(A, row_scale, columns, counts, order, C, rank, residual)
     for i in range(n):                      # q̈ from the basic multipliers: A'_I q̈ = γ'_I exactly
         total = y[i]
@@ -154,11 +158,14 @@ def solve_dependent_rows(mass_low, floats, order, inverse_mass, Q, A, gamma, row
 
 @njit(cache=True)
 def _pivoted_cholesky(S, z, order, stop):
-    """Lower Cholesky factor of the symmetric positive semi-definite S (lower triangle) with
-    diagonal pivoting, in place, until the remaining diagonals sum to at most ``stop``; rows
-    and columns are swapped in S, and alike in ``z`` and ``order``.  Returns the rank reached,
-    or -1 when a pivot is not positive (S not semi-definite to rounding)."""
+    """Lower Cholesky factor of the symmetric positive semi-definite S (given in its upper
+    triangle) with diagonal pivoting, until the remaining diagonals sum to at most ``stop``; rows
+    and columns are swapped in S, and alike in ``z`` and ``order``.  Right-looking on the upper
+    triangle (U = Lᵀ: the updates run along rows, which are contiguous), then L = Uᵀ written to
+    the lower triangle.  Returns the rank reached, or -1 when a pivot is not positive (S not
+    semi-definite to rounding)."""
     m = S.shape[0]
+    rank = m
     for k in range(m):
         pivot, remaining = k, 0.0
         for j in range(k, m):
@@ -166,7 +173,8 @@ def _pivoted_cholesky(S, z, order, stop):
             if S[j, j] > S[pivot, pivot]:
                 pivot = j
         if remaining <= stop:
-            return k
+            rank = k
+            break
         if S[pivot, pivot] <= 0.0:
             return -1
         if pivot != k:
@@ -176,25 +184,29 @@ def _pivoted_cholesky(S, z, order, stop):
         diagonal = math.sqrt(S[k, k])
         S[k, k] = diagonal
         for i in range(k + 1, m):
-            S[i, k] /= diagonal
+            S[k, i] /= diagonal
         for j in range(k + 1, m):
-            factor = S[j, k]
-            for i in range(j, m):
-                S[i, j] -= S[i, k] * factor
-    return m
+            factor = S[k, j]
+            target, source = S[j, j:], S[k, j:]     # from 0: numba's loop then vectorizes
+            for i in range(target.shape[0]):
+                target[i] -= source[i] * factor
+    for i in range(m):
+        for j in range(i):
+            S[i, j] = S[j, i]
+    return rank
 
 
 @njit(cache=True, inline="always")
 def _swap_symmetric(S, k, p):
-    """Swap rows and columns k < p of the symmetric matrix held in S's lower triangle, together
-    with rows k and p of the factor's columns before k."""
+    """Swap rows and columns k < p of the symmetric matrix held in S's upper triangle, together
+    with columns k and p of the factor's rows before k."""
     for j in range(k):
-        S[k, j], S[p, j] = S[p, j], S[k, j]
+        S[j, k], S[j, p] = S[j, p], S[j, k]
     S[k, k], S[p, p] = S[p, p], S[k, k]
     for j in range(k + 1, p):
-        S[j, k], S[p, j] = S[p, j], S[j, k]
+        S[k, j], S[j, p] = S[j, p], S[k, j]
     for i in range(p + 1, S.shape[0]):
-        S[i, k], S[i, p] = S[i, p], S[i, k]
+        S[k, i], S[p, i] = S[p, i], S[k, i]
 
 
 @njit(cache=True, inline="always")
@@ -208,17 +220,21 @@ def _solve_kept(L, rank, z):
 @njit(cache=True)
 def _inverse_frobenius_squared(L, rank, T):
     """‖L⁻¹‖_F² = trace(S_II⁻¹) of the leading rank × rank block of the lower factor ``L``, with
-    L⁻¹ left in ``T``'s lower triangle."""
+    W = L⁻¹ left in ``T``'s lower triangle, row by row: W_i = (e_i − Σ_{k<i} L_ik W_k) / L_ii
+    (rows are contiguous)."""
     total = 0.0
-    for j in range(rank):
-        T[j, j] = 1.0 / L[j, j]
-        total += T[j, j] * T[j, j]
-        for i in range(j + 1, rank):
-            value = 0.0
-            for k in range(j, i):
-                value -= L[i, k] * T[k, j]
-            T[i, j] = value / L[i, i]
+    for i in range(rank):
+        for j in range(i):
+            T[i, j] = 0.0
+        for k in range(i):
+            value = L[i, k]
+            for j in range(k + 1):
+                T[i, j] -= value * T[k, j]
+        for j in range(i):
+            T[i, j] /= L[i, i]
             total += T[i, j] * T[i, j]
+        T[i, i] = 1.0 / L[i, i]
+        total += T[i, i] * T[i, i]
     return total
 
 

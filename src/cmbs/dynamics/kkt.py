@@ -401,12 +401,14 @@ def schur_solve(M, Q, A, c, schur, qdd, lam):
                 columns[r, count] = i
                 count += 1
         counts[r] = count
-        if flag == 1:
+        if flag == 1:                       # Σ_t A[r, c_t] M_pp⁻¹[c_t, :]: M_pp⁻¹ is symmetric
+            row = X[r]
             for i in range(n_p):
-                total = 0.0
-                for t in range(count):
-                    total += matrix[i, columns[r, t]] * A[r, massive[columns[r, t]]]
-                X[r, i] = total
+                row[i] = 0.0
+            for t in range(count):
+                value, source = A[r, massive[columns[r, t]]], matrix[columns[r, t]]
+                for i in range(n_p):
+                    row[i] += source[i] * value
         else:
             for i in range(n_p):
                 X[r, i] = A[r, massive[i]]
@@ -486,7 +488,8 @@ def schur_workspace(constant_mass: bool, mass: np.ndarray, m: int, pattern: np.n
         block = mass[np.ix_(massive, massive)]
         try:
             np.linalg.cholesky(block)       # positive definite: the inverse is safe
-            matrix = np.linalg.inv(block)
+            inverse = np.linalg.inv(block)
+            matrix = (inverse + inverse.T) / 2.0    # exactly symmetric: its rows are its columns
             flag = 1
         except np.linalg.LinAlgError:
             flag = -1
