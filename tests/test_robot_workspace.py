@@ -163,3 +163,120 @@ def test_crank_turns_fully_and_swings_the_rocker_between_its_limits(four_bar):
     swing = result.q[:, model.coordinate_index("rocker-joint")]
     assert rocker.low - 1e-12 <= swing.min() < rocker.low + 1e-3
     assert rocker.high - 1e-3 < swing.max() <= rocker.high + 1e-12
+
+
+# ------------------------------------------------------------------ a grid of two inputs
+def _closed_form_five_bar(left: float, right: float) -> tuple[np.ndarray, np.ndarray]:
+    """The elbows B1, B2 in the plane (x, z) at the motor angles (five-bar-robot.urdf)."""
+    return (np.array([-D / 2 + L1 * math.cos(left), L1 * math.sin(left)]),
+            np.array([D / 2 + L1 * math.cos(right), L1 * math.sin(right)]))
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> float:
+    """The plane cross product u_x v_z - u_z v_x of two (x, z) vectors."""
+    return float(u[0] * v[1] - u[1] * v[0])
+
+
+def _assembles(left: float, right: float) -> bool:
+    """The distal bars close the loop: |B1 - B2| < 2 L2 (the circles of radius L2 about the elbows
+    meet in two points, one per assembly mode)."""
+    B1, B2 = _closed_form_five_bar(left, right)
+    return 0.0 < np.linalg.norm(B2 - B1) < 2 * L2
+
+
+def test_five_bar_grid_is_the_closed_form_region_of_the_start_s_mode(five_bar):
+    """Both motors over a turn (13 x 13 grid of 0.52 rad steps, none of its points on the
+    singularity curve, where the two modes meet): the points reached are the grid's
+    connected part, from the start's point, of the closed-form region |B1 - B2| < 2 L2 (two grid
+    neighbours connected when the segment between them stays in the region: 200 samples); at each
+    the tool C is the closed-form point on the start's side of B1 B2, to 1e-9 m; each limit
+    lies on a grid line from a point reached to one not reached, where the distal bars are
+    aligned (|B1 - B2| = 2 L2 to 1e-8 m) and the motors lock (σ_min/σ_max < 1e-4 with them held,
+    > 0.1 for the chain)."""
+    from cmbs.workspace import workspace_grid
+
+    values = np.linspace(-3.0, 3.2, 13)
+    result = workspace_grid(five_bar, ("left_motor", values), ("right_motor", values))
+    motors = np.radians([100.0, 80.0])
+    assert result.start == tuple(int(np.argmin(np.abs(values - angle))) for angle in motors)
+    start_B1, start_B2 = _closed_form_five_bar(*motors)
+    side = np.sign(_cross(start_B2 - start_B1, _points(five_bar, five_bar.q0)["C"] - start_B1))
+    gaps = [abs(np.linalg.norm(np.subtract(*_closed_form_five_bar(a, b))) - 2 * L2) for a in values for b in values]
+    assert min(gaps) > 1e-3                                 # no grid point on the singularity curve
+
+    def segment_inside(i, j, k, l):
+        s = np.linspace(0.0, 1.0, 200)
+        return all(_assembles(a, b) for a, b in zip(values[i] + s * (values[k] - values[i]),
+                                                    values[j] + s * (values[l] - values[j])))
+
+    expected = np.zeros((13, 13), dtype=bool)
+    expected[result.start] = True
+    queue = [result.start]
+    while queue:
+        i, j = queue.pop()
+        for k, l in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1)):
+            if 0 <= k < 13 and 0 <= l < 13 and not expected[k, l] and segment_inside(i, j, k, l):
+                expected[k, l] = True
+                queue.append((k, l))
+    assert np.array_equal(result.reached, expected) and 0 < expected.sum() < 169
+    for i, j in zip(*np.nonzero(result.reached)):
+        B1, B2 = _closed_form_five_bar(values[i], values[j])
+        d = np.linalg.norm(B2 - B1)
+        u = (B2 - B1) / d
+        C = (B1 + B2) / 2 + side * math.sqrt(L2**2 - (d / 2) ** 2) * np.array([-u[1], u[0]])
+        np.testing.assert_allclose(_points(five_bar, result.q[i, j])["C"], C, atol=1e-9)
+    boundary = sum(1 for i, j in zip(*np.nonzero(expected)) for k, l in ((i - 1, j), (i + 1, j), (i, j - 1), (i, j + 1))
+                   if 0 <= k < 13 and 0 <= l < 13 and not expected[k, l])
+    assert len(result.limits) == boundary == result.limit_points.shape[0]
+    for limit, point in zip(result.limits, result.limit_points):
+        B1, B2 = _closed_form_five_bar(*point)
+        assert abs(np.linalg.norm(B2 - B1) - 2 * L2) < 1e-8
+        assert limit.relative_sigma < 1e-4 and limit.chain_relative_sigma > 0.1
+    assert np.all(np.isnan(result.relative_sigma[~result.reached]))
+    assert np.all(result.relative_sigma[result.reached] > 0.0)
+
+
+def test_cmbs_workspace_grid_command_writes_its_result_and_figure(tmp_path, capsys):
+    """Two --sweep options sweep a grid: the points reached and the limits are printed, --out
+    writes the grid (.npz: the arrays; .csv: a row per point), --plot the figure; mistakes are
+    one-line errors before any work."""
+    from cmbs.cli import main
+
+    out, figure, table = tmp_path / "grid.npz", tmp_path / "grid.png", tmp_path / "grid.csv"
+    arguments = ["workspace", "five-bar-robot", "--sweep", "left_motor", "-3.14159", "3.14159", "7",
+                 "--sweep", "right_motor", "-3.14159", "3.14159", "7"]
+    assert main([*arguments, "--out", str(out), "--plot", str(figure)]) == 0
+    printed = capsys.readouterr().out
+    with np.load(out) as saved:
+        reached = saved["reached"]
+        assert saved["q"].shape == (7, 7, 4) and reached.shape == (7, 7)
+        assert f"reached {int(reached.sum())} of 49 grid points on the branch of the start" in printed
+        assert f"{saved['limit_values'].size} limits located on the grid lines: singular, the inputs lock" in printed
+        assert list(saved["inputs"]) == ["left_motor", "right_motor"]
+        assert np.isnan(saved["q"][~reached]).all() and not np.isnan(saved["q"][reached]).any()
+    assert figure.stat().st_size > 10_000
+    assert main([*arguments, "--out", str(table)]) == 0
+    rows = np.genfromtxt(table, delimiter=",", names=True)
+    assert rows.size == 49 and int(rows["reached"].sum()) == int(reached.sum())
+    capsys.readouterr()
+    assert main([*arguments, "--sweep", "left_elbow", "0", "1", "3"]) == 2
+    assert "--sweep: at most two inputs (a grid of two), got 3" in capsys.readouterr().err
+    assert main([*arguments, "--hold", "left_motor"]) == 2
+    assert "a coordinate is both swept and held, or held twice" in capsys.readouterr().err
+    assert main([*arguments, "--out", str(tmp_path / "grid.txt")]) == 2
+    assert "must end in .npz or .csv" in capsys.readouterr().err
+
+
+def test_cmbs_workspace_one_input_writes_its_result(tmp_path, capsys):
+    """One --sweep with --out (.npz) and --plot: the values, the configurations and the limits."""
+    from cmbs.cli import main
+
+    out, figure = tmp_path / "sweep.npz", tmp_path / "sweep.svg"
+    assert main(["workspace", "five-bar-robot", "--sweep", "left_motor", "-3.14159", "3.14159", "37",
+                 "--hold", "right_motor", "--out", str(out), "--plot", str(figure)]) == 0
+    capsys.readouterr()
+    with np.load(out) as saved:
+        assert saved["q"].shape == (37, 4) and int(saved["reached"].sum()) == 19
+        np.testing.assert_allclose(saved["limit_values"], [-0.7457224701, 2.474526987], atol=1e-9)
+        assert str(saved["input"]) == "left_motor"
+    assert figure.read_text().lstrip().startswith("<?xml")

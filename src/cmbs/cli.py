@@ -244,35 +244,102 @@ def _kinematics(args: argparse.Namespace) -> int:
 
 
 def _workspace(args: argparse.Namespace) -> int:
-    from cmbs.workspace import workspace
+    if len(args.sweep) > 2:
+        raise _UsageError(f"--sweep: at most two inputs (a grid of two), got {len(args.sweep)}")
+    sweeps = [(sweep[0], _sweep_values(sweep)) for sweep in args.sweep]
+    for path, suffixes, option in ((args.out, (".npz", ".csv"), "--out"), (args.plot, (".png", ".pdf", ".svg"),
+                                                                            "--plot")):
+        if path:
+            _check_output(path, suffixes, option)
+    model = _load(args)
+    if len(sweeps) == 1:
+        result = _print_sweep(model, *sweeps[0], args.hold)
+    else:
+        result = _print_grid(model, sweeps, args.hold)
+    if args.out:
+        print(f"  result -> {result.save(args.out)}")
+    if args.plot:
+        from cmbs.plotting import save_figure
+        from cmbs.workspace_plots import plot_workspace, plot_workspace_grid
 
-    joint, start, stop, count = args.sweep
+        figure = plot_workspace(result) if len(sweeps) == 1 else plot_workspace_grid(result)
+        print(f"  figure -> {save_figure(figure, args.plot)}")
+    return 0
+
+
+def _sweep_values(sweep: list[str]) -> np.ndarray:
+    """The values of one ``--sweep JOINT START STOP N``."""
+    _, start, stop, count = sweep
     try:
         values = np.linspace(float(start), float(stop), int(count))
     except ValueError:
-        raise _UsageError(f"--sweep expects JOINT START STOP N (numbers, N an integer), got {' '.join(args.sweep)}") \
+        raise _UsageError(f"--sweep expects JOINT START STOP N (numbers, N an integer), got {' '.join(sweep)}") \
             from None
     if not (np.all(np.isfinite(values)) and int(count) >= 2 and float(stop) > float(start)):
-        raise _UsageError(f"--sweep: need START < STOP, finite, and N >= 2, got {' '.join(args.sweep)}")
-    model = _load(args)
-    result = workspace(model, joint, values, held=args.hold)
+        raise _UsageError(f"--sweep: need START < STOP, finite, and N >= 2, got {' '.join(sweep)}")
+    return values
+
+
+def _print_sweep(model: cmbs.Model, joint: str, values: np.ndarray, hold: list[str]) -> object:
+    """Sweep one input and print the range reached, the limits and the singular configurations."""
+    from cmbs.workspace import workspace
+
+    result = workspace(model, joint, values, held=hold)
     held = ", ".join(f"{name} held at {value:.6g}" for name, value in result.held.items())
     print(f"{model.name}: sweep of {joint} over [{values[0]:.6g}, {values[-1]:.6g}] ({values.size} values)"
           + (f", {held}" if held else ""))
     print(f"  reached {joint} in [{result.low:.10g}, {result.high:.10g}] ({int(result.reached.sum())} of "
           f"{values.size} values) on the branch of the start")
     for limit in result.limits:
-        locks = "the chain gains a DOF" if limit.chain_relative_sigma < 1e-3 else "the inputs lock"
-        print(f"  limit at {joint} = {limit.value:.10g}: singular, {locks} (sigma_min/sigma_max {limit.relative_sigma:.2g} "
-              f"with the inputs held, {limit.chain_relative_sigma:.2g} of the chain)")
+        print(f"  limit at {joint} = {limit.value:.10g}: singular, {_locks(limit)} (sigma_min/sigma_max "
+              f"{limit.relative_sigma:.2g} with the inputs held, {limit.chain_relative_sigma:.2g} of the chain)")
     for configuration in result.singular:
         print(f"  singular configuration at {joint} = {configuration.t:.10g}: rank {configuration.rank} < "
               f"{configuration.nominal_rank} with the inputs held")
-    reached = result.q[result.reached]
+    _print_ranges(model, result.q[result.reached], [joint, *result.held])
+    return result
+
+
+def _print_grid(model: cmbs.Model, sweeps: list[tuple[str, np.ndarray]], hold: list[str]) -> object:
+    """Sweep a grid of two inputs and print the points reached, the limits and the smallest σ ratio."""
+    from cmbs.workspace import workspace_grid
+
+    result = workspace_grid(model, *sweeps, held=hold)
+    held = ", ".join(f"{name} held at {value:.6g}" for name, value in result.held.items())
+    (a, values_a), (b, values_b) = sweeps
+    print(f"{model.name}: grid of {a} over [{values_a[0]:.6g}, {values_a[-1]:.6g}] ({values_a.size} values) and {b} "
+          f"over [{values_b[0]:.6g}, {values_b[-1]:.6g}] ({values_b.size} values)" + (f", {held}" if held else ""))
+    reached = result.reached
+    print(f"  reached {int(reached.sum())} of {reached.size} grid points on the branch of the start")
+    for k, (name, values) in enumerate(sweeps):
+        hit = values[reached.any(axis=1 - k)]
+        if hit.size:
+            print(f"  {name:<18} reached from {hit[0]:.6g} to {hit[-1]:.6g}")
+    kinds: dict[str, list] = {}
+    for limit in result.limits:
+        kinds.setdefault(_locks(limit), []).append(limit)
+    for kind, limits in kinds.items():
+        print(f"  {len(limits)} limits located on the grid lines: singular, {kind} (sigma_min/sigma_max with the "
+              f"inputs held at most {max(limit.relative_sigma for limit in limits):.2g}, of the chain at least "
+              f"{min(limit.chain_relative_sigma for limit in limits):.2g})")
+    if reached.any():
+        index = np.unravel_index(np.nanargmin(result.relative_sigma), reached.shape)
+        print(f"  smallest sigma_min/sigma_max with the inputs held at a grid point reached: "
+              f"{result.relative_sigma[index]:.2g} at {a} = {values_a[index[0]]:.6g}, {b} = {values_b[index[1]]:.6g}")
+    _print_ranges(model, result.q[reached], [a, b, *result.held])
+    return result
+
+
+def _locks(limit: object) -> str:
+    """What happens at a branch's limit: the chain gains a DOF, or the inputs lock."""
+    return "the chain gains a DOF" if limit.chain_relative_sigma < 1e-3 else "the inputs lock"
+
+
+def _print_ranges(model: cmbs.Model, reached: np.ndarray, given: list[str]) -> None:
+    """The range of each coordinate that follows over the configurations ``reached``."""
     for k, name in enumerate(model.coordinate_names):
-        if reached.size and name != joint and name not in result.held:
+        if reached.size and name not in given:
             print(f"  {name:<18} min {reached[:, k].min(): .6g}  max {reached[:, k].max(): .6g}")
-    return 0
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -635,12 +702,14 @@ def build_parser() -> argparse.ArgumentParser:
     kinematics.add_argument("--plot", help="figure of the motion (.png, .pdf or .svg)")
     kinematics.set_defaults(run=_kinematics)
 
-    sweep = model_command("workspace", "the range of an input coordinate on its assembly branch, the branch's limits "
-                                       "and singular configurations")
-    sweep.add_argument("--sweep", nargs=4, required=True, metavar=("JOINT", "START", "STOP", "N"),
-                       help="the input coordinate and N values from START to STOP")
+    sweep = model_command("workspace", "the range of an input coordinate (or a grid of two) on its assembly branch, "
+                                       "the branch's limits and singular configurations")
+    sweep.add_argument("--sweep", nargs=4, action="append", required=True, metavar=("JOINT", "START", "STOP", "N"),
+                       help="the input coordinate and N values from START to STOP; twice: a grid of two inputs")
     sweep.add_argument("--hold", action="append", default=[], metavar="NAME",
                        help="a coordinate held at its start value (another input; repeatable)")
+    sweep.add_argument("--out", help="result file (.npz or .csv)")
+    sweep.add_argument("--plot", help="figure (.png, .pdf or .svg)")
     sweep.set_defaults(run=_workspace)
 
     def dynamics_options(command: argparse.ArgumentParser) -> None:
