@@ -98,6 +98,8 @@ CLOSURES = {
                     rpy_b=(0.5, -0.2, 0.1)),
     "line": Closure("c", "line", "l2", "tip", (0.1, 0.2, 0.3), (0.3, -0.1, 0.2), axis_b=(0.2, 1.0, -0.3)),
     "line-ground": Closure("c", "line", "ground", "l4", (0.1, 0.2, 0.3), (0.3, -0.1, 0.2), axis_b=(0.2, 1.0, -0.3)),
+    "prismatic": Closure("c", "prismatic", "l2", "tip", (0.1, 0.2, 0.3), (0.3, -0.1, 0.2), axis_b=(0.2, 1.0, -0.3),
+                         rpy_a=(0.1, 0.2, 0.3), rpy_b=(0.5, -0.2, 0.1)),
 }
 
 
@@ -132,6 +134,74 @@ def test_line_rows_are_the_point_across_the_line():
     phi = model.constraints(q)
     assert phi.shape == (2,) and model.constraint_names == ("c.line1", "c.line2")
     np.testing.assert_allclose(phi @ phi, d @ d - (d @ u) ** 2, rtol=1e-14)
+
+
+def test_prismatic_rows_are_the_line_and_the_frames_alignment():
+    """Φ of a prismatic closure: the two rows of the line closure (p_a across link b's line) and
+    the three of the weld's alignment of the frames F_a = R_a Rot(rpy_a), F_b = R_b Rot(rpy_b):
+    y_a·z_b, z_a·x_b, x_a·y_b, from the links' placements."""
+    closure = CLOSURES["prismatic"]
+    model = _made_up_tree([closure])
+    q = np.array([0.3, -0.2, 0.5, 0.7, -0.4])
+    (Ra, oa), (Rb, ob) = frame_placement(model, q, "l2"), frame_placement(model, q, "tip")
+    Fa, Fb = Ra @ rpy_rotation(closure.rpy_a), Rb @ rpy_rotation(closure.rpy_b)
+    phi = model.constraints(q)
+    assert model.constraint_names == ("c.line1", "c.line2", "c.rx", "c.ry", "c.rz")
+    np.testing.assert_allclose(phi[2:], [Fa[:, 1] @ Fb[:, 2], Fa[:, 2] @ Fb[:, 0], Fa[:, 0] @ Fb[:, 1]], atol=1e-15)
+    line = _made_up_tree([CLOSURES["line"]])
+    np.testing.assert_allclose(phi[:2], line.constraints(q), atol=1e-15)
+
+
+SLIDER_CRANK = {"r": 0.08, "l": 0.3}
+
+
+def _slider_crank_file(folder: Path) -> Path:
+    """A planar slider-crank in the plane x-z as a robot: crank (r) from the ground, rod (l),
+    slider block, revolute joints about y, the block closed to the ground by a prismatic closure
+    along x (the block's frame kept aligned with the world's)."""
+    r, l = SLIDER_CRANK["r"], SLIDER_CRANK["l"]
+
+    def link(name, mass, com, inertia):
+        return (f'<link name="{name}"><inertial><origin xyz="{com} 0 0"/><mass value="{mass}"/>'
+                f'<inertia ixx="{inertia}" ixy="0" ixz="0" iyy="{inertia}" iyz="0" izz="{inertia}"/></inertial></link>')
+
+    def joint(name, parent, child, x):
+        return (f'<joint name="{name}" type="continuous"><parent link="{parent}"/><child link="{child}"/>'
+                f'<origin xyz="{x} 0 0"/><axis xyz="0 1 0"/></joint>')
+
+    (folder / "slider-crank.urdf").write_text(
+        '<robot name="slider-crank"><link name="base"/>' + link("crank", 0.12, r / 2, 1e-4)
+        + link("rod", 0.5, l / 2, 4e-3) + link("block", 2.0, 0.0, 2e-3) + joint("crank_joint", "base", "crank", 0.0)
+        + joint("rod_joint", "crank", "rod", r) + joint("block_joint", "rod", "block", l) + "</robot>")
+    path = folder / "slider-crank.toml"
+    path.write_text('[model]\nurdf = "slider-crank.urdf"\n\n[closures.slide]\nkind = "prismatic"\nlink_a = "block"\n'
+                    'link_b = "ground"\naxis_b = [1.0, 0.0, 0.0]\n\n[initial_positions]\ncrank_joint = 0.7\n'
+                    'rod_joint = -0.9\nblock_joint = 0.2\n\n[initial_velocities]\ncrank_joint = 6.0\n')
+    return path
+
+
+def test_slider_crank_closed_by_a_prismatic_closure_follows_the_closed_form(tmp_path):
+    """The slider-crank whose block slides on the ground's x axis (a prismatic closure: 5 rows of
+    rank 2 in the plane, the out-of-plane rows redundant; DOF 1) swings under gravity from the
+    crank at 6 rad/s: over 1 s (projection, DOP853 at rtol 1e-11) the block stays on the axis,
+    unturned, at x = r cos θ + √(l² - r² sin² θ) for the crank angle θ (a turn about y carries x
+    towards -z) to 1e-9 m, and T + V holds to 1e-8 J."""
+    model = cmbs.load(_slider_crank_file(tmp_path))
+    report = cmbs.constraint_report(model, model.q0)
+    assert (model.n, model.m, report.rank, report.dof, len(report.redundant)) == (3, 5, 2, 1, 3)
+    run = cmbs.simulate(model, t_end=1.0, dt=0.02, formulation="projection", integrator="dop853", rtol=1e-11,
+                        atol=1e-12)
+    assert run.info["status"] == "success"
+    r, l = SLIDER_CRANK["r"], SLIDER_CRANK["l"]
+    theta = run.q[:, model.coordinate_index("crank_joint")]
+    for q, angle in zip(run.q, theta):
+        rotation, origin = frame_placement(model, q, "block")
+        np.testing.assert_allclose(origin, [r * np.cos(angle) + np.sqrt(l**2 - (r * np.sin(angle)) ** 2), 0.0, 0.0],
+                                   atol=1e-9)
+        np.testing.assert_allclose(rotation, np.eye(3), atol=1e-9)
+    assert np.ptp(theta) > 3.0
+    energy = model.energy_history(run.q, run.qd)
+    assert np.abs(energy - energy[0]).max() < 1e-8
 
 
 def test_point_rows_are_the_frames_points():

@@ -22,6 +22,10 @@ their rows (Φ = 0; A, γ in :mod:`cmbs.model.robot_kernel`):
   ``F_b = R_b Rot(rpy_b)`` (rpy in URDF's convention, default 0) aligned: with their columns
   (x, y, z), ``y_a·z_b = z_a·x_b = x_a·y_b = 0``, whose Jacobian at alignment is the identity
   (they also vanish at half-turns about x, y or z: the start guess picks the alignment).
+- ``prismatic`` (5 rows ``.line1 .line2 .rx .ry .rz``): ``line`` and the frames aligned as in
+  ``weld``: ``point_a`` slides on the line of link b along ``axis_b`` and link a cannot turn
+  relative to link b (a prismatic joint that closes the loop; the rotation lock about the line
+  is the frames' alignment).
 
 Redundant rows (e.g. a planar loop closed by a revolute joint) are allowed: the projection and
 Udwadia-Kalaba formulations handle them and :func:`cmbs.constraint_report` names them.
@@ -42,7 +46,8 @@ __all__ = ["Closure", "CLOSURE_KINDS", "GROUND", "closure_elements", "rpy_rotati
 
 #: the rows of each kind, by their suffix
 CLOSURE_KINDS = {"point": ("x", "y", "z"), "axis": ("axis1", "axis2"), "revolute": ("x", "y", "z", "axis1", "axis2"),
-                 "weld": ("x", "y", "z", "rx", "ry", "rz"), "line": ("line1", "line2")}
+                 "weld": ("x", "y", "z", "rx", "ry", "rz"), "line": ("line1", "line2"),
+                 "prismatic": ("line1", "line2", "rx", "ry", "rz")}
 #: the name of the world frame as a closure's link
 GROUND = "ground"
 
@@ -51,7 +56,8 @@ GROUND = "ground"
 class Closure:
     """A loop closure (module docstring): ``name``, ``kind`` (:data:`CLOSURE_KINDS`), links a and
     b (:data:`GROUND` for the world), points in their frames, axes in their frames (``axis``,
-    ``revolute``; ``line``: ``axis_b`` only) and frame turns (``weld``)."""
+    ``revolute``; ``line`` and ``prismatic``: ``axis_b`` only) and frame turns (``weld``,
+    ``prismatic``)."""
 
     name: str
     kind: str
@@ -148,15 +154,16 @@ def closure_elements(closures: Sequence[Closure], link_names: Sequence[str], lin
         point_b = offset_b[:3, :3] @ _vector(closure.point_b, entry, "point_b", source) + offset_b[:3, 3]
         rpy_a = _vector(closure.rpy_a, entry, "rpy_a", source)
         rpy_b = _vector(closure.rpy_b, entry, "rpy_b", source)
-        axes = {"axis": ("axis_a", "axis_b"), "revolute": ("axis_a", "axis_b"), "line": ("axis_b",)}.get(closure.kind, ())
+        axes = {"axis": ("axis_a", "axis_b"), "revolute": ("axis_a", "axis_b"), "line": ("axis_b",),
+                "prismatic": ("axis_b",)}.get(closure.kind, ())
         for field in ("axis_a", "axis_b"):
             given = getattr(closure, field) is not None
             if given != (field in axes):
                 raise ModelError(f"{field} is {'required' if field in axes else 'not used'} by kind {closure.kind!r}",
                                  source=source, entry=entry)
-        if closure.kind != "weld" and (np.any(rpy_a) or np.any(rpy_b)):
-            raise ModelError(f"rpy_a and rpy_b are used by kind 'weld' only, not by {closure.kind!r}", source=source,
-                             entry=entry)
+        if closure.kind not in ("weld", "prismatic") and (np.any(rpy_a) or np.any(rpy_b)):
+            raise ModelError(f"rpy_a and rpy_b are used by kinds 'weld' and 'prismatic' only, not by {closure.kind!r}",
+                             source=source, entry=entry)
         if closure.kind in ("point", "revolute", "weld"):
             ints.append((CLOSE_POINT, body_a, body_b, 0))
             reals.append(np.concatenate([point_a, point_b, np.zeros(3)]))
@@ -165,13 +172,13 @@ def closure_elements(closures: Sequence[Closure], link_names: Sequence[str], lin
         if axes:
             axis_b = offset_b[:3, :3] @ _vector(closure.axis_b, entry, "axis_b", source, unit=True)
             for v in _perpendicular_pair(axis_b):
-                if closure.kind == "line":
+                if closure.kind in ("line", "prismatic"):
                     ints.append((CLOSE_LINE, body_a, body_b, 0))
                     reals.append(np.concatenate([point_a, point_b, v]))
                 else:
                     ints.append((CLOSE_DOT, body_a, body_b, 0))
                     reals.append(np.concatenate([u, v, np.zeros(3)]))
-        if closure.kind == "weld":
+        if closure.kind in ("weld", "prismatic"):
             frame_a = offset_a[:3, :3] @ rpy_rotation(rpy_a)
             frame_b = offset_b[:3, :3] @ rpy_rotation(rpy_b)
             for i, j in ((1, 2), (2, 0), (0, 1)):
