@@ -275,6 +275,15 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
     direction (:func:`half_turn_angles`) or a robot's link frame turned more than 90° from the
     target orientation of its pose driver (``RobotEquations.turned_targets``).
 
+    A model with ``coordinate_limits`` (a robot's joint limits, when it asks for them) is
+    assembled within them: where Newton's solution leaves them, or Newton does not converge,
+    the bounded least-squares problem min ‖Φ(q)‖ over the free coordinates within their limits
+    is solved by a trust-region reflective method (``scipy.optimize.least_squares``, method
+    ``trf``: Branch, Coleman & Li, SIAM J. Sci. Comput. 21(1), 1999) from the solution (or the
+    guess) reflected into the limits, then finished by Newton with the coordinates at a limit
+    held there.  It is a local method: it finds the configuration within the limits that its
+    start leads to, if any.
+
     Parameters
     ----------
     fixed
@@ -287,7 +296,8 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
     Raises
     ------
     ConvergenceError
-        Naming the iteration count, the largest residual and its constraint (``constraint``).
+        Naming the iteration count, the largest residual and its constraint (``constraint``);
+        with limits, the coordinate Newton's solution puts beyond its limit.
     BranchError
         When Newton converged with an angle half a turn away from its direction, or a pose
         driver's frame at a spurious root of its orientation rows.
@@ -297,9 +307,27 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
     if rows.size == 0:
         return q
     free = _free_mask(model, fixed)
+    size = model_size(model, q)
+    solution, error, A = _newton(model, q, t, rows, free, size, tolerance, max_iterations)
+    if model.coordinate_limits is not None:
+        beyond = None if solution is None else _beyond_limits(model, solution, free)
+        if solution is None or beyond is not None:
+            solution, error, A = _within_limits(model, q if solution is None else solution, t, rows, free, size,
+                                                tolerance, max_iterations, beyond, error)
+    if solution is None:
+        raise error
+    _refuse_half_turns(model, solution, t, A)
+    return solution
+
+
+def _newton(model: Model, q: np.ndarray, t: float, rows: np.ndarray, free: np.ndarray, size: float,
+            tolerance: float, max_iterations: int) -> tuple[np.ndarray | None, ConvergenceError | None, np.ndarray]:
+    """Newton-Raphson on the holonomic ``rows`` over the ``free`` coordinates from ``q`` (least-
+    squares steps): (the solution, None, A there), or (None, the error naming the largest
+    residual, A at the last iterate)."""
+    q = q.copy()
     terms = model.new_terms()
     zeros = np.zeros(model.n)
-    size = model_size(model, q)
     for iteration in range(max_iterations + 1):
         model.evaluate(q, zeros, t, out=terms)
         phi = terms.phi[rows]
@@ -307,8 +335,7 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
         if not np.isfinite(residual):
             break
         if residual < tolerance:
-            _refuse_half_turns(model, q, t, terms.A)
-            return q
+            return q, None, terms.A
         if iteration == max_iterations:
             break
         step, *_ = np.linalg.lstsq(terms.A[np.ix_(rows, free)], -phi, rcond=None)
@@ -326,7 +353,69 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
             f"model {model.name!r}: assembly at t={t:g} did not converge in {max_iterations} Newton iterations "
             f"({where}); check the initial positions, the segment lengths and the drivers' values")
     error.constraint = constraint
-    raise error
+    return None, error, terms.A
+
+
+def _beyond_limits(model: Model, q: np.ndarray, free: np.ndarray) -> tuple[int, float, float, float] | None:
+    """The first free coordinate of ``q`` outside the model's ``coordinate_limits`` (beyond 1e-12
+    of its range or of 1), as (index, value, lower, upper); None when all are within."""
+    lower, upper = model.coordinate_limits
+    slack = 1e-12 * np.maximum(1.0, np.where(np.isfinite(upper - lower), upper - lower, 1.0))
+    outside = free & ((q < lower - slack) | (q > upper + slack))
+    if not outside.any():
+        return None
+    k = int(np.flatnonzero(outside)[0])
+    return k, float(q[k]), float(lower[k]), float(upper[k])
+
+
+def _within_limits(model: Model, q: np.ndarray, t: float, rows: np.ndarray, free: np.ndarray, size: float,
+                   tolerance: float, max_iterations: int, beyond: tuple[int, float, float, float] | None,
+                   error: ConvergenceError | None) -> tuple[np.ndarray | None, ConvergenceError | None, np.ndarray]:
+    """The assembly within the coordinate limits (:func:`assemble`): trust-region reflective
+    least squares from ``q`` reflected into the limits (a coordinate beyond a limit by δ starts
+    δ inside it), then Newton with the coordinates at a limit held; ``beyond`` is what Newton's own solution left (or None when Newton failed,
+    ``error`` its failure)."""
+    from scipy.optimize import least_squares
+
+    lower, upper = (limit[free] for limit in model.coordinate_limits)
+    start = q[free]                         # reflected into the limits (as far inside as it was out), then clipped
+    start = np.clip(np.where(start < lower, 2 * lower - start, np.where(start > upper, 2 * upper - start, start)),
+                    lower, upper)
+    terms = model.new_terms()
+    zeros = np.zeros(model.n)
+
+    def evaluated(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        trial = q.copy()
+        trial[free] = x
+        model.evaluate(trial, zeros, t, out=terms)
+        return terms.phi[rows], terms.A[np.ix_(rows, free)]
+
+    fit = least_squares(lambda x: evaluated(x)[0], start, jac=lambda x: evaluated(x)[1], bounds=(lower, upper),
+                        method="trf", x_scale="jac", ftol=np.finfo(float).eps, xtol=np.finfo(float).eps,
+                        gtol=np.finfo(float).eps, max_nfev=50 * max(1, int(free.sum())))
+    fitted = q.copy()
+    fitted[free] = fit.x
+    span = np.where(np.isfinite(upper - lower), upper - lower, 1.0)
+    at_limit = np.zeros(model.n, dtype=bool)
+    at_limit[free] = (fit.x - lower <= 1e-9 * span) | (upper - fit.x <= 1e-9 * span)
+    solution, _, A = _newton(model, fitted, t, rows, free & ~at_limit, size, tolerance, max_iterations)
+    if solution is not None and _beyond_limits(model, solution, free) is None:
+        return solution, None, A
+    phi, _ = evaluated(fit.x)
+    worst = int(np.argmax(np.abs(phi)))
+    name = model.coordinate_names
+    if beyond is not None:
+        k, value, low, high = beyond
+        reason = f"Newton's solution puts {name[k]!r} at {value:.6g}, beyond its limits [{low:.6g}, {high:.6g}]"
+    else:
+        reason = f"Newton from the guess did not converge ({error})"
+    failure = ConvergenceError(
+        f"model {model.name!r}: no configuration within the coordinate limits at t={t:g}: {reason}; within the "
+        f"limits the smallest residual found is {abs(phi[worst]):.3g} in constraint "
+        f"{model.constraint_names[rows[worst]]!r}" + (f" with {', '.join(repr(name[k]) for k in np.flatnonzero(at_limit))} "
+                                                      "at a limit" if at_limit.any() else ""))
+    failure.constraint = model.constraint_names[rows[worst]]
+    return None, failure, A
 
 
 def _refuse_half_turns(model: Model, q: np.ndarray, t: float, A: np.ndarray) -> None:

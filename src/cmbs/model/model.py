@@ -166,6 +166,10 @@ class Model:
         Builder parameters (for provenance and ``replace``).
     constant_mass
         True when M does not depend on q (natural coordinates).
+    coordinate_limits
+        (lower, upper), each (n,) with ∓inf where unlimited, or None: bounds that position
+        analysis keeps the coordinates within (:func:`cmbs.kinematics.assemble`; a robot's joint
+        limits when it asks for them).  The dynamics does not enforce them.
     """
 
     name: str
@@ -185,6 +189,7 @@ class Model:
     constant_mass: bool = False
     segment_masses: tuple[tuple[str, float], ...] = ()
     nonholonomic: np.ndarray | None = None
+    coordinate_limits: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
     _no_input: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -204,6 +209,15 @@ class Model:
             frozen = np.array(getattr(self, label), dtype=bool if label in ("drivers", "nonholonomic") else float)
             frozen.setflags(write=False)
             object.__setattr__(self, label, frozen)
+        if self.coordinate_limits is not None:
+            lower, upper = (np.array(limit, dtype=float) for limit in self.coordinate_limits)
+            if lower.shape != (n,) or upper.shape != (n,) or np.isnan(lower).any() or np.isnan(upper).any() \
+                    or np.any(lower > upper):
+                raise ModelError(f"model {self.name!r}: coordinate_limits must be two arrays ({n},) with lower <= "
+                                 "upper")
+            for limit in (lower, upper):
+                limit.setflags(write=False)
+            object.__setattr__(self, "coordinate_limits", (lower, upper))
         object.__setattr__(self, "_no_input", np.zeros(len(self.actuator_names)))
 
     # ---------------------------------------------------------------- pickling
