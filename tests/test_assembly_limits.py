@@ -24,16 +24,16 @@ def _placement(x: float) -> np.ndarray:
     return matrix
 
 
-def _arm() -> cmbs.Model:
+def _arm(position: tuple[object, object, object] = (TARGET[0], 0.0, TARGET[1])) -> cmbs.Model:
     """A planar two-link arm in the plane x-z (joints about y: a turn θ carries x towards -z) whose
-    forearm end is driven to TARGET by a pose driver."""
+    forearm end is driven to ``position`` (default TARGET) by a pose driver."""
     def inertial(length):
         return Inertial(1.0, _placement(length / 2), np.diag([1e-3, 1e-2, 1e-2]))
 
     links = [TreeLink("base"), TreeLink("upper", inertial(L1)), TreeLink("fore", inertial(L2))]
     joints = [TreeJoint("shoulder", "revolute", "base", "upper", _placement(0.0), (0, 1, 0)),
               TreeJoint("elbow", "revolute", "upper", "fore", _placement(L1), (0, 1, 0))]
-    driver = PoseDriver("tip", "fore", point=(L2, 0.0, 0.0), position=(TARGET[0], 0.0, TARGET[1]))
+    driver = PoseDriver("tip", "fore", point=(L2, 0.0, 0.0), position=position)
     return build_robot("arm", links, joints, drivers=[driver])
 
 
@@ -94,6 +94,21 @@ def test_a_held_coordinate_is_not_moved_into_its_limits():
     q = cmbs.assemble(model, np.array([solution[0], -1.0]), fixed=["shoulder"])
     assert q[0] == solution[0] and not 0.5 <= q[0] <= 1.0
     np.testing.assert_allclose(q, solution, atol=1e-10)
+
+
+def test_kinematic_analysis_stops_where_a_joint_reaches_its_limit():
+    """The target turned about the shoulder at 1 rad/s (its distance kept): the shoulder angle
+    falls as θ1(0) - t, so with the shoulder limited to [-1, 0.5] the motion stops at
+    t = θ1(0) + 1 (to 1e-5 s), the error naming the joint and its limit."""
+    radius, start = math.hypot(*TARGET), math.atan2(TARGET[1], TARGET[0])
+    model = _arm((f"{radius!r}*cos({start!r} + t)", 0.0, f"{radius!r}*sin({start!r} + t)"))
+    model = model.replace(q0=_closed_form(-1.0), coordinate_limits=(np.array([-1.0, -np.inf]), np.array([0.5, np.inf])))
+    with pytest.raises(cmbs.ConvergenceError) as error:
+        cmbs.kinematic_analysis(model, np.linspace(0.0, 2.0, 21))
+    message = str(error.value)
+    assert "the motion takes shoulder beyond its limit -1" in message
+    stopped = float(message.split("beyond t=")[1].split(" ")[0])
+    assert stopped == pytest.approx(_closed_form(-1.0)[0] + 1.0, abs=1e-5)
 
 
 @pytest.mark.parametrize("limits, problem", [((np.zeros(3), np.ones(3)), "shape"),

@@ -501,9 +501,23 @@ def follow_branch(model: Model, q: np.ndarray, t_from: float, t_to: float, *, fi
         else:
             raise ConvergenceError(
                 f"model {model.name!r}: cannot follow the assembly branch beyond t={t_from + s * duration:.6g} "
-                f"(on the way to t={t_to:g}): the position analysis would jump to another assembly mode or does "
-                "not converge — a singular configuration, or a motion the mechanism cannot reach")
+                f"(on the way to t={t_to:g}): " + (_at_limits(model, q, columns) or
+                "the position analysis would jump to another assembly mode or does not converge — a singular "
+                "configuration, or a motion the mechanism cannot reach"))
     return q
+
+
+def _at_limits(model: Model, q: np.ndarray, held: np.ndarray) -> str:
+    """The coordinates of ``q`` (not ``held``) at one of the model's ``coordinate_limits`` (within
+    1e-6 of the range, or of 1), as a sentence; empty when there are none."""
+    if model.coordinate_limits is None:
+        return ""
+    lower, upper = model.coordinate_limits
+    span = np.where(np.isfinite(upper - lower), upper - lower, 1.0)
+    named = [f"{name} beyond its limit {lower[k] if q[k] - lower[k] <= 1e-6 * span[k] else upper[k]:.6g}"
+             for k, name in enumerate(model.coordinate_names)
+             if k not in held and min(q[k] - lower[k], upper[k] - q[k]) <= 1e-6 * span[k]]
+    return f"the motion takes {' and '.join(named)}" if named else ""
 
 
 def _predict(model: Model, q: np.ndarray, t: float, h: float, duration: float, columns: np.ndarray,
