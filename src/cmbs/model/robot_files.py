@@ -76,8 +76,9 @@ def _closure(name: str, table: object) -> Closure:
 
 
 def _target(entry: Entry, key: str, axes: tuple[str, str, str]) -> tuple[TimeFunction, ...] | None:
-    """The three functions of time of a pose driver's ``position`` or ``rpy`` (numbers or
-    expressions of t), or None when not given."""
+    """The three functions of time of an entry's vector ``key`` (numbers or expressions of t: a
+    pose driver's ``position`` or ``rpy``, a load's ``force`` or ``moment``), or None when not
+    given."""
     value = entry.get(key)
     if value is None:
         return None
