@@ -54,7 +54,7 @@ class _MassFaultEquations(WrappedEquations):
 
 class _RobotMassFaultEquations(WrappedEquations):
     """Robot equations with the terms of ``delta`` (the same tree carrying only the added
-    inertia, no rows) added from t0 on: ΔM(q) and ΔQ = -(ΔC(q, q̇) q̇ + Δg(q))."""
+    inertia, no rows, springs nor loads) added from t0 on: ΔM(q) and ΔQ = -(ΔC(q, q̇) q̇ + Δg(q))."""
 
     def __init__(self, inner: ModelEquations, delta: RobotKernel, t0: float):
         self.inner = inner
@@ -96,7 +96,9 @@ def _robot_mass_fault(model: Model, robot: RobotEquations, body: str, factor: fl
     added[k, 4:] *= factor - 1.0          # (m, centre of mass, inertia about it): m and I scale
     delta = kernel._replace(inertia=added, closure_ints=kernel.closure_ints[:0],
                             closure_reals=kernel.closure_reals[:0], drivers=kernel.drivers[:0],
-                            tf_table=kernel.tf_table[:0], sizes=np.array([0, kernel.sizes[1]], np.int64))
+                            tf_table=kernel.tf_table[:0], sizes=np.array([0, kernel.sizes[1]], np.int64),
+                            springs=kernel.springs[:0], spring_reals=kernel.spring_reals[:0],
+                            load_ints=kernel.load_ints[:0], load_reals=kernel.load_reals[:0])
     return _RobotMassFaultEquations(model.equations, delta, t0)
 
 

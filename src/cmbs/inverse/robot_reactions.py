@@ -5,11 +5,12 @@ Spatial vectors are those of :mod:`cmbs.model.robot_kernel`: Plücker coordinate
 about the world origin, a force ``f = (n_O, f)``.  The model's evaluation at (q, q̇) runs RNEA
 with q̈ = 0 and the base accelerating at -g, and leaves for each body k its motion subspace S_k,
 its composite inertia I^c_k and the sum over its subtree of the bias wrenches
-``Σ (I_j a_j + v_j ×_f I_j v_j)`` (Featherstone, *Rigid Body Dynamics Algorithms*, 2008, §5.3).
+``Σ (I_j a_j + v_j ×_f I_j v_j - f^ext_j)``, f^ext_j the spatial forces of the point forces and
+moments applied to body j (:mod:`cmbs.model.robot_loads`; Featherstone, *Rigid Body Dynamics Algorithms*, 2008, §5.3).
 With the accelerations q̈, each body's acceleration gains ``â_j = â_parent + S_j q̈_j``, so the
 wrench that joint k transmits from its parent (or the ground) to the subtree of k is::
 
-    f^J_k = Σ_{j in subtree(k)} [I_j (a_j + â_j) + v_j ×_f I_j v_j] - Σ_{j in subtree(k)} w_j,
+    f^J_k = Σ_{j in subtree(k)} [I_j (a_j + â_j) + v_j ×_f I_j v_j - f^ext_j] - Σ_{j in subtree(k)} w_j,
           I_j = I^c_j - Σ_{children c of j} I^c_c,
 
 with w_j the loop-closure wrenches on body j (gravity is in a_j through the base's -g).  The
@@ -26,8 +27,9 @@ since the rows' Jacobians are ``J_a - J_b`` at the points, ``(u × v)ᵀ (J_ω,a
 driver's row (``q_c - f(t)``) has the generalized force -λ on q_c alone: the actuation of joint c,
 part of what the joint transmits, and so does a mimic row's (``q_j - r q_k - o``: -λ on q_j
 and rλ on q_k, a transmission between the two joints).  Hence the check
-``S_kᵀ f^J_k = u_k - λ_drivers(k) - (mimic rows' Aᵀλ)_k``: the joint's torque (revolute) or force
-(prismatic) along its axis is the actuation of its coordinate.  The rest of f^J_k is carried by the bearing.
+``S_kᵀ f^J_k = u_k + τ_springs(k) - λ_drivers(k) - (mimic rows' Aᵀλ)_k``: the joint's torque
+(revolute) or force (prismatic) along its axis is the actuation of its coordinate, its joint springs'
+and dampers' torques ``-k (q_k - q_rest) - c q̇_k`` included.  The rest of f^J_k is carried by the bearing.
 
 Result (world axes): the force of f^J_k and its moment about the joint origin o_k (the child
 link frame's origin), ``n_k = n_O - o_k × f``; per movable joint, named by the joint.
@@ -128,7 +130,8 @@ def robot_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
         ``moments``: {joint: (3,) array} — moment of the same interaction about the joint origin,
         world axes (N m);
         ``joint_forces``: {joint: float} — its component along the joint's axis: the torque
-        (revolute) or force (prismatic) that actuates the joint;
+        (revolute) or force (prismatic) that actuates the joint (its input u plus the torques of
+        its springs and dampers, :mod:`cmbs.model.robot_loads`);
         ``closures``: {constraint row: float} — ``-λ`` of each loop-closure row (the force along a
         point row's world axis on link a, or the couple about u × v of an axis row) and of each
         mimic row (the torque on the mimicking joint; r times it, opposite, on the mimicked one).

@@ -14,7 +14,9 @@ the joints are given.  Constraints: the rows of the loop closures (:mod:`cmbs.mo
 then those of the pose drivers (a link frame's target pose, :mod:`cmbs.model.robot_targets`), then
 one per joint driver, ``q_c - f(t) = 0`` on joint c (:class:`JointDriver`).  Actuators: the joints
 themselves, ``u_k`` the torque (revolute) or force (prismatic) of joint k on its child, so
-``Q = u - C(q, q̇) q̇ - g(q)``.
+``Q = u - C(q, q̇) q̇ - g(q) + Q_loads`` with the applied loads of :mod:`cmbs.model.robot_loads`
+(joint springs and dampers ``-k (q - q_rest) - c q̇``, point forces ``J_pᵀ F`` and moments
+``J_ωᵀ M`` on links).
 
 For the dynamics each movable joint carries one rigid body: its child link and every link
 fixed to it by fixed joints, their inertias combined exactly (masses added, centres of mass
@@ -23,8 +25,9 @@ averaged, inertias moved to the common centre of mass by the parallel-axis theor
 are part of the ground.  Every link keeps its own frame for the kinematics
 (:func:`frame_placement`, :func:`frame_jacobian`).  M(q) and Q are computed by the compiled
 composite-rigid-body and recursive Newton-Euler algorithms of :mod:`cmbs.model.robot_kernel`.
-Joint limits, effort and velocity limits, damping and friction are kept as data
-(:attr:`RobotEquations.joints`), not enforced; so is the links' visual geometry
+Joint limits, effort and velocity limits and friction are kept as data
+(:attr:`RobotEquations.joints`), not enforced, and so is the URDF damping unless
+``joint_damping`` applies it as a damper; so is the links' visual geometry
 (``model.parameters["visuals"]``: per link name, its :class:`~cmbs.model.visuals.Visual` list).
 """
 
@@ -40,13 +43,14 @@ from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, is_constant
 from cmbs.model.model import Model, Terms
 from cmbs.model.robot_closures import Closure, closure_elements, coupling_elements, rpy_rotation
+from cmbs.model.robot_loads import JointSpring, LinkForce, LinkMoment, load_elements
 from cmbs.model.robot_targets import PoseDriver, target_elements
 from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, TARGET_DOT, TARGET_POINT, RobotKernel, \
     body_poses, energies, evaluate_terms, scratch_size
 from cmbs.model.visuals import Visual, checked_visual
 
-__all__ = ["Inertial", "TreeLink", "TreeJoint", "JointDriver", "PoseDriver", "RobotEquations", "build_robot",
-           "frame_placement", "frame_jacobian", "initial_value"]
+__all__ = ["Inertial", "TreeLink", "TreeJoint", "JointDriver", "PoseDriver", "JointSpring", "LinkForce", "LinkMoment",
+           "RobotEquations", "build_robot", "frame_placement", "frame_jacobian", "initial_value"]
 
 MOVABLE = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
 JOINT_TYPES = (*MOVABLE, "fixed")
@@ -77,7 +81,8 @@ class TreeJoint:
     """A joint: type (:data:`JOINT_TYPES`), parent and child link, placement ``origin`` (4 x 4,
     the joint frame in the parent link frame), axis (joint frame), and the data kept unenforced:
     position limits ``lower``/``upper``, ``effort`` and ``velocity`` limits (None: not given),
-    ``damping`` and ``friction``; ``mimic``: URDF's ``<mimic>`` as (joint, multiplier, offset),
+    ``damping`` (the viscous damper ``-damping·q̇`` when ``build_robot(..., joint_damping=True)``)
+    and ``friction``; ``mimic``: URDF's ``<mimic>`` as (joint, multiplier, offset),
     the joint's value ``multiplier·q_joint + offset`` when mimic joints are coupled
     (``build_robot(..., mimic=True)``), else None."""
 
@@ -115,15 +120,15 @@ class RobotEquations:
     ``link_offset[i]`` (4 x 4) in that body's frame (in the world for the ground).
     """
 
-    #: nothing but gravity, the joint torques and the drivers does work: damping and friction are
-    #: not applied, the closures are workless
-    work_sources: tuple[str, ...] = ()
-
     def __init__(self, kernel: RobotKernel, link_names: tuple[str, ...], link_body: np.ndarray,
                  link_offset: np.ndarray, joints: tuple[TreeJoint, ...],
                  time_functions: TimeFunctionPack | None = None, steady_drivers: frozenset[str] = frozenset(),
-                 orientation_targets: tuple[tuple[str, int, int], ...] = ()):
+                 orientation_targets: tuple[tuple[str, int, int], ...] = (), work_sources: tuple[str, ...] = ()):
         self.kernel = kernel
+        #: what does work besides gravity, the joint springs, the joint torques and the drivers: the
+        #: dampers and the point forces and moments (:mod:`cmbs.model.robot_loads`; the closures are
+        #: workless, friction is not applied)
+        self.work_sources = work_sources
         self.n = int(kernel.parent.shape[0])
         self.m = int(kernel.sizes[0])
         self.link_names = link_names
@@ -131,7 +136,7 @@ class RobotEquations:
         self.link_offset = link_offset
         #: the movable joints, in coordinate order, with their limits, damping and friction
         self.joints = joints
-        #: the drivers' functions of time; the (index, function) pairs evaluated in Python
+        #: the drivers' and loads' functions of time; the (index, function) pairs evaluated in Python
         self.time_functions = time_functions or TimeFunctionPack.build(())
         self.python: tuple[tuple[int, TimeFunction], ...] = self.time_functions.python
         #: the drivers of a constant, which hold their joint and do no work
@@ -169,8 +174,8 @@ class RobotEquations:
         return None if self.python else self.kernel
 
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
-        """M(q) (CRBA), Q = u - C(q, q̇) q̇ - g(q) (RNEA with q̈ = 0) and the closure and driver rows
-        into ``terms``."""
+        """M(q) (CRBA), Q = u - C(q, q̇) q̇ - g(q) + Q_loads (RNEA with q̈ = 0 and the loads as
+        external forces, then the joint springs) and the closure and driver rows into ``terms``."""
         for k, function in self.python:
             terms.scratch[3 * k:3 * k + 3] = function(t)
         evaluate_terms(self.kernel, q, qd, t, u, terms.buffer)
@@ -180,7 +185,7 @@ class RobotEquations:
         return energies(self.kernel, q, qd)[0]
 
     def potential_energy(self, q: np.ndarray) -> float:
-        """V = -Σ_k m_k g·c_k over the bodies (c_k the centre of mass)."""
+        """V = -Σ_k m_k g·c_k over the bodies (c_k the centre of mass) + Σ_springs ½ k (q - q_rest)²."""
         return energies(self.kernel, q, np.zeros(self.n))[1]
 
     def link_index(self, link: str) -> int:
@@ -319,11 +324,16 @@ def _combined_inertia(parts: list[tuple[float, np.ndarray, np.ndarray]]) -> np.n
 def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint], *,
                 gravity: Sequence[float] = (0.0, 0.0, -9.81), source: str | None = None,
                 description: str = "", closures: Sequence[Closure] = (),
-                drivers: Sequence[JointDriver | PoseDriver] = (), mimic: bool = False) -> Model:
+                drivers: Sequence[JointDriver | PoseDriver] = (), mimic: bool = False,
+                springs: Sequence[JointSpring] = (), loads: Sequence[LinkForce | LinkMoment] = (),
+                joint_damping: bool = False) -> Model:
     """The :class:`~cmbs.model.model.Model` of the tree of ``links`` and ``joints`` closed by
     ``closures`` and driven by ``drivers`` (joint and pose drivers; module docstring), with a
     row ``JOINT.mimic`` coupling each joint that has a ``mimic`` to the joint it mimics when
-    ``mimic`` is True (:func:`~cmbs.model.robot_closures.coupling_elements`); ``source``
+    ``mimic`` is True (:func:`~cmbs.model.robot_closures.coupling_elements`), loaded by the joint
+    ``springs`` (``τ = -k (q - q_rest) - c q̇``), by each movable joint's ``damping`` as the damper
+    ``τ = -damping·q̇`` when ``joint_damping`` is True, and by the point forces and moments on links
+    ``loads`` (``Q += J_pᵀ F``, ``Q += J_ωᵀ M``; :mod:`cmbs.model.robot_loads`); ``source``
     names the file it came from in errors and on the model.  ``model.q0`` is each coordinate's
     value nearest 0 within its joint's limits (:func:`initial_value`; not assembled:
     :func:`cmbs.kinematics.assemble`).
@@ -337,7 +347,8 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
         limits with lower > upper, a movable joint that carries no mass nor inertia, a closure's
         mistakes (:func:`~cmbs.model.robot_closures.closure_elements`), a pose driver's
         (:func:`~cmbs.model.robot_targets.target_elements`), a driver of an unknown or fixed
-        joint, two drivers of one joint, or repeated constraint names.
+        joint, two drivers of one joint, repeated constraint names, or a spring's or load's
+        mistakes (:func:`~cmbs.model.robot_loads.load_elements`).
     """
     g = _finite(gravity, f"model {name!r}", "gravity", source)
     if g.shape != (3,):
@@ -457,6 +468,10 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
             raise ModelError(error.problem, entry=entry) from None
         labels.append(f"driver {driver.name}")
         driver_rows.append((coordinate[driver.joint], len(functions) - 1))
+    loaded = load_elements(springs, loads, joints, coordinate, link_names, bodies, offsets,
+                           joint_damping=joint_damping, first_function=len(functions), source=source)
+    functions += loaded.functions
+    labels += loaded.labels
     closure_rows = len(constraint_names)
     constraint_names += targets.names + tuple(driver.name for driver in joint_drivers)
     repeated = sorted({c for c in constraint_names if constraint_names.count(c) > 1})
@@ -468,13 +483,14 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                          g.copy(), np.concatenate([closure_ints, targets.ints]),
                          np.concatenate([closure_reals, targets.reals]), np.array(driver_rows, np.int64).reshape(-1, 2),
                          pack.table, pack.ops, pack.reals,
-                         np.array([len(constraint_names), pack.depth], np.int64), np.zeros((0, 0)))
+                         np.array([len(constraint_names), pack.depth], np.int64), loaded.springs,
+                         loaded.spring_reals, loaded.load_ints, loaded.load_reals, np.zeros((0, 0)))
     for array in kernel:
         array.setflags(write=False)
     steady = targets.steady + tuple(driver.name for driver, (_, f) in zip(joint_drivers, driver_rows)
                                     if is_constant(functions[f]))
     equations = RobotEquations(kernel, link_names, bodies, offsets, tuple(movable), pack, frozenset(steady),
-                               targets.orientations)
+                               targets.orientations, loaded.work_sources)
     names = tuple(joint.name for joint in movable)
     index = {link: i for i, link in enumerate(link_names)}
     return Model(
@@ -500,6 +516,8 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                     "drivers": [{"name": d.name, "joint": d.joint, "function": functions[f]}
                                 for d, (_, f) in zip(joint_drivers, driver_rows)]
                                + [dict(vars(driver)) for driver in pose_drivers],
+                    "springs": [dict(vars(spring)) for spring in springs], "joint_damping": joint_damping,
+                    "loads": [dict(vars(load), kind=type(load).__name__) for load in loads],
                     "visuals": {link.name: tuple(link.visuals) for link in by_name.values() if link.visuals}},
         segment_masses=tuple((link.name, float(link.inertial.mass)) for link in by_name.values()
                              if link.inertial is not None and link.inertial.mass > 0),

@@ -2,10 +2,14 @@
 (docs/robots.md, "Loop closures").
 
 ``urdf`` in ``[model]`` (a path relative to the TOML file) makes a file a robot file
-(``mimic = true`` there couples the URDF's mimic joints to the joints they mimic); its other
+(``mimic = true`` there couples the URDF's mimic joints to the joints they mimic,
+``joint_damping = true`` applies the URDF joints' ``<dynamics damping>`` as dampers); its other
 sections are ``[closures.NAME]`` (:class:`~cmbs.model.robot_closures.Closure`), ``[drivers.NAME]``
 (a joint's prescribed motion, as in the natural-coordinate files: ``coordinate`` names the joint;
 or, with ``kind = "pose"``, a link frame's target pose: :class:`~cmbs.model.robot_targets.PoseDriver`),
+``[springs.NAME]`` (a joint spring-damper: :class:`~cmbs.model.robot_loads.JointSpring`),
+``[forces.NAME]`` and ``[moments.NAME]`` (a force at a link point, a moment on a link:
+:class:`~cmbs.model.robot_loads.LinkForce`, :class:`~cmbs.model.robot_loads.LinkMoment`),
 ``[initial_positions]`` (joint = value: the guess assembly starts from, default ``model.q0``) and
 ``[initial_velocities]``.  The file is data, checked key by key before any work (unknown keys,
 wrong types, vectors of the wrong length, unknown links, joints and kinds are one-line errors
@@ -24,11 +28,12 @@ from cmbs.model.files import Entry, assembled, coordinate_values, entries, initi
 from cmbs.model.model import Model
 from cmbs.model.robot import JointDriver
 from cmbs.model.robot_closures import CLOSURE_KINDS, Closure
+from cmbs.model.robot_loads import JointSpring, LinkForce, LinkMoment
 from cmbs.model.robot_targets import PoseDriver
 
 __all__ = ["SECTIONS", "read_robot_file"]
 
-SECTIONS = ("model", "closures", "drivers", "initial_positions", "initial_velocities")
+SECTIONS = ("model", "closures", "drivers", "springs", "forces", "moments", "initial_positions", "initial_velocities")
 _CLOSURE_KEYS = ("kind", "link_a", "link_b", "point_a", "point_b", "axis_a", "axis_b", "rpy_a", "rpy_b")
 _VECTORS = ("point_a", "point_b", "axis_a", "axis_b", "rpy_a", "rpy_b")
 _POSE_KEYS = ("kind", "link", "point", "position", "rpy")
@@ -71,8 +76,9 @@ def _closure(name: str, table: object) -> Closure:
 
 
 def _target(entry: Entry, key: str, axes: tuple[str, str, str]) -> tuple[TimeFunction, ...] | None:
-    """The three functions of time of a pose driver's ``position`` or ``rpy`` (numbers or
-    expressions of t), or None when not given."""
+    """The three functions of time of an entry's vector ``key`` (numbers or expressions of t: a
+    pose driver's ``position`` or ``rpy``, a load's ``force`` or ``moment``), or None when not
+    given."""
     value = entry.get(key)
     if value is None:
         return None
@@ -96,6 +102,27 @@ def _pose_driver(name: str, entry: Entry) -> PoseDriver:
     if position is None and rpy is None:
         raise ModelError("give the target's 'position', its orientation 'rpy', or both", entry=entry.label)
     return PoseDriver(name, entry.string("link"), _vector(entry, "point") or (0.0, 0.0, 0.0), position, rpy)
+
+
+def _spring(name: str, table: object) -> JointSpring:
+    """A ``[springs.NAME]`` entry: ``joint``, ``stiffness``, ``rest``, ``damping`` (their values
+    are checked by :func:`~cmbs.model.robot_loads.load_elements`)."""
+    entry = Entry(f"springs.{name}", table, ("joint", "stiffness", "rest", "damping"), ("joint",))
+    return JointSpring(name, entry.string("joint"), entry.number("stiffness", 0.0), entry.number("rest", 0.0),
+                       entry.number("damping", 0.0))
+
+
+def _load(section: str, name: str, table: object) -> LinkForce | LinkMoment:
+    """A ``[forces.NAME]`` entry (``link``, ``point``, ``force``, ``frame``) or a ``[moments.NAME]``
+    one (``link``, ``moment``, ``frame``); the components numbers or expressions of t."""
+    field = "force" if section == "forces" else "moment"
+    keys = ("link", "point", field, "frame") if field == "force" else ("link", field, "frame")
+    entry = Entry(f"{section}.{name}", table, keys, ("link", field))
+    components = _target(entry, field, ("x", "y", "z"))
+    frame = entry.string("frame") or "world"
+    if field == "force":
+        return LinkForce(name, entry.string("link"), components, _vector(entry, "point") or (0.0, 0.0, 0.0), frame)
+    return LinkMoment(name, entry.string("link"), components, frame)
 
 
 def _read_driver(drivers: _Drivers, name: str, table: object, base: Path) -> None:
@@ -141,12 +168,16 @@ def read_robot_file(document: dict, path: Path) -> Model:
             raise ModelError(f"unknown section(s) {', '.join(map(repr, unknown))} for a robot file (allowed: "
                              f"{', '.join(SECTIONS)})")
         header = Entry("model", document.get("model", {}),
-                       ("name", "description", "source", "urdf", "gravity", "mimic"), ("urdf",))
+                       ("name", "description", "source", "urdf", "gravity", "mimic", "joint_damping"), ("urdf",))
         gravity = _vector(header, "gravity") or (0.0, 0.0, -9.81)
-        mimic = header.get("mimic", False)
-        if not isinstance(mimic, bool):
-            raise ModelError(f"mimic must be true or false, got {mimic!r}", entry="model")
+        switches = {key: header.get(key, False) for key in ("mimic", "joint_damping")}
+        for key, value in switches.items():
+            if not isinstance(value, bool):
+                raise ModelError(f"{key} must be true or false, got {value!r}", entry="model")
         closures = [_closure(name, table) for name, table in entries(document, "closures")]
+        springs = [_spring(name, table) for name, table in entries(document, "springs")]
+        loads = [_load(section, name, table) for section in ("forces", "moments")
+                 for name, table in entries(document, section)]
         drivers = _Drivers()
         for name, table in entries(document, "drivers"):
             try:
@@ -160,12 +191,14 @@ def read_robot_file(document: dict, path: Path) -> Model:
     except ModelError as error:
         raise error.located(source=source) from None
     try:
-        robot = load_urdf(urdf, gravity=gravity, closures=closures, drivers=drivers.drivers, mimic=mimic)
+        robot = load_urdf(urdf, gravity=gravity, closures=closures, drivers=drivers.drivers, springs=springs,
+                          loads=loads, **switches)
     except ModelError as error:
-        if error.source is None:      # a closure's or driver's mistake: name this file's entry
+        if error.source is None:      # a closure's, driver's, spring's or load's mistake: name this file's entry
             entry = error.entry or ""
             kind, _, name = entry.partition(" ")
-            where = {"closure": "closures", "driver": "drivers"}.get(kind)
+            where = {"closure": "closures", "driver": "drivers", "spring": "springs", "force": "forces",
+                     "moment": "moments"}.get(kind)
             raise ModelError(error.problem, source=source,
                              entry=f"{where}.{name.strip(chr(39))}" if where else entry or None) from None
         raise

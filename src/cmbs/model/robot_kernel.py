@@ -21,8 +21,16 @@ q̈ = 0 and the base accelerating at -g instead of gravity acting on each body (
     v_k = v_p + S_k q̇_k,      a_k = a_p + v_k ×ₘ S_k q̇_k,      a_ground = (0, -g),
     f_k = I_k a_k + v_k ×_f I_k v_k,      f_p += f_k,      b_k = S_kᵀ f_k,
 
-so ``b = C(q, q̇) q̇ + g(q)`` and ``Q = u - b`` (joint torques u, one per joint).  The
-composite-rigid-body algorithm (Featherstone §6.2)::
+so ``b = C(q, q̇) q̇ + g(q)`` and ``Q = u - b`` (joint torques u, one per joint).  Applied loads
+(:mod:`cmbs.model.robot_loads`) enter as Featherstone's external forces (§5.3: ``f_k = I_k a_k +
+v_k ×_f I_k v_k - f_k^ext``): a force F (world axes) at the world point p of body k is the spatial
+force ``f^ext = (p × F, F)`` about the world origin, a moment M is ``(M, 0)``; a force or moment
+given in the link's axes is first turned into the world's, ``F = R_k E F_link`` (E the link
+frame's rotation in the body frame).  The backward pass's ``S_jᵀ f^ext`` is then, for every joint
+j between body k and the ground, ``z_j·((p - o_j) × F)`` (revolute) or ``z_j·F`` (prismatic):
+``Q += J_pᵀ F`` (J_p the point's translational Jacobian) and ``Q += J_ωᵀ M`` (J_ω the body's
+angular one).  A joint spring-damper on coordinate c adds ``-k (q_c - q_rest) - c q̇_c`` to Q_c.
+The composite-rigid-body algorithm (Featherstone §6.2)::
 
     I^c_k = I_k + Σ_children I^c_c,     M_kk = S_kᵀ I^c_k S_k,     M_jk = M_kj = S_jᵀ I^c_k S_k
     for every ancestor j of k.
@@ -84,6 +92,15 @@ ELEMENT_REALS = 9
 PLACEMENT = 12
 #: per body in ``inertia``: mass, centre of mass (3, body frame), inertia about it (xx, xy, xz, yy, yz, zz; body axes)
 INERTIA = 10
+#: applied loads (:mod:`cmbs.model.robot_loads`): a force at a body point, a moment on a body; their
+#: components along the world's axes or along the link's (turning with it)
+LOAD_FORCE, LOAD_MOMENT = 0, 1
+FRAME_WORLD, FRAME_LINK = 0, 1
+#: per load in ``load_reals``: the point in the body frame (3), the link frame's rotation E in the
+#: body frame (3 x 3, row-major)
+LOAD_REALS = 12
+#: per joint spring-damper in ``spring_reals``: stiffness k, rest value q_rest, damping c
+SPRING_REALS = 3
 # work per body: R (9), o (3), S (6), v (6), a (6), f (6), composite inertia (m, h (3), Ī (xx, xy, xz, yy, yz, zz))
 _R, _O, _S, _V, _A, _F, _I = 0, 9, 12, 18, 24, 30, 36
 WORK = 46
@@ -112,6 +129,11 @@ class RobotKernel(NamedTuple):
     tf_ops: np.ndarray
     tf_reals: np.ndarray
     sizes: np.ndarray            # (2,) int64: m (constraint rows), depth of the expression stack
+    springs: np.ndarray          # (s,) int64: the coordinate of each joint spring-damper
+    spring_reals: np.ndarray     # (s, SPRING_REALS): k, q_rest, c
+    load_ints: np.ndarray        # (l, 4) int64: LOAD_FORCE or LOAD_MOMENT, body, FRAME_WORLD or FRAME_LINK, the
+                                 # first of its three time functions (x, y, z components)
+    load_reals: np.ndarray       # (l, LOAD_REALS): point (body frame), E
     mass: np.ndarray         # (0, 0)
 
 
@@ -286,6 +308,7 @@ def evaluate_terms(kernel, q, qd, t, u, buf):
         W[f + 3] = f0 + wy * g2 - wz * g1
         W[f + 4] = f1 + wz * g0 - wx * g2
         W[f + 5] = f2 + wx * g1 - wy * g0
+    _apply_loads(kernel.load_ints, kernel.load_reals, gravity, buf[s0:s0 + 3 * ntf].reshape((ntf, 3)), W, w0)
     for i in range(n * n):
         buf[o_M + i] = 0.0
     for idx in range(n - 1, -1, -1):
@@ -312,8 +335,35 @@ def evaluate_terms(kernel, q, qd, t, u, buf):
                 W[pbase + _F + i] += W[f + i]
             for i in range(10):
                 W[pbase + _I + i] += W[w + i]
+    springs, spring_reals = kernel.springs, kernel.spring_reals
+    for e in range(springs.shape[0]):
+        c = springs[e]
+        buf[c] -= spring_reals[e, 0] * (q[c] - spring_reals[e, 1]) + spring_reals[e, 2] * qd[c]
     if m > 0:
         _constraint_rows(kernel, q, n, m, s0, w0, buf)
+
+
+@njit(cache=True, inline="always")
+def _apply_loads(ints, reals, gravity, values, W, w0):
+    """Subtracts each applied load's spatial force about the world origin, ``(p × F, F)`` or
+    ``(M, 0)``, from its body's f (module docstring), the components at t in ``values`` (k, 3)."""
+    for e in range(ints.shape[0]):
+        kind, body, frame, f0 = ints[e, 0], ints[e, 1], ints[e, 2], ints[e, 3]
+        cx, cy, cz = values[f0, 0], values[f0 + 1, 0], values[f0 + 2, 0]
+        if frame == FRAME_LINK:
+            # into the body's axes by E, then into the world's by R_k
+            bx = reals[e, 3] * cx + reals[e, 4] * cy + reals[e, 5] * cz
+            by = reals[e, 6] * cx + reals[e, 7] * cy + reals[e, 8] * cz
+            bz = reals[e, 9] * cx + reals[e, 10] * cy + reals[e, 11] * cz
+            cx, cy, cz, _, _, _, _, _, _ = _vector_motion(body, bx, by, bz, W, w0)
+        f = w0 + WORK * body + _F
+        if kind == LOAD_FORCE:
+            px, py, pz, _, _, _, _, _, _ = _point_motion(body, reals[e, 0], reals[e, 1], reals[e, 2], gravity, W, w0)
+            nx, ny, nz = _cross(px, py, pz, cx, cy, cz)
+            W[f], W[f + 1], W[f + 2] = W[f] - nx, W[f + 1] - ny, W[f + 2] - nz
+            W[f + 3], W[f + 4], W[f + 5] = W[f + 3] - cx, W[f + 4] - cy, W[f + 5] - cz
+        else:
+            W[f], W[f + 1], W[f + 2] = W[f] - cx, W[f + 1] - cy, W[f + 2] - cz
 
 
 @njit(cache=True, inline="always")
@@ -532,8 +582,9 @@ RobotKernel.evaluate = staticmethod(_evaluate_robot)
 
 
 @njit(cache=True)
-def _energy_kernel(parent, order, kind, placement, axis, inertia, gravity, q, qd):
-    """(T, V): T = ½ Σ_k v_kᵀ I_k v_k (= ½ q̇ᵀ M q̇), V = -Σ_k m_k g·c_k (c_k the centre of mass)."""
+def _energy_kernel(parent, order, kind, placement, axis, inertia, gravity, springs, spring_reals, q, qd):
+    """(T, V): T = ½ Σ_k v_kᵀ I_k v_k (= ½ q̇ᵀ M q̇), V = -Σ_k m_k g·c_k (c_k the centre of mass)
+    + Σ_springs ½ k (q_c - q_rest)²."""
     n = parent.shape[0]
     W = np.zeros(WORK * n)
     kinetic = 0.0
@@ -550,13 +601,18 @@ def _energy_kernel(parent, order, kind, placement, axis, inertia, gravity, q, qd
         n0, n1, n2, f0, f1, f2 = _inertia_times(W, w, W[v], W[v + 1], W[v + 2], W[v + 3], W[v + 4], W[v + 5])
         kinetic += 0.5 * (W[v] * n0 + W[v + 1] * n1 + W[v + 2] * n2 + W[v + 3] * f0 + W[v + 4] * f1 + W[v + 5] * f2)
         potential -= gravity[0] * W[w + 1] + gravity[1] * W[w + 2] + gravity[2] * W[w + 3]
+    for e in range(springs.shape[0]):
+        stretch = q[springs[e]] - spring_reals[e, 1]
+        potential += 0.5 * spring_reals[e, 0] * stretch * stretch
     return kinetic, potential
 
 
 def energies(kernel: RobotKernel, q: np.ndarray, qd: np.ndarray) -> tuple[float, float]:
-    """Kinetic and potential energy (T, V) of the tree at (q, q̇) (:func:`_energy_kernel`)."""
+    """Kinetic and potential energy (T, V) of the tree and its joint springs at (q, q̇)
+    (:func:`_energy_kernel`)."""
     kinetic, potential = _energy_kernel(kernel.parent, kernel.order, kernel.kind, kernel.placement, kernel.axis,
-                                        kernel.inertia, kernel.gravity, np.ascontiguousarray(q, dtype=float),
+                                        kernel.inertia, kernel.gravity, kernel.springs, kernel.spring_reals,
+                                        np.ascontiguousarray(q, dtype=float),
                                         np.ascontiguousarray(qd, dtype=float))
     return float(kinetic), float(potential)
 
@@ -590,7 +646,8 @@ def body_poses(kernel: RobotKernel, q: np.ndarray) -> tuple[np.ndarray, np.ndarr
 class BodyWork(NamedTuple):
     """What :func:`evaluate_terms` leaves per body in the terms' scratch, as arrays (views):
     world rotation R (n, 3, 3), frame origin o (n, 3), motion subspace S (n, 6), the sum over the
-    body's subtree of the bias wrenches ``I a + v ×_f I v`` (RNEA at q̈ = 0, base at -g; n, 6)
+    body's subtree of the bias wrenches ``I a + v ×_f I v - f^ext`` (RNEA at q̈ = 0, base at -g,
+    the applied loads' spatial forces f^ext; n, 6)
     and the composite inertia (m, h, Ī) of its subtree (n, 10), all in world Plücker coordinates
     (module docstring)."""
 

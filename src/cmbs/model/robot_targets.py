@@ -58,12 +58,14 @@ class PoseDriver:
         return tuple(f"{self.name}.{suffix}" for suffix in suffixes)
 
 
-def _functions(driver: PoseDriver, field: str, entry: str) -> list[TimeFunction]:
-    values = getattr(driver, field)
+def three_functions(values: object, field: str, axes: tuple[str, str, str], entry: str) -> list[TimeFunction]:
+    """The three functions of time of ``values`` (numbers, expressions, tables, callables:
+    :func:`~cmbs.model.drivers.as_time_function`), the components ``axes`` of ``field``; a
+    ModelError naming ``entry`` and the field otherwise."""
     if not isinstance(values, (tuple, list)) or len(values) != 3:
         raise ModelError(f"{field} must be 3 functions of time, got {values!r}", entry=entry)
     functions = []
-    for axis, value in zip(("x", "y", "z") if field == "position" else ("roll", "pitch", "yaw"), values):
+    for axis, value in zip(axes, values):
         try:
             functions.append(as_time_function(value))
         except ModelError as error:
@@ -124,14 +126,14 @@ def target_elements(drivers: Sequence[PoseDriver], link_names: Sequence[str], li
         if driver.position is not None:
             ints.append((TARGET_POINT, body, len(functions), 0))
             reals.append(np.concatenate([offset[:3, :3] @ point + offset[:3, 3], np.zeros(ELEMENT_REALS - 3)]))
-            functions += _functions(driver, "position", entry)
+            functions += three_functions(driver.position, "position", ("x", "y", "z"), entry)
             labels += [f"driver {driver.name} position {axis}" for axis in "xyz"]
         if driver.rpy is not None:
             orientations.append((f"{driver.name}.{ORIENTATION_ROWS[0]}", index, len(functions)))
             for i, j in ORIENTATION_PAIRS:
                 ints.append((TARGET_DOT, body, len(functions), j))
                 reals.append(np.concatenate([offset[:3, i], np.zeros(ELEMENT_REALS - 3)]))
-            functions += _functions(driver, "rpy", entry)
+            functions += three_functions(driver.rpy, "rpy", ("roll", "pitch", "yaw"), entry)
             labels += [f"driver {driver.name} {angle}" for angle in ("roll", "pitch", "yaw")]
         names += driver.row_names
         if all(is_constant(function) for function in functions[first:]):

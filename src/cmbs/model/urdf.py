@@ -9,7 +9,10 @@ planar joints (six and three coordinates) are refused: a free-flying or planar b
 in spatial natural coordinates (docs/spatial.md).  A ``<mimic joint multiplier offset>`` is kept
 with its joint (``TreeJoint.mimic``); it is applied, as a constraint row ``JOINT.mimic``
 (``q_joint = multiplier·q_mimicked + offset``), when ``mimic=True``; otherwise a mimicking joint
-has a coordinate of its own (as in Pinocchio's default).
+has a coordinate of its own (as in Pinocchio's default).  A joint's ``<dynamics damping>`` is kept
+as data (``TreeJoint.damping``; Pinocchio's ``aba`` ignores it too) unless ``joint_damping=True``
+applies it as the viscous damper ``τ = -damping·q̇``; its ``friction`` (Coulomb friction,
+discontinuous) is kept as data only.
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ from cmbs.errors import ModelError
 from cmbs.model.model import Model
 from cmbs.model.robot import Inertial, JointDriver, TreeJoint, TreeLink, build_robot
 from cmbs.model.robot_closures import Closure
+from cmbs.model.robot_loads import JointSpring, LinkForce, LinkMoment
+from cmbs.model.robot_targets import PoseDriver
 from cmbs.model.visuals import SHAPES, Visual
 
 __all__ = ["load_urdf"]
@@ -41,10 +46,14 @@ _COMMAS = {"size", "scale"}
 
 
 def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81), closures: Sequence[Closure] = (),
-              drivers: Sequence[JointDriver] = (), mimic: bool = False) -> Model:
+              drivers: Sequence[JointDriver | PoseDriver] = (), mimic: bool = False,
+              springs: Sequence[JointSpring] = (), loads: Sequence[LinkForce | LinkMoment] = (),
+              joint_damping: bool = False) -> Model:
     """The robot of the URDF file ``path`` (module docstring), gravity ``gravity`` (m/s², world
-    axes), closed by ``closures``, driven by ``drivers``, its mimic joints coupled when ``mimic``
-    (:func:`~cmbs.model.robot.build_robot`;
+    axes), closed by ``closures``, driven by ``drivers``, its mimic joints coupled when ``mimic``,
+    loaded by the joint ``springs``, the forces and moments ``loads`` and, when ``joint_damping``,
+    its joints' ``<dynamics damping>`` as dampers (:mod:`cmbs.model.robot_loads`;
+    :func:`~cmbs.model.robot.build_robot`;
     not assembled: a robot file does that, :mod:`cmbs.model.robot_files`).  Every problem of the
     URDF is a one-line :class:`~cmbs.errors.ModelError` naming the file and the element: a missing
     file, XML that is not well formed, a number that is not one, an unknown, floating or planar
@@ -88,7 +97,7 @@ def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81),
                 0.0 if joint.mimic.offset is None else float(joint.mimic.offset))))
     return build_robot(robot.name, links, joints, gravity=gravity, source=source,
                        description=f"robot {robot.name!r} from {Path(path).name}", closures=closures, drivers=drivers,
-                       mimic=mimic)
+                       mimic=mimic, springs=springs, loads=loads, joint_damping=joint_damping)
 
 
 def _optional(value: object) -> float | None:
