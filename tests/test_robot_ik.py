@@ -134,6 +134,58 @@ def test_panda_inverse_kinematics_of_a_redundant_arm(tmp_path):
         assert np.abs(reached_origin - origin).max() < 1e-10 and np.abs(reached_rotation - rotation).max() < 1e-10
 
 
+@needs_pinocchio
+def test_panda_inverse_kinematics_within_its_joint_limits():
+    """The Panda's hand driven to Pinocchio's pose at q* drawn within the URDF's joint limits (40
+    times), assembly from q* plus up to 0.6 rad per arm joint: wherever Newton alone ends outside
+    the limits (at least 4 times; at 150 rad once), the model loaded with ``joint_limits=True``
+    reaches the pose to 1e-10 (Pinocchio at the solution; measured below 1e-15) with every joint
+    within its limits (``Model.coordinate_limits``, bounded least squares in
+    :func:`cmbs.assemble`)."""
+    urdf = ROBOTS / URDFS["panda"]
+    joints = load_urdf(urdf).equations.joints
+    lower, upper = np.array([j.lower for j in joints]), np.array([j.upper for j in joints])
+    rng = np.random.default_rng(3)
+    outside = 0
+    for _ in range(40):
+        target = np.concatenate([rng.uniform(lower[:7] + 0.05, upper[:7] - 0.05), [0.02, 0.02]])
+        rotation, origin = _pinocchio_pose(urdf, "panda_hand", target)
+        driver = PoseDriver("hand", "panda_hand", position=tuple(origin), rpy=tuple(pinocchio.rpy.matrixToRpy(rotation)))
+        guess = target + np.concatenate([rng.uniform(-0.6, 0.6, 7), [0.0, 0.0]])
+        try:
+            q = cmbs.assemble(load_urdf(urdf, drivers=[driver]), guess)
+        except cmbs.ConvergenceError:
+            continue
+        if np.all((q >= lower) & (q <= upper)):
+            continue
+        outside += 1
+        model = load_urdf(urdf, drivers=[driver], joint_limits=True)
+        np.testing.assert_array_equal(model.coordinate_limits[0], lower)
+        q = cmbs.assemble(model, guess)
+        assert np.all((q >= lower) & (q <= upper))
+        reached_rotation, reached_origin = _pinocchio_pose(urdf, "panda_hand", q)
+        assert np.abs(reached_origin - origin).max() < 1e-10 and np.abs(reached_rotation - rotation).max() < 1e-10
+    assert outside >= 4
+
+
+def test_joint_limits_in_a_robot_file(tmp_path):
+    """``[model] joint_limits = true`` gives the model the URDF's limits (continuous joints
+    unlimited); a value that is not a boolean is a one-line error naming the field."""
+    path = _ur5_pose_file(tmp_path, [0.3, 0.2, 0.4], [np.pi, 0.0, 0.3], np.array([0.2, -1.6, 1.4, -1.4, -1.6, -1.7]))
+    text = path.read_text()
+    path.write_text(text.replace("[model]\n", "[model]\njoint_limits = true\n"))
+    model = cmbs.load(path)
+    lower, upper = model.coordinate_limits
+    expected = [(j.lower, j.upper) for j in model.equations.joints]
+    assert [(float(a), float(b)) for a, b in zip(lower, upper)] == expected and np.all(np.isfinite(lower))
+    assert np.all((model.q0 >= lower) & (model.q0 <= upper))
+    path.write_text(text.replace("[model]\n", '[model]\njoint_limits = "yes"\n'))
+    with pytest.raises(cmbs.ModelError) as error:
+        cmbs.load(path)
+    assert "model: joint_limits must be true or false, got 'yes'" in str(error.value)
+    assert "\n" not in str(error.value)
+
+
 #: the moving target: the tool point on a circle of radius 0.1 m about CENTRE in a horizontal
 #: plane at 1 rad/s, the flange frame's orientation held at RPY
 CENTRE, RADIUS, RPY = np.array([0.35, 0.2, 0.4]), 0.1, np.array([np.pi, 0.0, 0.3])

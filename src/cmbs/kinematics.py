@@ -279,9 +279,9 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
     assembled within them: where Newton's solution leaves them, or Newton does not converge,
     the bounded least-squares problem min ‖Φ(q)‖ over the free coordinates within their limits
     is solved by a trust-region reflective method (``scipy.optimize.least_squares``, method
-    ``trf``: Branch, Coleman & Li, SIAM J. Sci. Comput. 21(1), 1999) from the solution (or the
-    guess) reflected into the limits, then finished by Newton with the coordinates at a limit
-    held there.  It is a local method: it finds the configuration within the limits that its
+    ``trf``: Branch, Coleman & Li, SIAM J. Sci. Comput. 21(1), 1999) from Newton's solution
+    reflected into the limits, then from the guess, each finished by Newton with the coordinates
+    at a limit held there.  It is a local method: it finds the configuration within the limits that its
     start leads to, if any.
 
     Parameters
@@ -312,8 +312,9 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
     if model.coordinate_limits is not None:
         beyond = None if solution is None else _beyond_limits(model, solution, free)
         if solution is None or beyond is not None:
-            solution, error, A = _within_limits(model, q if solution is None else solution, t, rows, free, size,
-                                                tolerance, max_iterations, beyond, error)
+            starts = [q] if solution is None else [solution, q]
+            solution, error, A = _within_limits(model, starts, t, rows, free, size, tolerance, max_iterations, beyond,
+                                                error)
     if solution is None:
         raise error
     _refuse_half_turns(model, solution, t, A)
@@ -368,40 +369,50 @@ def _beyond_limits(model: Model, q: np.ndarray, free: np.ndarray) -> tuple[int, 
     return k, float(q[k]), float(lower[k]), float(upper[k])
 
 
-def _within_limits(model: Model, q: np.ndarray, t: float, rows: np.ndarray, free: np.ndarray, size: float,
+def _within_limits(model: Model, starts: list[np.ndarray], t: float, rows: np.ndarray, free: np.ndarray, size: float,
                    tolerance: float, max_iterations: int, beyond: tuple[int, float, float, float] | None,
                    error: ConvergenceError | None) -> tuple[np.ndarray | None, ConvergenceError | None, np.ndarray]:
-    """The assembly within the coordinate limits (:func:`assemble`): trust-region reflective
-    least squares from ``q`` reflected into the limits (a coordinate beyond a limit by δ starts
-    δ inside it), then Newton with the coordinates at a limit held; ``beyond`` is what Newton's own solution left (or None when Newton failed,
-    ``error`` its failure)."""
+    """The assembly within the coordinate limits (:func:`assemble`) from each of ``starts`` in turn
+    (Newton's solution, then the guess): trust-region reflective least squares from the start
+    reflected into the limits (a coordinate beyond a limit by δ starts δ inside it), then Newton
+    with the coordinates at a limit held; a solution at a spurious root (:func:`_refuse_half_turns`)
+    counts as none.  ``beyond`` is what Newton's own solution left (None
+    when Newton failed, ``error`` its failure)."""
     from scipy.optimize import least_squares
 
     lower, upper = (limit[free] for limit in model.coordinate_limits)
-    start = q[free]                         # reflected into the limits (as far inside as it was out), then clipped
-    start = np.clip(np.where(start < lower, 2 * lower - start, np.where(start > upper, 2 * upper - start, start)),
-                    lower, upper)
+    span = np.where(np.isfinite(upper - lower), upper - lower, 1.0)
     terms = model.new_terms()
     zeros = np.zeros(model.n)
+    best = None
+    for q in starts:
+        def evaluated(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            trial = q.copy()
+            trial[free] = x
+            model.evaluate(trial, zeros, t, out=terms)
+            return terms.phi[rows], terms.A[np.ix_(rows, free)]
 
-    def evaluated(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        trial = q.copy()
-        trial[free] = x
-        model.evaluate(trial, zeros, t, out=terms)
-        return terms.phi[rows], terms.A[np.ix_(rows, free)]
-
-    fit = least_squares(lambda x: evaluated(x)[0], start, jac=lambda x: evaluated(x)[1], bounds=(lower, upper),
-                        method="trf", x_scale="jac", ftol=np.finfo(float).eps, xtol=np.finfo(float).eps,
-                        gtol=np.finfo(float).eps, max_nfev=50 * max(1, int(free.sum())))
-    fitted = q.copy()
-    fitted[free] = fit.x
-    span = np.where(np.isfinite(upper - lower), upper - lower, 1.0)
-    at_limit = np.zeros(model.n, dtype=bool)
-    at_limit[free] = (fit.x - lower <= 1e-9 * span) | (upper - fit.x <= 1e-9 * span)
-    solution, _, A = _newton(model, fitted, t, rows, free & ~at_limit, size, tolerance, max_iterations)
-    if solution is not None and _beyond_limits(model, solution, free) is None:
-        return solution, None, A
-    phi, _ = evaluated(fit.x)
+        start = q[free]
+        start = np.clip(np.where(start < lower, 2 * lower - start, np.where(start > upper, 2 * upper - start, start)),
+                        lower, upper)
+        fit = least_squares(lambda x: evaluated(x)[0], start, jac=lambda x: evaluated(x)[1], bounds=(lower, upper),
+                            method="trf", x_scale="jac", ftol=np.finfo(float).eps, xtol=np.finfo(float).eps,
+                            gtol=np.finfo(float).eps, max_nfev=50 * max(1, int(free.sum())))
+        fitted = q.copy()
+        fitted[free] = fit.x
+        at_limit = np.zeros(model.n, dtype=bool)
+        at_limit[free] = (fit.x - lower <= 1e-9 * span) | (upper - fit.x <= 1e-9 * span)
+        solution, _, A = _newton(model, fitted, t, rows, free & ~at_limit, size, tolerance, max_iterations)
+        if solution is not None and _beyond_limits(model, solution, free) is None:
+            try:
+                _refuse_half_turns(model, solution, t, A)
+                return solution, None, A
+            except BranchError:             # a spurious root: the next start may avoid it
+                pass
+        phi = evaluated(fit.x)[0]
+        if best is None or np.max(np.abs(phi)) < np.max(np.abs(best[0])):
+            best = phi, at_limit, A
+    phi, at_limit, A = best
     worst = int(np.argmax(np.abs(phi)))
     name = model.coordinate_names
     if beyond is not None:

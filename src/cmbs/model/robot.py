@@ -326,15 +326,18 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                 description: str = "", closures: Sequence[Closure] = (),
                 drivers: Sequence[JointDriver | PoseDriver] = (), mimic: bool = False,
                 springs: Sequence[JointSpring] = (), loads: Sequence[LinkForce | LinkMoment] = (),
-                joint_damping: bool = False) -> Model:
+                joint_damping: bool = False, joint_limits: bool = False) -> Model:
     """The :class:`~cmbs.model.model.Model` of the tree of ``links`` and ``joints`` closed by
     ``closures`` and driven by ``drivers`` (joint and pose drivers; module docstring), with a
     row ``JOINT.mimic`` coupling each joint that has a ``mimic`` to the joint it mimics when
     ``mimic`` is True (:func:`~cmbs.model.robot_closures.coupling_elements`), loaded by the joint
     ``springs`` (``τ = -k (q - q_rest) - c q̇``), by each movable joint's ``damping`` as the damper
     ``τ = -damping·q̇`` when ``joint_damping`` is True, and by the point forces and moments on links
-    ``loads`` (``Q += J_pᵀ F``, ``Q += J_ωᵀ M``; :mod:`cmbs.model.robot_loads`); ``source``
-    names the file it came from in errors and on the model.  ``model.q0`` is each coordinate's
+    ``loads`` (``Q += J_pᵀ F``, ``Q += J_ωᵀ M``; :mod:`cmbs.model.robot_loads`), its position
+    analysis kept within the joints' ``lower``/``upper`` limits when ``joint_limits`` is True
+    (``Model.coordinate_limits``: inverse kinematics and loop closures within the limits,
+    :func:`cmbs.kinematics.assemble`; the dynamics does not enforce them); ``source`` names the
+    file it came from in errors and on the model.  ``model.q0`` is each coordinate's
     value nearest 0 within its joint's limits (:func:`initial_value`; not assembled:
     :func:`cmbs.kinematics.assemble`).
 
@@ -517,8 +520,12 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                                 for d, (_, f) in zip(joint_drivers, driver_rows)]
                                + [dict(vars(driver)) for driver in pose_drivers],
                     "springs": [dict(vars(spring)) for spring in springs], "joint_damping": joint_damping,
+                    "joint_limits": joint_limits,
                     "loads": [dict(vars(load), kind=type(load).__name__) for load in loads],
                     "visuals": {link.name: tuple(link.visuals) for link in by_name.values() if link.visuals}},
         segment_masses=tuple((link.name, float(link.inertial.mass)) for link in by_name.values()
                              if link.inertial is not None and link.inertial.mass > 0),
+        coordinate_limits=(np.array([-np.inf if j.lower is None else j.lower for j in movable], dtype=float),
+                           np.array([np.inf if j.upper is None else j.upper for j in movable], dtype=float))
+        if joint_limits else None,
     )

@@ -3,7 +3,8 @@
 
 ``urdf`` in ``[model]`` (a path relative to the TOML file) makes a file a robot file
 (``mimic = true`` there couples the URDF's mimic joints to the joints they mimic,
-``joint_damping = true`` applies the URDF joints' ``<dynamics damping>`` as dampers); its other
+``joint_damping = true`` applies the URDF joints' ``<dynamics damping>`` as dampers,
+``joint_limits = true`` keeps position analysis within the joints' limits); its other
 sections are ``[closures.NAME]`` (:class:`~cmbs.model.robot_closures.Closure`), ``[drivers.NAME]``
 (a joint's prescribed motion, as in the natural-coordinate files: ``coordinate`` names the joint;
 or, with ``kind = "pose"``, a link frame's target pose: :class:`~cmbs.model.robot_targets.PoseDriver`),
@@ -168,9 +169,10 @@ def read_robot_file(document: dict, path: Path) -> Model:
             raise ModelError(f"unknown section(s) {', '.join(map(repr, unknown))} for a robot file (allowed: "
                              f"{', '.join(SECTIONS)})")
         header = Entry("model", document.get("model", {}),
-                       ("name", "description", "source", "urdf", "gravity", "mimic", "joint_damping"), ("urdf",))
+                       ("name", "description", "source", "urdf", "gravity", "mimic", "joint_damping", "joint_limits"),
+                       ("urdf",))
         gravity = _vector(header, "gravity") or (0.0, 0.0, -9.81)
-        switches = {key: header.get(key, False) for key in ("mimic", "joint_damping")}
+        switches = {key: header.get(key, False) for key in ("mimic", "joint_damping", "joint_limits")}
         for key, value in switches.items():
             if not isinstance(value, bool):
                 raise ModelError(f"{key} must be true or false, got {value!r}", entry="model")

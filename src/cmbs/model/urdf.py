@@ -48,12 +48,13 @@ _COMMAS = {"size", "scale"}
 def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81), closures: Sequence[Closure] = (),
               drivers: Sequence[JointDriver | PoseDriver] = (), mimic: bool = False,
               springs: Sequence[JointSpring] = (), loads: Sequence[LinkForce | LinkMoment] = (),
-              joint_damping: bool = False) -> Model:
+              joint_damping: bool = False, joint_limits: bool = False) -> Model:
     """The robot of the URDF file ``path`` (module docstring), gravity ``gravity`` (m/s², world
     axes), closed by ``closures``, driven by ``drivers``, its mimic joints coupled when ``mimic``,
     loaded by the joint ``springs``, the forces and moments ``loads`` and, when ``joint_damping``,
-    its joints' ``<dynamics damping>`` as dampers (:mod:`cmbs.model.robot_loads`;
-    :func:`~cmbs.model.robot.build_robot`;
+    its joints' ``<dynamics damping>`` as dampers (:mod:`cmbs.model.robot_loads`), its position
+    analysis kept within the joints' ``<limit lower upper>`` when ``joint_limits``
+    (:func:`~cmbs.model.robot.build_robot`;
     not assembled: a robot file does that, :mod:`cmbs.model.robot_files`).  Every problem of the
     URDF is a one-line :class:`~cmbs.errors.ModelError` naming the file and the element: a missing
     file, XML that is not well formed, a number that is not one, an unknown, floating or planar
@@ -97,7 +98,8 @@ def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81),
                 0.0 if joint.mimic.offset is None else float(joint.mimic.offset))))
     return build_robot(robot.name, links, joints, gravity=gravity, source=source,
                        description=f"robot {robot.name!r} from {Path(path).name}", closures=closures, drivers=drivers,
-                       mimic=mimic, springs=springs, loads=loads, joint_damping=joint_damping)
+                       mimic=mimic, springs=springs, loads=loads, joint_damping=joint_damping,
+                       joint_limits=joint_limits)
 
 
 def _optional(value: object) -> float | None:
