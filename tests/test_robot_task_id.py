@@ -258,6 +258,60 @@ def test_projected_on_a_joint_driven_ur5_equals_the_driver_forces(tmp_path):
     assert np.abs(projected.forces - lagrange.forces).max() < 1e-12 * np.abs(lagrange.forces).max()
 
 
+# ------------------------------------------------------------------ joint reactions of pose-driven robots
+@needs_pinocchio
+def test_reactions_of_a_pose_driven_ur5_are_pinocchios_rnea_forces(tmp_path):
+    """The UR5's task-space motion (6 pose rows, no closure): at every instant the joint reactions
+    (the pose rows carry no force) equal Pinocchio's ``data.f`` after rnea(q, q̇, q̈) in world
+    axes, and each joint's force along its axis the projected torque, to 1e-10 of the largest
+    force; no closure is listed."""
+    from cmbs.inverse import joint_reaction_history
+    from test_robot_reactions import _pinocchio_joint_forces
+
+    urdf = ROBOTS / URDFS["ur5"]
+    model = cmbs.load(_ur5_task_file(tmp_path))
+    result = cmbs.inverse_dynamics(model, np.linspace(0.0, 1.0, 6))
+    reactions = joint_reaction_history(model, result.motion)
+    assert reactions["closures"] == {}
+    robot = pinocchio.buildModelFromUrdf(str(urdf))
+    data = robot.createData()
+    for i, (q, qd, qdd) in enumerate(zip(result.motion.q, result.motion.qd, result.motion.qdd)):
+        tau, expected = _pinocchio_joint_forces(robot, data, q, qd, qdd)
+        scale = max(np.abs(force).max() for force, _ in expected.values())
+        for name, (force, moment) in expected.items():
+            np.testing.assert_allclose(reactions["forces"][name][i], force, rtol=0, atol=1e-10 * scale)
+            np.testing.assert_allclose(reactions["moments"][name][i], moment, rtol=0, atol=1e-10 * scale)
+        np.testing.assert_allclose([reactions["joint_forces"][name][i] for name in model.coordinate_names],
+                                   result.forces[i], rtol=0, atol=1e-10 * scale)
+
+
+def test_cmbs_inverse_reactions_of_the_pose_driven_five_bar(tmp_path, capsys):
+    """``cmbs inverse five-bar-task.toml --reactions``: the closed chain's tool point driven; each
+    joint's force along its axis is its minimum-norm torque (the pose rows carry no force, the
+    closure C its multipliers), to 1e-10 of the largest; the closure's rows, not the pose rows,
+    are listed; a nonzero pose multiplier is refused."""
+    from cmbs.cli import main
+    from cmbs.inverse.robot_reactions import robot_reactions
+
+    out = tmp_path / "reactions.npz"
+    path = _five_bar_task_file(tmp_path)
+    assert main(["inverse", str(path), "--t-end", "0.4", "--dt", "0.1", "--reactions", "--out", str(out)]) == 0
+    capsys.readouterr()
+    model = cmbs.load(path)
+    with np.load(out) as saved:
+        torques = saved["driver_forces"]
+        for i, name in enumerate(model.coordinate_names):
+            np.testing.assert_allclose(saved[f"joint force {name}"], torques[:, i], rtol=0,
+                                       atol=1e-10 * np.abs(torques).max())
+        assert {"closure force C.line1", "closure force C.line2"} <= set(saved.files)
+        assert not any(key.startswith("closure force tool") for key in saved.files)
+    motion = cmbs.inverse_dynamics(model, np.linspace(0.0, 0.4, 5)).motion
+    lam = motion.extras["lam"][1].copy()
+    lam[model.constraint_names.index("tool.z")] = 1.0
+    with pytest.raises(CmbsError, match="a pose driver's multipliers are not zero"):
+        robot_reactions(model, motion.q[1], motion.qd[1], motion.qdd[1], lam)
+
+
 # ------------------------------------------------------------------ mistakes
 @pytest.mark.parametrize("arguments, expected", [
     (["--method", "matrix-r"], "a pose driver prescribes a link's pose, not a joint's force: its joint torques come "
@@ -267,7 +321,6 @@ def test_projected_on_a_joint_driven_ur5_equals_the_driver_forces(tmp_path):
     (["--actuated", "left_motor"], "passive coordinate(s) left_elbow, right_motor, right_elbow cannot be left "
                                    "unactuated"),
     (["--method", "projected", "--option", "alpha=1e8"], "method 'projected' takes no formulation options"),
-    (["--reactions"], "reactions of pose-driven robots are not available"),
 ])
 def test_inverse_dynamics_mistakes_are_one_line_errors(tmp_path, capsys, arguments, expected):
     from cmbs.cli import main

@@ -473,10 +473,6 @@ def _inverse(args: argparse.Namespace) -> int:
     model = _load(args)
     if args.motion:
         model = _prescribed(model, args)
-    if args.reactions:
-        from cmbs.inverse.robot_reactions import refuse_pose_driven
-
-        refuse_pose_driven(model)
     actuated = [name.strip() for name in args.actuated.split(",")] if args.actuated is not None else None
     result = inverse_dynamics(model, times, method=args.method, actuated=actuated, **_formulation_options(args))
     print(f"{model.name}: inverse dynamics ({result.method}) over {len(times)} instants")

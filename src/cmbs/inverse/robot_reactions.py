@@ -26,7 +26,10 @@ since the rows' Jacobians are ``J_a - J_b`` at the points, ``(u × v)ᵀ (J_ω,a
 -λ v × d on body b are the force +λ v at p_a).  A
 driver's row (``q_c - f(t)``) has the generalized force -λ on q_c alone: the actuation of joint c,
 part of what the joint transmits, and so does a mimic row's (``q_j - r q_k - o``: -λ on q_j
-and rλ on q_k, a transmission between the two joints).  Hence the check
+and rλ on q_k, a transmission between the two joints).  A pose driver's rows carry no force: the
+joint torques of inverse dynamics' method ``projected`` produce its motion with their multipliers
+zero (:mod:`cmbs.inverse.joint_torques`), and a nonzero one, the target's wrench on the link, is
+refused.  Hence the check
 ``S_kᵀ f^J_k = u_k + τ_springs(k) - λ_drivers(k) - (mimic rows' Aᵀλ)_k``: the joint's torque
 (revolute) or force (prismatic) along its axis is the actuation of its coordinate, its joint springs'
 and dampers' torques ``-k (q_k - q_rest) - c q̇_k`` included.  The rest of f^J_k is carried by the bearing.
@@ -42,7 +45,7 @@ import numpy as np
 from cmbs.errors import CmbsError
 from cmbs.model.model import Model, base_equations, base_multipliers
 from cmbs.model.robot import RobotEquations
-from cmbs.model.robot_kernel import CLOSE_LINE, CLOSE_POINT, JOINT_COUPLING, body_work
+from cmbs.model.robot_kernel import CLOSE_LINE, CLOSE_POINT, JOINT_COUPLING, TARGET_DOT, TARGET_POINT, body_work
 
 __all__ = ["robot_reactions"]
 
@@ -96,7 +99,15 @@ def _closure_wrenches(equations: RobotEquations, R: np.ndarray, o: np.ndarray, l
         elif kind == JOINT_COUPLING:       # a transmission between two joints: their actuation, no wrench
             row += 1
             continue
-        else:                              # CLOSE_DOT (pose drivers' elements are refused before)
+        elif kind in (TARGET_POINT, TARGET_DOT):    # a pose driver's rows: no force (projected torques)
+            count = 3 if kind == TARGET_POINT else 1
+            if np.any(lam[row:row + count] != 0.0):
+                raise CmbsError("a pose driver's multipliers are not zero: they would be the target's wrench on "
+                                "the link, which no joint transmits; take the joint torques of inverse dynamics' "
+                                "method 'projected' (its pose rows carry no force)")
+            row += count
+            continue
+        else:                              # CLOSE_DOT
             couple = -lam[row] * np.cross(world_vector(body_a, reals[0:3]), world_vector(body_b, reals[3:6]))
             on_a = np.concatenate([couple, np.zeros(3)])
             on_b = -on_a
@@ -105,15 +116,6 @@ def _closure_wrenches(equations: RobotEquations, R: np.ndarray, o: np.ndarray, l
             if body >= 0:
                 wrenches[body] += wrench
     return wrenches
-
-
-def refuse_pose_driven(model: Model) -> None:
-    """A :class:`CmbsError` when ``model`` is a robot driven by a pose driver: its reactions are not
-    available (checked before an analysis whose reactions are asked for)."""
-    equations = base_equations(model)[0]
-    if isinstance(equations, RobotEquations) and equations.pose_driven:
-        raise CmbsError(f"model {model.name!r}: reactions of pose-driven robots are not available (the target's "
-                        "wrench on the link); drive the joints instead")
 
 
 def robot_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, lam: np.ndarray,
@@ -139,7 +141,6 @@ def robot_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     equations, rows = base_equations(model)
     if not isinstance(equations, RobotEquations):
         raise CmbsError(f"model {model.name!r}: robot reactions need a robot (a URDF tree)")
-    refuse_pose_driven(model)
     q, qd, qdd, lam = (np.asarray(a, dtype=float) for a in (q, qd, qdd, lam))
     if lam.shape != (model.m,):
         raise CmbsError(f"lam has shape {lam.shape}, expected ({model.m},)")
@@ -165,9 +166,8 @@ def robot_reactions(model: Model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
     transmitted = work.bias_subtree + per_body
 
     names = [joint.name for joint in equations.joints]
-    closure_rows = equations.m - equations.kernel.drivers.shape[0]
     closures = {name: float(-lam[r]) for r, name in enumerate(model.constraint_names)
-                if 0 <= rows[r] < closure_rows}
+                if rows[r] >= 0 and not model.drivers[r]}
     return {"forces": {names[k]: transmitted[k, 3:].copy() for k in range(equations.n)},
             "moments": {names[k]: transmitted[k, :3] - np.cross(work.o[k], transmitted[k, 3:])
                         for k in range(equations.n)},
