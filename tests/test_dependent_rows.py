@@ -79,6 +79,59 @@ def test_the_residual_bounds_the_singular_values_left_out(noise):
     assert certificate[KEPT_LOW] <= singular[rank - 1] ** 2
 
 
+def test_the_bound_reused_along_a_moving_a_stays_below_the_kept_rows_singular_value():
+    """The same work arrays for a sequence of A: 7 sparse rows moved by ε E (ε from 1e-6 to 0.1)
+    and 3 rows kept combinations of them: the
+    bound on σ_min(A'_I)² stays below the SVD's value at every step, is reused (the same number
+    as Weyl's (b₀ - ‖A'_k - A'_0‖_F)² from the first fresh bound b₀²) while the move is at most
+    REUSE·b₀, and is fresh again (λ_min(M)/trace(S_II⁻¹), the value a new work array gives) once
+    it is more."""
+    from cmbs.dynamics.dependent_rows import REUSE
+
+    rng = np.random.default_rng(4)
+    M, Q, _, gamma = _system(rng, n=12, independent=7, dependent=3)
+    n, m = 12, 10
+    B = np.zeros((7, n))
+    for row in B:
+        row[rng.choice(n, 3, replace=False)] = rng.normal(size=3)
+    combination, shuffle = rng.normal(size=(3, 7)), rng.permutation(m)
+    E = rng.normal(size=B.shape) * (B != 0)
+
+    def jacobian(epsilon):              # B moved by ε E, the dependent rows kept combinations of it
+        moved = B + epsilon * E
+        return np.vstack([moved, combination @ moved])[shuffle]
+
+    A = jacobian(0.0)
+    row_scale = rng.uniform(0.5, 2.0, size=m)
+    floats, order, _ = dependent_rows_arrays(m, n)
+    first = None
+    reused = fresh = 0
+    for epsilon in (0.0, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1):
+        moved = jacobian(epsilon)
+        qdd, lam = np.zeros(n), np.zeros(m)
+        certificate = solve_dependent_rows(float(np.linalg.eigvalsh(M)[0]), floats, order, np.linalg.inv(M), Q, moved,
+                                           gamma, row_scale, np.zeros((m, n)), np.zeros((m, n), dtype=np.int64),
+                                           np.zeros(m, dtype=np.int64), qdd, lam)
+        assert certificate[RANK] == 7
+        kept = np.sort(order[:7])
+        sigma = np.linalg.svd((moved * row_scale[:, None])[kept], compute_uv=False)[-1]
+        assert certificate[KEPT_LOW] <= sigma**2 * (1 + 1e-12)
+        _, _, alone = _solve(M, Q, moved, gamma, row_scale)      # fresh work arrays: the fresh bound
+        if first is None:
+            first = np.sqrt(alone[KEPT_LOW]), A * row_scale[:, None]
+            assert certificate[KEPT_LOW] == alone[KEPT_LOW]
+            continue
+        delta = np.linalg.norm((moved * row_scale[:, None] - first[1])[kept])
+        if delta <= REUSE * first[0]:
+            assert certificate[KEPT_LOW] == pytest.approx((first[0] - delta) ** 2, rel=1e-12)
+            reused += 1
+        else:
+            assert certificate[KEPT_LOW] == pytest.approx(alone[KEPT_LOW], rel=1e-12)
+            first = np.sqrt(alone[KEPT_LOW]), moved * row_scale[:, None]
+            fresh += 1
+    assert reused >= 2 and fresh >= 1
+
+
 def _bricard_states():
     model = cmbs.load("bricard")
     run = cmbs.simulate(model, t_end=2.0, formulation="projection", integrator="dop853", rtol=1e-10, atol=1e-12,

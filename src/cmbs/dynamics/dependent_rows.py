@@ -13,7 +13,7 @@ rows scaled once, A' = D A, γ' = D γ, λ = D μ (D = diag(row_scale)):
    kept; the others, R, are the dependent rows.
 3. μ_I = S_II⁻¹ z_I and q̈ = y - X_Iᵀ μ_I: M q̈ + A'_Iᵀ μ_I = Q and A'_I q̈ = γ'_I.
 4. The dependent rows in terms of the kept ones, a'_k ≈ Σ_j C_kj a'_j with C = S_RI S_II⁻¹
-   = L_RI L_II⁻¹, and the minimum-norm multipliers, as the pseudo-inverse (A'ᵀ)⁺ gives them:
+   = L_RI L_II⁻¹ (a triangular solve per dependent row), and the minimum-norm multipliers, as the pseudo-inverse (A'ᵀ)⁺ gives them:
    every μ with A'ᵀμ = A'_Iᵀμ_I is μ_basic + N v, N = [-Cᵀ; I], and the shortest one has
    v = (I + C Cᵀ)⁻¹ C μ_I (μ_I then less Cᵀv).
 
@@ -24,7 +24,9 @@ Certificate (what the caller compares with its SVD threshold):
   matrix).  ρ is computed from the rows themselves, so it resolves singular values down to the
   rounding level of A, not of its square.
 - σ_r(A')² ≥ σ_min(A'_I)² ≥ λ_min(M) / trace(S_II⁻¹) (removing rows does not raise singular
-  values; S_II ≼ A'_I A'_Iᵀ / λ_min(M)), with trace(S_II⁻¹) = ‖L_II⁻¹‖_F²;
+  values; S_II ≼ A'_I A'_Iᵀ / λ_min(M)), with trace(S_II⁻¹) = ‖L_II⁻¹‖_F²; from one evaluation
+  to the next, while the same rows are kept and A'_I has moved little, the bound of the last
+  one less the move (Weyl's inequality, :func:`_kept_low`);
 - σ_max(A')² ≤ trace(A'A'ᵀ).
 
 When ρ is at most the threshold and σ_r above it, the SVD keeps exactly the r largest singular
@@ -56,7 +58,8 @@ def dependent_rows(model: Model, M0: np.ndarray, definite: bool) -> tuple[float,
     """What :func:`solve_dependent_rows` needs besides the terms, for ``model`` whose mass matrix at
     q0 is ``M0`` (``definite``: positive definite, no massless coordinates): λ_min(M) (0 when M is
     not constant and definite: the path is not taken), the work floats (S, L⁻¹ and C, each m × m,
-    then y (n), z (m), a residual row (n) and the certificate (4)), the pivot order (m), and the
+    then y (n), z (m), a residual row (n), the certificate (4) and the reference of the bound's
+    reuse: valid, √bound, the kept rows (m) and their A' (m × n)), the pivot order (m), and the
     path of a formulation's last evaluation (1: dependent rows, which it then tries first).  A
     formulation's kernel carries the four as fields (numba's parallel loops take no tuple nested
     in a kernel's)."""
@@ -67,7 +70,8 @@ def dependent_rows(model: Model, M0: np.ndarray, definite: bool) -> tuple[float,
 
 def dependent_rows_arrays(m: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The work floats, pivot order and last path of :func:`dependent_rows` for m rows, n coordinates."""
-    return np.zeros(3 * m * m + 2 * n + m + 4), np.zeros(m, dtype=np.int64), np.zeros(1, dtype=np.int64)
+    return (np.zeros(3 * m * m + 2 * n + m + 4 + 2 + m + m * n), np.zeros(m, dtype=np.int64),
+            np.zeros(1, dtype=np.int64))
 
 
 @njit(cache=True)
@@ -88,6 +92,7 @@ def solve_dependent_rows(mass_low, floats, order, inverse_mass, Q, A, gamma, row
     z = floats[3 * m * m + n:3 * m * m + n + m]
     residual = floats[3 * m * m + n + m:3 * m * m + 2 * n + m]
     certificate = floats[3 * m * m + 2 * n + m:3 * m * m + 2 * n + m + 4]
+    reference = floats[3 * m * m + 2 * n + m + 4:]
     trace_gram = 0.0
     for r in range(m):                      # A's row non-zeros; X = A' M⁻¹
         count = 0
@@ -128,15 +133,14 @@ def solve_dependent_rows(mass_low, floats, order, inverse_mass, Q, A, gamma, row
     if rank <= 0:                           # not semi-definite, or no row to keep: nothing certified
         return certificate[:0]
     _solve_kept(S, rank, z)
-    kept_low = mass_low / _inverse_frobenius_squared(S, rank, T)
+    kept_low = _kept_low(mass_low, S, rank, T, A, row_scale, order, reference)
     dependent = m - rank
-    for k in range(dependent):              # C_k = L_II⁻ᵀ l_k (l_k: row rank + k of L), by rows of L⁻¹
+    kept = S[:rank, :rank]
+    for k in range(dependent):              # C_k = L_II⁻ᵀ l_k (l_k: row rank + k of L)
+        row = C[k, :rank]
         for j in range(rank):
-            C[k, j] = 0.0
-        for i in range(rank):
-            value = S[rank + k, i]
-            for j in range(i + 1):
-                C[k, j] += T[i, j] * value
+            row[j] = S[rank + k, j]
+        solve_lower_transposed(kept, DENSE, row)
     residual_squared = _dependency_residual(A, row_scale, columns, counts, order, C, rank, residual)
     for i in range(n):                      # q̈ from the basic multipliers: A'_I q̈ = γ'_I exactly
         total = y[i]
@@ -154,6 +158,55 @@ def solve_dependent_rows(mass_low, floats, order, inverse_mass, Q, A, gamma, row
     certificate[RESIDUAL] = residual_squared
     certificate[RANK] = rank
     return certificate
+
+
+#: The lower bound on σ_min(A'_I)² is reused while A'_I has moved by at most this fraction of the
+#: bound's square root (Frobenius norm): the reused bound then loses at most 19 %.
+REUSE = 0.1
+
+
+@njit(cache=True)
+def _kept_low(mass_low, L, rank, T, A, row_scale, order, reference):
+    """A lower bound on σ_min(A'_I)² for the kept rows I = order[:rank]: λ_min(M) / trace(S_II⁻¹)
+    (module docstring; trace(S_II⁻¹) = ‖L_II⁻¹‖_F², L⁻¹ left in ``T``), or, when the rows kept are
+    those of the bound last computed (``reference``: valid, its √bound b₀, the rows kept (1.0),
+    their A'₀ (m × n)) and δ = ‖A'_I - A'₀_I‖_F ≤ REUSE·b₀, the bound (b₀ - δ)², by Weyl's
+    inequality for singular values, σ_min(A'_I) ≥ σ_min(A'₀_I) - ‖A'_I - A'₀_I‖₂ (Golub & Van
+    Loan, Cor. 8.6.2): a step moves A little, so most evaluations skip L⁻¹.  A fresh bound
+    becomes the reference."""
+    m, n = A.shape
+    kept_rows = reference[2:2 + m]
+    A0 = reference[2 + m:].reshape((m, n))
+    if reference[0] == 1.0:
+        same = True
+        count = 0
+        for r in range(m):
+            count += kept_rows[r] == 1.0
+        if count != rank:
+            same = False
+        for k in range(rank):
+            if kept_rows[order[k]] != 1.0:
+                same = False
+        if same:
+            total = 0.0
+            for k in range(rank):
+                r = order[k]
+                for j in range(n):
+                    difference = (A[r, j] - A0[r, j]) * row_scale[r]
+                    total += difference * difference
+            delta = math.sqrt(total)
+            if delta <= REUSE * reference[1]:
+                return (reference[1] - delta) ** 2
+    low = mass_low / _inverse_frobenius_squared(L, rank, T)
+    reference[0], reference[1] = 1.0, math.sqrt(low)
+    for r in range(m):
+        kept_rows[r] = 0.0
+    for k in range(rank):
+        r = order[k]
+        kept_rows[r] = 1.0
+        for j in range(n):
+            A0[r, j] = A[r, j]
+    return low
 
 
 @njit(cache=True)
