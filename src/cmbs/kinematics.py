@@ -423,8 +423,8 @@ def _within_limits(model: Model, starts: list[np.ndarray], t: float, rows: np.nd
     failure = ConvergenceError(
         f"model {model.name!r}: no configuration within the coordinate limits at t={t:g}: {reason}; within the "
         f"limits the smallest residual found is {abs(phi[worst]):.3g} in constraint "
-        f"{model.constraint_names[rows[worst]]!r}" + (f" with {', '.join(repr(name[k]) for k in np.flatnonzero(at_limit))} "
-                                                      "at a limit" if at_limit.any() else ""))
+        f"{model.constraint_names[rows[worst]]!r}"
+        + (f" with {', '.join(repr(name[k]) for k in np.flatnonzero(at_limit))} at a limit" if at_limit.any() else ""))
     failure.constraint = model.constraint_names[rows[worst]]
     return None, failure, A
 

@@ -298,8 +298,7 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     plan = compiled_plan(model, chosen, solver, integrator, u, project, t_end, dt,
                          projection_tolerance=projection_tolerance)
     reason = _python_loop_reason(plan, compiled)
-    if not reason and compiled is None and integrator in EXPLICIT and _singular_start(model, solver, inputs, q_start,
-                                                                                     qd_start):
+    if not reason and compiled is None and integrator in EXPLICIT and _singular_start(model, solver, q_start, qd_start):
         reason = "the formulation cannot solve the start state, where the run ends (nothing to compile)"
     if compiled and reason:
         raise CmbsError(f"the compiled loop cannot run this simulation of model {model.name!r}: {reason}")
@@ -331,17 +330,19 @@ def simulate(model: Model | str | Path, *, t_end: float, formulation: str | Form
     return trajectory
 
 
-def _singular_start(model: Model, solver, inputs: Inputs, q: np.ndarray, qd: np.ndarray) -> bool:
+def _singular_start(model: Model, solver, q: np.ndarray, qd: np.ndarray) -> bool:
     """True when Lagrange or Baumgarte (:class:`~cmbs.dynamics.lagrange.KKTSolver`, the
     formulations that stop at a singular configuration) finds the system at the start state
     singular, so that a run would end at t = 0: it then takes the Python loop, which ends there
     with the same message, and no loop is compiled for it (20-40 s on a first run).  The check
     calls the solve the loop would compile; the other formulations' Python paths would compile
-    code of their own (Udwadia-Kalaba: 18 s), and they do not stop there."""
+    code of their own (Udwadia-Kalaba: 18 s), and they do not stop there.  The inputs are taken
+    zero: whether A is singular does not depend on them, and the run's input law (which may keep
+    a state, a sampled controller's) is called by the run alone."""
     if not isinstance(solver, KKTSolver):
         return False
     try:
-        terms = model.evaluate(q, qd, 0.0, inputs(0.0, q, qd))
+        terms = model.evaluate(q, qd, 0.0, np.zeros(model.n_u))
         solver.accelerations(terms, q, qd, 0.0)
     except SingularSystemError:
         return True

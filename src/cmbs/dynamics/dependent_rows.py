@@ -13,7 +13,8 @@ rows scaled once, A' = D A, γ' = D γ, λ = D μ (D = diag(row_scale)):
    kept; the others, R, are the dependent rows.
 3. μ_I = S_II⁻¹ z_I and q̈ = y - X_Iᵀ μ_I: M q̈ + A'_Iᵀ μ_I = Q and A'_I q̈ = γ'_I.
 4. The dependent rows in terms of the kept ones, a'_k ≈ Σ_j C_kj a'_j with C = S_RI S_II⁻¹
-   = L_RI L_II⁻¹ (a triangular solve per dependent row), and the minimum-norm multipliers, as the pseudo-inverse (A'ᵀ)⁺ gives them:
+   = L_RI L_II⁻¹ (a triangular solve per dependent row), and the minimum-norm multipliers, as
+   the pseudo-inverse (A'ᵀ)⁺ gives them:
    every μ with A'ᵀμ = A'_Iᵀμ_I is μ_basic + N v, N = [-Cᵀ; I], and the shortest one has
    v = (I + C Cᵀ)⁻¹ C μ_I (μ_I then less Cᵀv).
 

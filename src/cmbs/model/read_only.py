@@ -28,8 +28,9 @@ Step = tuple[str, Any]
 
 def read_only_paths(root: object) -> list[tuple[Step, ...]]:
     """The paths from ``root`` to each read-only numpy array reachable through dicts, lists,
-    tuples and the attributes of cmbs's own objects (``__dict__`` and slots; each object visited once: a shared array is named by
-    the first path that reaches it, and pickling keeps it shared)."""
+    tuples and the attributes of cmbs's own objects (``__dict__`` and slots).  Each object is
+    visited once: a shared array is named by the first path that reaches it, and pickling keeps
+    it shared."""
     return [path for path, array in _arrays(root, (), set()) if not array.flags.writeable]
 
 
