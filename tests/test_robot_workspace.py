@@ -262,7 +262,11 @@ def test_cmbs_workspace_grid_command_writes_its_result_and_figure(tmp_path, caps
     assert main([*arguments, "--sweep", "left_elbow", "0", "1", "3"]) == 2
     assert "--sweep: at most two inputs (a grid of two), got 3" in capsys.readouterr().err
     assert main([*arguments, "--hold", "left_motor"]) == 2
-    assert "a coordinate is both swept and held, or held twice" in capsys.readouterr().err
+    assert "a coordinate is given twice (swept twice, swept and held, or held twice)" in capsys.readouterr().err
+    assert main([*arguments, "--hold", "left_elbow"]) == 2
+    assert ("with left_motor, right_motor, left_elbow given, the other coordinates cannot follow every value near the "
+            "start (A over them has rank 1, the chain's A 2): the given coordinates are not independent inputs"
+            in capsys.readouterr().err)
     assert main([*arguments, "--out", str(tmp_path / "grid.txt")]) == 2
     assert "must end in .npz or .csv" in capsys.readouterr().err
 

@@ -279,11 +279,13 @@ def _start(model: Model, fixed: list[str], q: np.ndarray | None) -> tuple[Model,
     """The model without its drivers, its start assembled with the ``fixed`` coordinates (the
     inputs, then the held ones) at their values in ``q`` (default ``model.q0``), and the ranks of
     A over the coordinates that follow and of A there.  Raises when a coordinate is unknown or
-    given twice, or when the inputs leave degrees of freedom."""
+    given twice, when the inputs leave degrees of freedom, or when they are not independent (A
+    over the coordinates that follow has a lower rank than A: the constraints restrict them)."""
     free = model.without_drivers() if model.drivers.any() else model
     columns = free.coordinate_indices(fixed)
     if len(set(fixed)) != len(fixed):
-        raise CmbsError(f"sweep of {fixed[0]!r}: a coordinate is both swept and held, or held twice")
+        raise CmbsError(f"sweep of {fixed[0]!r}: a coordinate is given twice (swept twice, swept and held, or held "
+                        "twice)")
     start = assemble(free, model.q0 if q is None else q, 0.0, fixed=fixed)
     following = np.ones(free.n, dtype=bool)
     following[columns] = False
@@ -293,6 +295,11 @@ def _start(model: Model, fixed: list[str], q: np.ndarray | None) -> tuple[Model,
     if dof > 0:
         raise CmbsError(f"model {model.name!r}: with {', '.join(fixed)} given, {dof} degree(s) of freedom are left: "
                         f"hold {dof} more coordinate(s)")
+    if ranks[0] < ranks[1]:
+        raise CmbsError(f"model {model.name!r}: with {', '.join(fixed)} given, the other coordinates cannot follow "
+                        f"every value near the start (A over them has rank {ranks[0]}, the chain's A {ranks[1]}): the "
+                        "given coordinates are not independent inputs; hold fewer, or start away from a singular "
+                        "configuration")
     return free, start, ranks
 
 
