@@ -98,7 +98,8 @@ def _robot_mass_fault(model: Model, robot: RobotEquations, body: str, factor: fl
                             closure_reals=kernel.closure_reals[:0], drivers=kernel.drivers[:0],
                             tf_table=kernel.tf_table[:0], sizes=np.array([0, kernel.sizes[1]], np.int64),
                             springs=kernel.springs[:0], spring_reals=kernel.spring_reals[:0],
-                            load_ints=kernel.load_ints[:0], load_reals=kernel.load_reals[:0])
+                            load_ints=kernel.load_ints[:0], load_reals=kernel.load_reals[:0],
+                            point_springs=kernel.point_springs[:0], point_spring_reals=kernel.point_spring_reals[:0])
     return _RobotMassFaultEquations(model.equations, delta, t0)
 
 

@@ -5,8 +5,9 @@ Spatial vectors are those of :mod:`cmbs.model.robot_kernel`: Plücker coordinate
 about the world origin, a force ``f = (n_O, f)``.  The model's evaluation at (q, q̇) runs RNEA
 with q̈ = 0 and the base accelerating at -g, and leaves for each body k its motion subspace S_k,
 its composite inertia I^c_k and the sum over its subtree of the bias wrenches
-``Σ (I_j a_j + v_j ×_f I_j v_j - f^ext_j)``, f^ext_j the spatial forces of the point forces and
-moments applied to body j (:mod:`cmbs.model.robot_loads`; Featherstone, *Rigid Body Dynamics Algorithms*, 2008, §5.3).
+``Σ (I_j a_j + v_j ×_f I_j v_j - f^ext_j)``, f^ext_j the spatial forces of the point forces,
+moments and spring-dampers between two points applied to body j (:mod:`cmbs.model.robot_loads`;
+Featherstone, *Rigid Body Dynamics Algorithms*, 2008, §5.3).
 With the accelerations q̈, each body's acceleration gains ``â_j = â_parent + S_j q̈_j``, so the
 wrench that joint k transmits from its parent (or the ground) to the subtree of k is::
 

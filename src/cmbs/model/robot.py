@@ -15,8 +15,9 @@ then those of the pose drivers (a link frame's target pose, :mod:`cmbs.model.rob
 one per joint driver, ``q_c - f(t) = 0`` on joint c (:class:`JointDriver`).  Actuators: the joints
 themselves, ``u_k`` the torque (revolute) or force (prismatic) of joint k on its child, so
 ``Q = u - C(q, q̇) q̇ - g(q) + Q_loads`` with the applied loads of :mod:`cmbs.model.robot_loads`
-(joint springs and dampers ``-k (q - q_rest) - c q̇``, point forces ``J_pᵀ F`` and moments
-``J_ωᵀ M`` on links).
+(joint springs and dampers ``-k (q - q_rest) - c q̇``, spring-dampers between two points
+``J_aᵀ(-f u) + J_bᵀ(f u)`` with the tension ``f = k (ℓ - ℓ0) + c ℓ̇``, point forces ``J_pᵀ F``
+and moments ``J_ωᵀ M`` on links).
 
 For the dynamics each movable joint carries one rigid body: its child link and every link
 fixed to it by fixed joints, their inertias combined exactly (masses added, centres of mass
@@ -33,6 +34,7 @@ Joint limits, effort and velocity limits and friction are kept as data
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Sequence
@@ -43,14 +45,15 @@ from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.drivers import TimeFunction, TimeFunctionPack, as_time_function, is_constant
 from cmbs.model.model import Model, Terms
 from cmbs.model.robot_closures import Closure, closure_elements, coupling_elements, rpy_rotation
-from cmbs.model.robot_loads import JointSpring, LinkForce, LinkMoment, load_elements
+from cmbs.model.robot_loads import JointSpring, LinkForce, LinkMoment, PointSpring, load_elements, \
+    measured_rest_length, point_spring_lengths
 from cmbs.model.robot_targets import PoseDriver, target_elements
 from cmbs.model.robot_kernel import INERTIA, PLACEMENT, PRISMATIC, REVOLUTE, TARGET_DOT, TARGET_POINT, RobotKernel, \
     body_poses, energies, evaluate_terms, scratch_size
 from cmbs.model.visuals import Visual, checked_visual
 
-__all__ = ["Inertial", "TreeLink", "TreeJoint", "JointDriver", "PoseDriver", "JointSpring", "LinkForce", "LinkMoment",
-           "RobotEquations", "build_robot", "frame_placement", "frame_jacobian", "initial_value"]
+__all__ = ["Inertial", "TreeLink", "TreeJoint", "JointDriver", "PoseDriver", "JointSpring", "PointSpring", "LinkForce",
+           "LinkMoment", "RobotEquations", "build_robot", "frame_placement", "frame_jacobian", "initial_value"]
 
 MOVABLE = {"revolute": REVOLUTE, "continuous": REVOLUTE, "prismatic": PRISMATIC}
 JOINT_TYPES = (*MOVABLE, "fixed")
@@ -125,7 +128,7 @@ class RobotEquations:
                  time_functions: TimeFunctionPack | None = None, steady_drivers: frozenset[str] = frozenset(),
                  orientation_targets: tuple[tuple[str, int, int], ...] = (), work_sources: tuple[str, ...] = ()):
         self.kernel = kernel
-        #: what does work besides gravity, the joint springs, the joint torques and the drivers: the
+        #: what does work besides gravity, the springs, the joint torques and the drivers: the
         #: dampers and the point forces and moments (:mod:`cmbs.model.robot_loads`; the closures are
         #: workless, friction is not applied)
         self.work_sources = work_sources
@@ -174,8 +177,9 @@ class RobotEquations:
         return None if self.python else self.kernel
 
     def evaluate(self, q: np.ndarray, qd: np.ndarray, t: float, u: np.ndarray, terms: Terms) -> None:
-        """M(q) (CRBA), Q = u - C(q, q̇) q̇ - g(q) + Q_loads (RNEA with q̈ = 0 and the loads as
-        external forces, then the joint springs) and the closure and driver rows into ``terms``."""
+        """M(q) (CRBA), Q = u - C(q, q̇) q̇ - g(q) + Q_loads (RNEA with q̈ = 0 and the loads and
+        point springs as external forces, then the joint springs) and the closure and driver rows
+        into ``terms``."""
         for k, function in self.python:
             terms.scratch[3 * k:3 * k + 3] = function(t)
         evaluate_terms(self.kernel, q, qd, t, u, terms.buffer)
@@ -185,8 +189,14 @@ class RobotEquations:
         return energies(self.kernel, q, qd)[0]
 
     def potential_energy(self, q: np.ndarray) -> float:
-        """V = -Σ_k m_k g·c_k over the bodies (c_k the centre of mass) + Σ_springs ½ k (q - q_rest)²."""
+        """V = -Σ_k m_k g·c_k over the bodies (c_k the centre of mass) + Σ_joint springs ½ k (q - q_rest)²
+        + Σ_point springs ½ k (ℓ - ℓ0)²."""
         return energies(self.kernel, q, np.zeros(self.n))[1]
+
+    def point_spring_lengths(self, q: np.ndarray) -> np.ndarray:
+        """ℓ = |p_a - p_b| at ``q`` of each point spring (:class:`PointSpring`), in the order given."""
+        R, o, _ = body_poses(self.kernel, q)
+        return point_spring_lengths(self.kernel.point_springs, self.kernel.point_spring_reals, R, o)
 
     def link_index(self, link: str) -> int:
         """Index of ``link`` in :attr:`link_names` (ModelError naming the choices otherwise)."""
@@ -321,17 +331,37 @@ def _combined_inertia(parts: list[tuple[float, np.ndarray, np.ndarray]]) -> np.n
                      inertia[2, 2]])
 
 
+def _measured_rest_lengths(springs: Sequence[JointSpring | PointSpring], kernel: RobotKernel,
+                           q0: np.ndarray) -> list[JointSpring | PointSpring]:
+    """``springs`` with each point spring given no rest length given its length at ``q0``, written
+    into the kernel's (still writable) ``point_spring_reals`` too (:func:`measured_rest_length`)."""
+    point_springs = [spring for spring in springs if isinstance(spring, PointSpring)]
+    if all(spring.rest_length is not None for spring in point_springs):
+        return list(springs)
+    R, o, _ = body_poses(kernel, q0)
+    lengths = point_spring_lengths(kernel.point_springs, kernel.point_spring_reals, R, o)
+    measured: dict[str, PointSpring] = {}
+    for row, spring in enumerate(point_springs):
+        if spring.rest_length is None:
+            kernel.point_spring_reals[row, 8] = measured_rest_length(spring.name, lengths[row])
+            measured[spring.name] = dataclasses.replace(spring, rest_length=float(kernel.point_spring_reals[row, 8]))
+    return [measured.get(spring.name, spring) if isinstance(spring, PointSpring) else spring for spring in springs]
+
+
 def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint], *,
                 gravity: Sequence[float] = (0.0, 0.0, -9.81), source: str | None = None,
                 description: str = "", closures: Sequence[Closure] = (),
                 drivers: Sequence[JointDriver | PoseDriver] = (), mimic: bool = False,
-                springs: Sequence[JointSpring] = (), loads: Sequence[LinkForce | LinkMoment] = (),
+                springs: Sequence[JointSpring | PointSpring] = (), loads: Sequence[LinkForce | LinkMoment] = (),
                 joint_damping: bool = False, joint_limits: bool = False) -> Model:
     """The :class:`~cmbs.model.model.Model` of the tree of ``links`` and ``joints`` closed by
     ``closures`` and driven by ``drivers`` (joint and pose drivers; module docstring), with a
     row ``JOINT.mimic`` coupling each joint that has a ``mimic`` to the joint it mimics when
-    ``mimic`` is True (:func:`~cmbs.model.robot_closures.coupling_elements`), loaded by the joint
-    ``springs`` (``τ = -k (q - q_rest) - c q̇``), by each movable joint's ``damping`` as the damper
+    ``mimic`` is True (:func:`~cmbs.model.robot_closures.coupling_elements`), loaded by the
+    ``springs``: joint springs (:class:`JointSpring`, ``τ = -k (q - q_rest) - c q̇``) and
+    spring-dampers between two points (:class:`PointSpring`, ``Q += J_aᵀ(-f u) + J_bᵀ(f u)``,
+    ``f = k (ℓ - ℓ0) + c ℓ̇``; ℓ0 not given: the points' distance at ``model.q0``), by each movable
+    joint's ``damping`` as the damper
     ``τ = -damping·q̇`` when ``joint_damping`` is True, and by the point forces and moments on links
     ``loads`` (``Q += J_pᵀ F``, ``Q += J_ωᵀ M``; :mod:`cmbs.model.robot_loads`), its position
     analysis kept within the joints' ``lower``/``upper`` limits when ``joint_limits`` is True
@@ -350,8 +380,9 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
         limits with lower > upper, a movable joint that carries no mass nor inertia, a closure's
         mistakes (:func:`~cmbs.model.robot_closures.closure_elements`), a pose driver's
         (:func:`~cmbs.model.robot_targets.target_elements`), a driver of an unknown or fixed
-        joint, two drivers of one joint, repeated constraint names, or a spring's or load's
-        mistakes (:func:`~cmbs.model.robot_loads.load_elements`).
+        joint, two drivers of one joint, repeated constraint names, a spring's or load's
+        mistakes (:func:`~cmbs.model.robot_loads.load_elements`), or a point spring given no rest
+        length whose points coincide at ``model.q0``.
     """
     g = _finite(gravity, f"model {name!r}", "gravity", source)
     if g.shape != (3,):
@@ -487,7 +518,10 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                          np.concatenate([closure_reals, targets.reals]), np.array(driver_rows, np.int64).reshape(-1, 2),
                          pack.table, pack.ops, pack.reals,
                          np.array([len(constraint_names), pack.depth], np.int64), loaded.springs,
-                         loaded.spring_reals, loaded.load_ints, loaded.load_reals, np.zeros((0, 0)))
+                         loaded.spring_reals, loaded.load_ints, loaded.load_reals, loaded.point_springs,
+                         loaded.point_spring_reals, np.zeros((0, 0)))
+    q0 = np.array([initial_value(joint) for joint in movable], dtype=float).reshape(n)
+    springs = _measured_rest_lengths(springs, kernel, q0)
     for array in kernel:
         array.setflags(write=False)
     steady = targets.steady + tuple(driver.name for driver, (_, f) in zip(joint_drivers, driver_rows)
@@ -503,7 +537,7 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
         constraint_names=constraint_names,
         drivers=np.arange(len(constraint_names)) >= closure_rows,
         actuator_names=names,
-        q0=np.array([initial_value(joint) for joint in movable], dtype=float).reshape(n),
+        q0=q0,
         qd0=np.zeros(n),
         point_names=link_names,
         lines=tuple((index[joint.parent], index[joint.child]) for joint in joints),
@@ -519,7 +553,8 @@ def build_robot(name: str, links: Sequence[TreeLink], joints: Sequence[TreeJoint
                     "drivers": [{"name": d.name, "joint": d.joint, "function": functions[f]}
                                 for d, (_, f) in zip(joint_drivers, driver_rows)]
                                + [dict(vars(driver)) for driver in pose_drivers],
-                    "springs": [dict(vars(spring)) for spring in springs], "joint_damping": joint_damping,
+                    "springs": [dict(vars(spring), kind=type(spring).__name__) for spring in springs],
+                    "joint_damping": joint_damping,
                     "joint_limits": joint_limits,
                     "loads": [dict(vars(load), kind=type(load).__name__) for load in loads],
                     "visuals": {link.name: tuple(link.visuals) for link in by_name.values() if link.visuals}},

@@ -42,7 +42,7 @@ import numpy as np
 from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.robot_kernel import CLOSE_DOT, CLOSE_LINE, CLOSE_POINT, ELEMENT_REALS, JOINT_COUPLING
 
-__all__ = ["Closure", "CLOSURE_KINDS", "GROUND", "closure_elements", "rpy_rotation"]
+__all__ = ["Closure", "CLOSURE_KINDS", "GROUND", "closure_elements", "link_frame", "rpy_rotation"]
 
 #: the rows of each kind, by their suffix
 CLOSURE_KINDS = {"point": ("x", "y", "z"), "axis": ("axis1", "axis2"), "revolute": ("x", "y", "z", "axis1", "axis2"),
@@ -107,6 +107,30 @@ def _vector(values: object, entry: str, field: str, source: str | None, *, unit:
     return array
 
 
+def link_frame(link: str, field: str, link_names: Sequence[str], link_body: np.ndarray, link_offset: np.ndarray,
+               entry: str, source: str | None = None) -> tuple[int, np.ndarray]:
+    """The body of ``link`` (-1: the ground) and the link frame's placement in that body's frame
+    (4 x 4; in the world for the ground); :data:`GROUND` is the world frame itself.
+
+    Raises
+    ------
+    ModelError
+        Naming ``entry`` and ``field``: an unknown link (did you mean, and the choices), or a moving
+        link named :data:`GROUND`.
+    """
+    if link == GROUND and link in link_names and link_body[list(link_names).index(link)] >= 0:
+        raise ModelError(f"{field}: {GROUND!r} names the world frame, but the tree has a moving link of "
+                         "that name; rename the link", source=source, entry=entry)
+    if link == GROUND:
+        return -1, np.eye(4)
+    if link in link_names:
+        index = list(link_names).index(link)
+        return int(link_body[index]), np.asarray(link_offset[index], dtype=float)
+    choices = (GROUND, *(name for name in link_names if name != GROUND))
+    raise ModelError(f"{field}: unknown link {link!r}{did_you_mean(link, choices)}; links: "
+                     f"{', '.join(choices)}", source=source, entry=entry)
+
+
 def closure_elements(closures: Sequence[Closure], link_names: Sequence[str], link_body: np.ndarray,
                      link_offset: np.ndarray, *, source: str | None = None
                      ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
@@ -135,21 +159,9 @@ def closure_elements(closures: Sequence[Closure], link_names: Sequence[str], lin
                              f"{', '.join(CLOSURE_KINDS)}", source=source, entry=entry)
         if closure.link_a == closure.link_b:
             raise ModelError(f"link_a and link_b are the same link {closure.link_a!r}", source=source, entry=entry)
-        frames = []
-        for field, link in (("link_a", closure.link_a), ("link_b", closure.link_b)):
-            if link == GROUND and link in link_names and link_body[list(link_names).index(link)] >= 0:
-                raise ModelError(f"{field}: {GROUND!r} names the world frame, but the tree has a moving link of "
-                                 "that name; rename the link", source=source, entry=entry)
-            if link == GROUND:
-                frames.append((-1, np.eye(4)))
-            elif link in link_names:
-                index = list(link_names).index(link)
-                frames.append((int(link_body[index]), np.asarray(link_offset[index], dtype=float)))
-            else:
-                choices = (GROUND, *(name for name in link_names if name != GROUND))
-                raise ModelError(f"{field}: unknown link {link!r}{did_you_mean(link, choices)}; links: "
-                                 f"{', '.join(choices)}", source=source, entry=entry)
-        (body_a, offset_a), (body_b, offset_b) = frames
+        (body_a, offset_a), (body_b, offset_b) = (
+            link_frame(link, field, link_names, link_body, link_offset, entry, source)
+            for field, link in (("link_a", closure.link_a), ("link_b", closure.link_b)))
         point_a = offset_a[:3, :3] @ _vector(closure.point_a, entry, "point_a", source) + offset_a[:3, 3]
         point_b = offset_b[:3, :3] @ _vector(closure.point_b, entry, "point_b", source) + offset_b[:3, 3]
         rpy_a = _vector(closure.rpy_a, entry, "rpy_a", source)

@@ -9,8 +9,11 @@ sections are ``[closures.NAME]`` (:class:`~cmbs.model.robot_closures.Closure`), 
 (a joint's prescribed motion, as in the natural-coordinate files: ``coordinate`` names the joint;
 or, with ``kind = "pose"``, a link frame's target pose: :class:`~cmbs.model.robot_targets.PoseDriver`),
 ``[springs.NAME]`` (a joint spring-damper: :class:`~cmbs.model.robot_loads.JointSpring`),
-``[forces.NAME]`` and ``[moments.NAME]`` (a force at a link point, a moment on a link:
-:class:`~cmbs.model.robot_loads.LinkForce`, :class:`~cmbs.model.robot_loads.LinkMoment`),
+``[point_springs.NAME]`` (a spring-damper between two link points, or a link point and a world
+point: :class:`~cmbs.model.robot_loads.PointSpring`; its default rest length is the points'
+distance at the file's start, the assembled q0), ``[forces.NAME]`` and ``[moments.NAME]`` (a
+force at a link point, a moment on a link: :class:`~cmbs.model.robot_loads.LinkForce`,
+:class:`~cmbs.model.robot_loads.LinkMoment`),
 ``[initial_positions]`` (joint = value: the guess assembly starts from, default ``model.q0``) and
 ``[initial_velocities]``.  The file is data, checked key by key before any work (unknown keys,
 wrong types, vectors of the wrong length, unknown links, joints and kinds are one-line errors
@@ -20,8 +23,10 @@ naming the file, the entry and the field), then the model is assembled
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
+from typing import Sequence
 
 from cmbs.errors import ModelError, did_you_mean
 from cmbs.model.drivers import TimeFunction, as_time_function, checked_at_start
@@ -29,12 +34,13 @@ from cmbs.model.files import Entry, assembled, coordinate_values, entries, initi
 from cmbs.model.model import Model
 from cmbs.model.robot import JointDriver
 from cmbs.model.robot_closures import CLOSURE_KINDS, Closure
-from cmbs.model.robot_loads import JointSpring, LinkForce, LinkMoment
+from cmbs.model.robot_loads import JointSpring, LinkForce, LinkMoment, PointSpring, measured_rest_length
 from cmbs.model.robot_targets import PoseDriver
 
 __all__ = ["SECTIONS", "read_robot_file"]
 
-SECTIONS = ("model", "closures", "drivers", "springs", "forces", "moments", "initial_positions", "initial_velocities")
+SECTIONS = ("model", "closures", "drivers", "springs", "point_springs", "forces", "moments", "initial_positions",
+            "initial_velocities")
 _CLOSURE_KEYS = ("kind", "link_a", "link_b", "point_a", "point_b", "axis_a", "axis_b", "rpy_a", "rpy_b")
 _VECTORS = ("point_a", "point_b", "axis_a", "axis_b", "rpy_a", "rpy_b")
 _POSE_KEYS = ("kind", "link", "point", "position", "rpy")
@@ -113,6 +119,19 @@ def _spring(name: str, table: object) -> JointSpring:
                        entry.number("damping", 0.0))
 
 
+def _point_spring(name: str, table: object) -> PointSpring:
+    """A ``[point_springs.NAME]`` entry: ``link_a``, ``point_a``, ``link_b``, ``point_b``, ``stiffness``,
+    ``damping``, ``rest_length`` (the points default to the links' origins; the values are checked
+    by :func:`~cmbs.model.robot_loads.load_elements`)."""
+    entry = Entry(f"point_springs.{name}", table,
+                  ("link_a", "point_a", "link_b", "point_b", "stiffness", "damping", "rest_length"),
+                  ("link_a", "link_b", "stiffness"))
+    zero = (0.0, 0.0, 0.0)
+    return PointSpring(name, entry.string("link_a"), _vector(entry, "point_a") or zero, entry.string("link_b"),
+                       _vector(entry, "point_b") or zero, entry.number("stiffness"), entry.number("damping", 0.0),
+                       entry.number("rest_length"))
+
+
 def _load(section: str, name: str, table: object) -> LinkForce | LinkMoment:
     """A ``[forces.NAME]`` entry (``link``, ``point``, ``force``, ``frame``) or a ``[moments.NAME]``
     one (``link``, ``moment``, ``frame``); the components numbers or expressions of t."""
@@ -157,9 +176,42 @@ def _entry_of(constraint: str, joint_drivers: frozenset[str], pose_drivers: froz
     return f"drivers.{name}" if name in pose_drivers else f"closures.{name}"
 
 
+#: the entries of the Python elements' errors (``KIND 'NAME'``) by the file's sections
+_SECTION_OF = {"closure": "closures", "driver": "drivers", "spring": "springs", "point spring": "point_springs",
+               "force": "forces", "moment": "moments"}
+
+
+def _in_file(error: ModelError, source: str) -> ModelError:
+    """A closure's, driver's, spring's or load's mistake (an error naming no file) as this file's:
+    its entry ``KIND 'NAME'`` named ``SECTION.NAME``."""
+    if error.source is not None:
+        return error
+    entry = error.entry or ""
+    for kind, section in _SECTION_OF.items():
+        if entry.startswith(f"{kind} '") and entry.endswith("'"):
+            entry = f"{section}.{entry[len(kind) + 2:-1]}"
+            break
+    return ModelError(error.problem, source=source, entry=entry or None)
+
+
+def _measured_at_start(springs: Sequence[JointSpring | PointSpring], model: Model,
+                       source: str) -> list[JointSpring | PointSpring]:
+    """``springs`` with each point spring that the file gives no ``rest_length`` given the points'
+    distance at the assembled start ``model.q0`` (:func:`~cmbs.model.robot_loads.measured_rest_length`)."""
+    point_springs = [spring for spring in springs if isinstance(spring, PointSpring)]
+    lengths = dict(zip((spring.name for spring in point_springs), model.equations.point_spring_lengths(model.q0)))
+    try:
+        return [dataclasses.replace(spring, rest_length=measured_rest_length(spring.name, lengths[spring.name]))
+                if isinstance(spring, PointSpring) and spring.rest_length is None else spring for spring in springs]
+    except ModelError as error:
+        raise _in_file(error, source) from None
+
+
 def read_robot_file(document: dict, path: Path) -> Model:
     """The assembled robot model of the parsed robot file ``document`` read from ``path``
-    (module docstring).  Errors are :class:`~cmbs.errors.ModelError` naming the file."""
+    (module docstring).  Errors are :class:`~cmbs.errors.ModelError` naming the file.  A point
+    spring given no ``rest_length`` takes the points' distance at the assembled start: the model
+    is built with a stand-in rest length, assembled, then built again with the measured ones."""
     from cmbs.model.urdf import load_urdf
 
     source = str(path)
@@ -177,7 +229,9 @@ def read_robot_file(document: dict, path: Path) -> Model:
             if not isinstance(value, bool):
                 raise ModelError(f"{key} must be true or false, got {value!r}", entry="model")
         closures = [_closure(name, table) for name, table in entries(document, "closures")]
-        springs = [_spring(name, table) for name, table in entries(document, "springs")]
+        springs: list[JointSpring | PointSpring] = [_spring(name, table)
+                                                    for name, table in entries(document, "springs")]
+        springs += [_point_spring(name, table) for name, table in entries(document, "point_springs")]
         loads = [_load(section, name, table) for section in ("forces", "moments")
                  for name, table in entries(document, section)]
         drivers = _Drivers()
@@ -192,27 +246,31 @@ def read_robot_file(document: dict, path: Path) -> Model:
             raise ModelError(f"urdf: no such file {str(urdf)!r}", entry="model")
     except ModelError as error:
         raise error.located(source=source) from None
+
+    def robot(springs: Sequence[JointSpring | PointSpring]) -> Model:
+        try:
+            return load_urdf(urdf, gravity=gravity, closures=closures, drivers=drivers.drivers, springs=springs,
+                             loads=loads, **switches)
+        except ModelError as error:
+            raise _in_file(error, source) from None
+
+    # a stand-in rest length (1 m) for the point springs given none, measured once the start is known
+    measured = any(isinstance(spring, PointSpring) and spring.rest_length is None for spring in springs)
+    built = robot([dataclasses.replace(spring, rest_length=1.0)
+                   if isinstance(spring, PointSpring) and spring.rest_length is None else spring for spring in springs])
     try:
-        robot = load_urdf(urdf, gravity=gravity, closures=closures, drivers=drivers.drivers, springs=springs,
-                          loads=loads, **switches)
-    except ModelError as error:
-        if error.source is None:      # a closure's, driver's, spring's or load's mistake: name this file's entry
-            entry = error.entry or ""
-            kind, _, name = entry.partition(" ")
-            where = {"closure": "closures", "driver": "drivers", "spring": "springs", "force": "forces",
-                     "moment": "moments"}.get(kind)
-            raise ModelError(error.problem, source=source,
-                             entry=f"{where}.{name.strip(chr(39))}" if where else entry or None) from None
-        raise
-    try:
-        model = robot.replace(name=header.string("name") or path.stem,
-                              description=header.string("description") or robot.description,
-                              source=header.string("source") or robot.source)
+        model = built.replace(name=header.string("name") or path.stem,
+                              description=header.string("description") or built.description,
+                              source=header.string("source") or built.source)
         model = _initial_positions(document, model)
         model, given_velocities = initial_velocities(document, model)
     except ModelError as error:
         raise error.located(source=source) from None
     joint_drivers = frozenset(d.name for d in drivers.drivers if isinstance(d, JointDriver))
     pose_drivers = frozenset(d.name for d in drivers.drivers if isinstance(d, PoseDriver))
-    return assembled(model, source, given_velocities,
-                     lambda constraint: _entry_of(constraint, joint_drivers, pose_drivers))
+    model = assembled(model, source, given_velocities,
+                      lambda constraint: _entry_of(constraint, joint_drivers, pose_drivers))
+    if not measured:
+        return model
+    return robot(_measured_at_start(springs, model, source)).replace(
+        name=model.name, description=model.description, source=model.source, q0=model.q0, qd0=model.qd0)

@@ -29,7 +29,13 @@ given in the link's axes is first turned into the world's, ``F = R_k E F_link`` 
 frame's rotation in the body frame).  The backward pass's ``S_jᵀ f^ext`` is then, for every joint
 j between body k and the ground, ``z_j·((p - o_j) × F)`` (revolute) or ``z_j·F`` (prismatic):
 ``Q += J_pᵀ F`` (J_p the point's translational Jacobian) and ``Q += J_ωᵀ M`` (J_ω the body's
-angular one).  A joint spring-damper on coordinate c adds ``-k (q_c - q_rest) - c q̇_c`` to Q_c.
+angular one).  A spring-damper between the point p_a of body a and p_b of body b (either may be
+the ground, whose points are fixed in the world) is two such forces, ``-f u`` at p_a and ``+f u``
+at p_b, with ``d = p_a - p_b``, ``ℓ = |d|``, ``u = d / ℓ``, ``ℓ̇ = u·(ṗ_a - ṗ_b)`` (the points'
+velocities of the forward pass) and the tension ``f = k (ℓ - ℓ0) + c ℓ̇``:
+``Q += J_aᵀ(-f u) + J_bᵀ(f u)``.  At ℓ = 0 u is undefined and the spring exerts no force (the
+length is computed scaled by the largest component of d, so a tiny ℓ gives a unit u, not 0/0).
+A joint spring-damper on coordinate c adds ``-k (q_c - q_rest) - c q̇_c`` to Q_c.
 The composite-rigid-body algorithm (Featherstone §6.2)::
 
     I^c_k = I_k + Σ_children I^c_c,     M_kk = S_kᵀ I^c_k S_k,     M_jk = M_kj = S_jᵀ I^c_k S_k
@@ -101,6 +107,9 @@ FRAME_WORLD, FRAME_LINK = 0, 1
 LOAD_REALS = 12
 #: per joint spring-damper in ``spring_reals``: stiffness k, rest value q_rest, damping c
 SPRING_REALS = 3
+#: per spring-damper between two points in ``point_spring_reals``: l_a (3, body a's frame), l_b (3,
+#: body b's frame; world coordinates for the ground), stiffness k, damping c, rest length ℓ0
+POINT_SPRING_REALS = 9
 # work per body: R (9), o (3), S (6), v (6), a (6), f (6), composite inertia (m, h (3), Ī (xx, xy, xz, yy, yz, zz))
 _R, _O, _S, _V, _A, _F, _I = 0, 9, 12, 18, 24, 30, 36
 WORK = 46
@@ -134,6 +143,8 @@ class RobotKernel(NamedTuple):
     load_ints: np.ndarray        # (l, 4) int64: LOAD_FORCE or LOAD_MOMENT, body, FRAME_WORLD or FRAME_LINK, the
                                  # first of its three time functions (x, y, z components)
     load_reals: np.ndarray       # (l, LOAD_REALS): point (body frame), E
+    point_springs: np.ndarray        # (p, 2) int64: body a, body b (-1: the ground) of each point spring-damper
+    point_spring_reals: np.ndarray   # (p, POINT_SPRING_REALS): l_a, l_b, k, c, ℓ0
     mass: np.ndarray         # (0, 0)
 
 
@@ -308,7 +319,8 @@ def evaluate_terms(kernel, q, qd, t, u, buf):
         W[f + 3] = f0 + wy * g2 - wz * g1
         W[f + 4] = f1 + wz * g0 - wx * g2
         W[f + 5] = f2 + wx * g1 - wy * g0
-    _apply_loads(kernel.load_ints, kernel.load_reals, gravity, buf[s0:s0 + 3 * ntf].reshape((ntf, 3)), W, w0)
+    _apply_loads(kernel.load_ints, kernel.load_reals, buf[s0:s0 + 3 * ntf].reshape((ntf, 3)), W, w0)
+    _apply_point_springs(kernel.point_springs, kernel.point_spring_reals, gravity, W, w0)
     for i in range(n * n):
         buf[o_M + i] = 0.0
     for idx in range(n - 1, -1, -1):
@@ -344,7 +356,7 @@ def evaluate_terms(kernel, q, qd, t, u, buf):
 
 
 @njit(cache=True, inline="always")
-def _apply_loads(ints, reals, gravity, values, W, w0):
+def _apply_loads(ints, reals, values, W, w0):
     """Subtracts each applied load's spatial force about the world origin, ``(p × F, F)`` or
     ``(M, 0)``, from its body's f (module docstring), the components at t in ``values`` (k, 3)."""
     for e in range(ints.shape[0]):
@@ -356,14 +368,68 @@ def _apply_loads(ints, reals, gravity, values, W, w0):
             by = reals[e, 6] * cx + reals[e, 7] * cy + reals[e, 8] * cz
             bz = reals[e, 9] * cx + reals[e, 10] * cy + reals[e, 11] * cz
             cx, cy, cz, _, _, _, _, _, _ = _vector_motion(body, bx, by, bz, W, w0)
-        f = w0 + WORK * body + _F
         if kind == LOAD_FORCE:
-            px, py, pz, _, _, _, _, _, _ = _point_motion(body, reals[e, 0], reals[e, 1], reals[e, 2], gravity, W, w0)
-            nx, ny, nz = _cross(px, py, pz, cx, cy, cz)
-            W[f], W[f + 1], W[f + 2] = W[f] - nx, W[f + 1] - ny, W[f + 2] - nz
-            W[f + 3], W[f + 4], W[f + 5] = W[f + 3] - cx, W[f + 4] - cy, W[f + 5] - cz
+            px, py, pz = _point_position(body, reals[e, 0], reals[e, 1], reals[e, 2], W, w0)
+            _apply_force(body, px, py, pz, cx, cy, cz, W, w0)
         else:
+            f = w0 + WORK * body + _F
             W[f], W[f + 1], W[f + 2] = W[f] - cx, W[f + 1] - cy, W[f + 2] - cz
+
+
+@njit(cache=True, inline="always")
+def _apply_point_springs(ints, reals, gravity, W, w0):
+    """Subtracts each point spring-damper's two forces, ``-f u`` at p_a and ``f u`` at p_b as
+    spatial forces about the world origin, from its bodies' f (module docstring; nothing for the
+    ground and nothing at ℓ = 0)."""
+    for e in range(ints.shape[0]):
+        ba, bb = ints[e, 0], ints[e, 1]
+        ax, ay, az, vax, vay, vaz, _, _, _ = _point_motion(ba, reals[e, 0], reals[e, 1], reals[e, 2], gravity, W, w0)
+        bx, by, bz, vbx, vby, vbz, _, _, _ = _point_motion(bb, reals[e, 3], reals[e, 4], reals[e, 5], gravity, W, w0)
+        length, ux, uy, uz = _length_direction(ax - bx, ay - by, az - bz)
+        if length == 0.0:
+            continue
+        tension = reals[e, 6] * (length - reals[e, 8]) + reals[e, 7] * (ux * (vax - vbx) + uy * (vay - vby)
+                                                                         + uz * (vaz - vbz))
+        fx, fy, fz = tension * ux, tension * uy, tension * uz
+        _apply_force(ba, ax, ay, az, -fx, -fy, -fz, W, w0)
+        _apply_force(bb, bx, by, bz, fx, fy, fz, W, w0)
+
+
+@njit(cache=True, inline="always")
+def _apply_force(body, px, py, pz, fx, fy, fz, W, w0):
+    """Subtracts the force F at the world point p, the spatial force ``(p × F, F)`` about the
+    world origin, from ``body``'s f (nothing for the ground, -1)."""
+    if body < 0:
+        return
+    f = w0 + WORK * body + _F
+    nx, ny, nz = _cross(px, py, pz, fx, fy, fz)
+    W[f], W[f + 1], W[f + 2] = W[f] - nx, W[f + 1] - ny, W[f + 2] - nz
+    W[f + 3], W[f + 4], W[f + 5] = W[f + 3] - fx, W[f + 4] - fy, W[f + 5] - fz
+
+
+@njit(cache=True, inline="always")
+def _length_direction(dx, dy, dz):
+    """(ℓ, u) of d: ℓ = |d| and u = d / ℓ, both computed scaled by d's largest component (no
+    underflow of a tiny ℓ); (0, 0) when d = 0."""
+    scale = max(abs(dx), abs(dy), abs(dz))
+    if scale == 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    sx, sy, sz = dx / scale, dy / scale, dz / scale
+    norm = math.sqrt(sx * sx + sy * sy + sz * sz)
+    return scale * norm, sx / norm, sy / norm, sz / norm
+
+
+@njit(cache=True, inline="always")
+def _point_position(body, lx, ly, lz, W, w0):
+    """World position of the point with local coordinates l on ``body`` (-1: the ground, l is
+    then the position)."""
+    if body < 0:
+        return lx, ly, lz
+    base = w0 + WORK * body
+    R = base + _R
+    return (W[base + _O] + W[R] * lx + W[R + 1] * ly + W[R + 2] * lz,
+            W[base + _O + 1] + W[R + 3] * lx + W[R + 4] * ly + W[R + 5] * lz,
+            W[base + _O + 2] + W[R + 6] * lx + W[R + 7] * ly + W[R + 8] * lz)
 
 
 @njit(cache=True, inline="always")
@@ -373,10 +439,8 @@ def _point_motion(body, lx, ly, lz, gravity, W, w0):
     if body < 0:
         return lx, ly, lz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     base = w0 + WORK * body
-    R, v, a = base + _R, base + _V, base + _A
-    px = W[base + _O] + W[R] * lx + W[R + 1] * ly + W[R + 2] * lz
-    py = W[base + _O + 1] + W[R + 3] * lx + W[R + 4] * ly + W[R + 5] * lz
-    pz = W[base + _O + 2] + W[R + 6] * lx + W[R + 7] * ly + W[R + 8] * lz
+    v, a = base + _V, base + _A
+    px, py, pz = _point_position(body, lx, ly, lz, W, w0)
     wx, wy, wz = W[v], W[v + 1], W[v + 2]
     vx = W[v + 3] + wy * pz - wz * py
     vy = W[v + 4] + wz * px - wx * pz
@@ -582,9 +646,10 @@ RobotKernel.evaluate = staticmethod(_evaluate_robot)
 
 
 @njit(cache=True)
-def _energy_kernel(parent, order, kind, placement, axis, inertia, gravity, springs, spring_reals, q, qd):
+def _energy_kernel(parent, order, kind, placement, axis, inertia, gravity, springs, spring_reals, point_springs,
+                   point_spring_reals, q, qd):
     """(T, V): T = ½ Σ_k v_kᵀ I_k v_k (= ½ q̇ᵀ M q̇), V = -Σ_k m_k g·c_k (c_k the centre of mass)
-    + Σ_springs ½ k (q_c - q_rest)²."""
+    + Σ_joint springs ½ k (q_c - q_rest)² + Σ_point springs ½ k (ℓ - ℓ0)²."""
     n = parent.shape[0]
     W = np.zeros(WORK * n)
     kinetic = 0.0
@@ -604,14 +669,21 @@ def _energy_kernel(parent, order, kind, placement, axis, inertia, gravity, sprin
     for e in range(springs.shape[0]):
         stretch = q[springs[e]] - spring_reals[e, 1]
         potential += 0.5 * spring_reals[e, 0] * stretch * stretch
+    for e in range(point_springs.shape[0]):
+        reals = point_spring_reals[e]
+        ax, ay, az = _point_position(point_springs[e, 0], reals[0], reals[1], reals[2], W, 0)
+        bx, by, bz = _point_position(point_springs[e, 1], reals[3], reals[4], reals[5], W, 0)
+        stretch = _length_direction(ax - bx, ay - by, az - bz)[0] - reals[8]
+        potential += 0.5 * reals[6] * stretch * stretch
     return kinetic, potential
 
 
 def energies(kernel: RobotKernel, q: np.ndarray, qd: np.ndarray) -> tuple[float, float]:
-    """Kinetic and potential energy (T, V) of the tree and its joint springs at (q, q̇)
+    """Kinetic and potential energy (T, V) of the tree and its springs at (q, q̇)
     (:func:`_energy_kernel`)."""
     kinetic, potential = _energy_kernel(kernel.parent, kernel.order, kernel.kind, kernel.placement, kernel.axis,
                                         kernel.inertia, kernel.gravity, kernel.springs, kernel.spring_reals,
+                                        kernel.point_springs, kernel.point_spring_reals,
                                         np.ascontiguousarray(q, dtype=float),
                                         np.ascontiguousarray(qd, dtype=float))
     return float(kinetic), float(potential)
@@ -647,7 +719,7 @@ class BodyWork(NamedTuple):
     """What :func:`evaluate_terms` leaves per body in the terms' scratch, as arrays (views):
     world rotation R (n, 3, 3), frame origin o (n, 3), motion subspace S (n, 6), the sum over the
     body's subtree of the bias wrenches ``I a + v ×_f I v - f^ext`` (RNEA at q̈ = 0, base at -g,
-    the applied loads' spatial forces f^ext; n, 6)
+    the spatial forces f^ext of the applied loads and the point springs; n, 6)
     and the composite inertia (m, h, Ī) of its subtree (n, 10), all in world Plücker coordinates
     (module docstring)."""
 

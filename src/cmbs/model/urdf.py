@@ -27,7 +27,7 @@ from cmbs.errors import ModelError
 from cmbs.model.model import Model
 from cmbs.model.robot import Inertial, JointDriver, TreeJoint, TreeLink, build_robot
 from cmbs.model.robot_closures import Closure
-from cmbs.model.robot_loads import JointSpring, LinkForce, LinkMoment
+from cmbs.model.robot_loads import JointSpring, LinkForce, LinkMoment, PointSpring
 from cmbs.model.robot_targets import PoseDriver
 from cmbs.model.visuals import SHAPES, Visual
 
@@ -47,15 +47,16 @@ _COMMAS = {"size", "scale"}
 
 def load_urdf(path: str | Path, *, gravity: Sequence[float] = (0.0, 0.0, -9.81), closures: Sequence[Closure] = (),
               drivers: Sequence[JointDriver | PoseDriver] = (), mimic: bool = False,
-              springs: Sequence[JointSpring] = (), loads: Sequence[LinkForce | LinkMoment] = (),
+              springs: Sequence[JointSpring | PointSpring] = (), loads: Sequence[LinkForce | LinkMoment] = (),
               joint_damping: bool = False, joint_limits: bool = False) -> Model:
     """The robot of the URDF file ``path`` (module docstring), gravity ``gravity`` (m/s², world
     axes), closed by ``closures``, driven by ``drivers``, its mimic joints coupled when ``mimic``,
-    loaded by the joint ``springs``, the forces and moments ``loads`` and, when ``joint_damping``,
-    its joints' ``<dynamics damping>`` as dampers (:mod:`cmbs.model.robot_loads`), its position
-    analysis kept within the joints' ``<limit lower upper>`` when ``joint_limits``
-    (:func:`~cmbs.model.robot.build_robot`;
-    not assembled: a robot file does that, :mod:`cmbs.model.robot_files`).  Every problem of the
+    loaded by the ``springs`` (joint springs and spring-dampers between two points; a point
+    spring's default rest length is its length at ``model.q0``), the forces and moments ``loads``
+    and, when ``joint_damping``, its joints' ``<dynamics damping>`` as dampers
+    (:mod:`cmbs.model.robot_loads`), its position analysis kept within the joints' ``<limit lower
+    upper>`` when ``joint_limits`` (:func:`~cmbs.model.robot.build_robot`; not assembled: a robot
+    file does that, :mod:`cmbs.model.robot_files`).  Every problem of the
     URDF is a one-line :class:`~cmbs.errors.ModelError` naming the file and the element: a missing
     file, XML that is not well formed, a number that is not one, an unknown, floating or planar
     joint type, a movable joint that carries no inertial."""
