@@ -46,7 +46,7 @@ from cmbs.model.drivers import TimeFunction, is_constant
 from cmbs.model.robot_closures import link_frame
 from cmbs.model.robot_kernel import FRAME_LINK, FRAME_WORLD, LOAD_FORCE, LOAD_MOMENT, LOAD_REALS, \
     POINT_SPRING_REALS, SPRING_REALS
-from cmbs.model.robot_targets import three_functions
+from cmbs.model.robot_targets import moving_link, three_functions
 
 if TYPE_CHECKING:
     from cmbs.model.robot import TreeJoint
@@ -296,14 +296,8 @@ def load_elements(springs: Sequence[JointSpring | PointSpring], loads: Sequence[
         if (noun, load.name) in seen:
             raise ModelError(f"duplicate {noun} name", entry=entry)
         seen.add((noun, load.name))
-        if load.link not in link_names:
-            raise ModelError(f"link: unknown link {load.link!r}{did_you_mean(load.link, link_names)}; links: "
-                             f"{', '.join(link_names)}", entry=entry)
-        index = list(link_names).index(load.link)
-        body, offset = int(link_body[index]), np.asarray(link_offset[index], dtype=float)
-        if body < 0:
-            raise ModelError(f"link: {load.link!r} does not move (it is the root or fixed to it): a {noun} on it "
-                             "acts on nothing", entry=entry)
+        body, offset = moving_link(load.link, link_names, link_body, link_offset, entry,
+                                   f"a {noun} on it acts on nothing")
         if load.frame not in FRAMES:
             raise ModelError(f"frame: unknown frame {load.frame!r}{did_you_mean(str(load.frame), FRAMES)}; frames: "
                              f"{', '.join(FRAMES)}", entry=entry)

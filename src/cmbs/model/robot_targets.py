@@ -85,6 +85,26 @@ class TargetElements(NamedTuple):
     orientations: tuple[tuple[str, int, int], ...]  # (first orientation row, link index, function of its roll)
 
 
+def moving_link(link: str, link_names: Sequence[str], link_body: np.ndarray, link_offset: np.ndarray, entry: str,
+                consequence: str) -> tuple[int, np.ndarray]:
+    """The body of the moving ``link`` and the link frame's placement in that body's frame (4 x 4).
+
+    Raises
+    ------
+    ModelError
+        Naming ``entry``: an unknown link (did you mean, and the links), or a link that does not
+        move (the root or a link fixed to it), saying the ``consequence``.
+    """
+    if link not in link_names:
+        raise ModelError(f"link: unknown link {link!r}{did_you_mean(link, link_names)}; links: "
+                         f"{', '.join(link_names)}", entry=entry)
+    index = list(link_names).index(link)
+    body, offset = int(link_body[index]), np.asarray(link_offset[index], dtype=float)
+    if body < 0:
+        raise ModelError(f"link: {link!r} does not move (it is the root or fixed to it): {consequence}", entry=entry)
+    return body, offset
+
+
 def target_elements(drivers: Sequence[PoseDriver], link_names: Sequence[str], link_body: np.ndarray,
                     link_offset: np.ndarray) -> TargetElements:
     """The kernel's elements of the pose drivers (rows of ``closure_ints`` and ``closure_reals``;
@@ -109,14 +129,9 @@ def target_elements(drivers: Sequence[PoseDriver], link_names: Sequence[str], li
     orientations: list[tuple[str, int, int]] = []
     for driver in drivers:
         entry = f"driver {driver.name!r}"
-        if driver.link not in link_names:
-            raise ModelError(f"link: unknown link {driver.link!r}{did_you_mean(driver.link, link_names)}; links: "
-                             f"{', '.join(link_names)}", entry=entry)
+        body, offset = moving_link(driver.link, link_names, link_body, link_offset, entry,
+                                   "no joint can bring it to a pose")
         index = list(link_names).index(driver.link)
-        body, offset = int(link_body[index]), np.asarray(link_offset[index], dtype=float)
-        if body < 0:
-            raise ModelError(f"link: {driver.link!r} does not move (it is the root or fixed to it): no joint can "
-                             "bring it to a pose", entry=entry)
         point = np.asarray(driver.point, dtype=float)
         if point.shape != (3,) or not np.all(np.isfinite(point)):
             raise ModelError(f"point must be 3 finite numbers, got {driver.point!r}", entry=entry)
