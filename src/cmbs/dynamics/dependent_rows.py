@@ -58,9 +58,10 @@ KEPT_LOW, TRACE, RESIDUAL, RANK = range(4)
 def dependent_rows(model: Model, M0: np.ndarray, definite: bool) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
     """What :func:`solve_dependent_rows` needs besides the terms, for ``model`` whose mass matrix at
     q0 is ``M0`` (``definite``: positive definite, no massless coordinates): λ_min(M) (0 when M is
-    not constant and definite: the path is not taken), the work floats (S, L⁻¹ and C, each m × m,
-    then y (n), z (m), a residual row (n), the certificate (4) and the reference of the bound's
-    reuse: valid, √bound, the kept rows (m) and their A' (m × n)), the pivot order (m), and the
+    not constant and definite: the path is not taken), the work floats (the reference of the
+    bound's reuse: valid, √bound, its row count, the kept rows (m) and their A' (m × n); then S,
+    L⁻¹ and C, each m × m, y (n), z (m), a residual row (n) and the certificate (4); a caller may
+    pass fewer rows, e.g. the holonomic ones), the pivot order (m), and the
     path of a formulation's last evaluation (1: dependent rows, which it then tries first).  A
     formulation's kernel carries the four as fields (numba's parallel loops take no tuple nested
     in a kernel's)."""
@@ -71,7 +72,7 @@ def dependent_rows(model: Model, M0: np.ndarray, definite: bool) -> tuple[float,
 
 def dependent_rows_arrays(m: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The work floats, pivot order and last path of :func:`dependent_rows` for m rows, n coordinates."""
-    return (np.zeros(3 * m * m + 2 * n + m + 4 + 2 + m + m * n), np.zeros(m, dtype=np.int64),
+    return (np.zeros(3 + m + m * n + 3 * m * m + 2 * n + m + 4), np.zeros(m, dtype=np.int64),
             np.zeros(1, dtype=np.int64))
 
 
@@ -86,14 +87,15 @@ def solve_dependent_rows(mass_low, floats, order, inverse_mass, Q, A, gamma, row
     σ_min(A'_I)² lower bound, trace(A'A'ᵀ), ρ², r), or an empty view when a pivot is not
     positive or a result is not finite (nothing is certified then)."""
     m, n = A.shape
-    S = floats[:m * m].reshape((m, m))
-    T = floats[m * m:2 * m * m].reshape((m, m))
-    C = floats[2 * m * m:3 * m * m].reshape((m, m))
-    y = floats[3 * m * m:3 * m * m + n]
-    z = floats[3 * m * m + n:3 * m * m + n + m]
-    residual = floats[3 * m * m + n + m:3 * m * m + 2 * n + m]
-    certificate = floats[3 * m * m + 2 * n + m:3 * m * m + 2 * n + m + 4]
-    reference = floats[3 * m * m + 2 * n + m + 4:]
+    reference = floats[:3 + m + m * n]      # first: its valid flag and row count stay put for any m
+    base = 3 + m + m * n
+    S = floats[base:base + m * m].reshape((m, m))
+    T = floats[base + m * m:base + 2 * m * m].reshape((m, m))
+    C = floats[base + 2 * m * m:base + 3 * m * m].reshape((m, m))
+    y = floats[base + 3 * m * m:base + 3 * m * m + n]
+    z = floats[base + 3 * m * m + n:base + 3 * m * m + n + m]
+    residual = floats[base + 3 * m * m + n + m:base + 3 * m * m + 2 * n + m]
+    certificate = floats[base + 3 * m * m + 2 * n + m:base + 3 * m * m + 2 * n + m + 4]
     trace_gram = 0.0
     for r in range(m):                      # A's row non-zeros; X = A' M⁻¹
         count = 0
@@ -170,15 +172,15 @@ REUSE = 0.1
 def _kept_low(mass_low, L, rank, T, A, row_scale, order, reference):
     """A lower bound on σ_min(A'_I)² for the kept rows I = order[:rank]: λ_min(M) / trace(S_II⁻¹)
     (module docstring; trace(S_II⁻¹) = ‖L_II⁻¹‖_F², L⁻¹ left in ``T``), or, when the rows kept are
-    those of the bound last computed (``reference``: valid, its √bound b₀, the rows kept (1.0),
-    their A'₀ (m × n)) and δ = ‖A'_I - A'₀_I‖_F ≤ REUSE·b₀, the bound (b₀ - δ)², by Weyl's
+    those of the bound last computed for as many rows (``reference``: valid, its √bound b₀, its
+    row count, the rows kept (1.0), their A'₀ (m × n)) and δ = ‖A'_I - A'₀_I‖_F ≤ REUSE·b₀, the bound (b₀ - δ)², by Weyl's
     inequality for singular values, σ_min(A'_I) ≥ σ_min(A'₀_I) - ‖A'_I - A'₀_I‖₂ (Golub & Van
     Loan, Cor. 8.6.2): a step moves A little, so most evaluations skip L⁻¹.  A fresh bound
     becomes the reference."""
     m, n = A.shape
-    kept_rows = reference[2:2 + m]
-    A0 = reference[2 + m:].reshape((m, n))
-    if reference[0] == 1.0:
+    kept_rows = reference[3:3 + m]
+    A0 = reference[3 + m:3 + m + m * n].reshape((m, n))
+    if reference[0] == 1.0 and reference[2] == m:
         same = True
         count = 0
         for r in range(m):
@@ -199,7 +201,7 @@ def _kept_low(mass_low, L, rank, T, A, row_scale, order, reference):
             if delta <= REUSE * reference[1]:
                 return (reference[1] - delta) ** 2
     low = mass_low / _inverse_frobenius_squared(L, rank, T)
-    reference[0], reference[1] = 1.0, math.sqrt(low)
+    reference[0], reference[1], reference[2] = 1.0, math.sqrt(low), m
     for r in range(m):
         kept_rows[r] = 0.0
     for k in range(rank):
