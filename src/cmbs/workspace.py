@@ -59,8 +59,8 @@ class Workspace:
     values, the swept ``values`` (k,), the configurations ``q`` (k, n) reached on the branch
     (rows of NaN where not), ``reached`` (k,), the input range the branch covers, ``low`` to
     ``high`` (its limits where it ends inside the values, else the values' ends), the branch's
-    ``limits`` in ascending order, and the ``singular`` configurations between the values reached
-    (``t`` the input's value there)."""
+    ``limits`` in ascending order, the ``singular`` configurations between the values reached
+    (``t`` the input's value there), and the model's ``coordinate_names`` (the columns of q)."""
 
     coordinate: str
     held: dict[str, float]
@@ -78,9 +78,8 @@ class Workspace:
         ``high``, the limits' ``limit_values``, ``limit_q``, ``limit_relative_sigma``,
         ``limit_chain_relative_sigma``, and ``names``) or ``.csv`` (a row per value: the input,
         whether reached, the coordinates); atomically."""
-        limits = self.limits
         return _save(path, {"values": self.values, "q": self.q, "reached": self.reached, "low": self.low,
-                            "high": self.high, **_limit_arrays(limits, len(self.coordinate_names)),
+                            "high": self.high, **_limit_arrays(self.limits, len(self.coordinate_names)),
                             "input": self.coordinate, "names": np.array(self.coordinate_names)},
                      [f"swept.{self.coordinate}", "reached", *self.coordinate_names],
                      np.column_stack([self.values, self.reached, self.q]))
@@ -139,7 +138,8 @@ class WorkspaceGrid:
     (k_a, k_b), NaN where not reached: it falls to 0 at the branch's limits); ``start`` the grid
     point the sweep began at; the branch's ``limits`` located on the grid lines between a point
     reached and a neighbour never reached (``limit_inputs[k]`` the input that varies along that
-    line: 0 for a, 1 for b; ``limit_points[k]`` the (a, b) values there)."""
+    line: 0 for a, 1 for b; ``limit_points[k]`` the (a, b) values there); the model's
+    ``coordinate_names`` (the last axis of q)."""
 
     inputs: tuple[str, str]
     values: tuple[np.ndarray, np.ndarray]
