@@ -311,10 +311,13 @@ def assemble(model: Model, q: np.ndarray | None = None, t: float = 0.0, *, fixed
     solution, error, A = _newton(model, q, t, rows, free, size, tolerance, max_iterations)
     if model.coordinate_limits is not None:
         beyond = None if solution is None else _beyond_limits(model, solution, free)
-        if solution is None or beyond is not None:
+        if solution is None or beyond is not None:      # the bounded solve refuses spurious roots itself
             starts = [q] if solution is None else [solution, q]
-            solution, error, A = _within_limits(model, starts, t, rows, free, size, tolerance, max_iterations, beyond,
-                                                error)
+            solution, error = _within_limits(model, starts, t, rows, free, size, tolerance, max_iterations, beyond,
+                                             error)
+            if solution is None:
+                raise error
+            return solution
     if solution is None:
         raise error
     _refuse_half_turns(model, solution, t, A)
@@ -371,7 +374,7 @@ def _beyond_limits(model: Model, q: np.ndarray, free: np.ndarray) -> tuple[int, 
 
 def _within_limits(model: Model, starts: list[np.ndarray], t: float, rows: np.ndarray, free: np.ndarray, size: float,
                    tolerance: float, max_iterations: int, beyond: tuple[int, float, float, float] | None,
-                   error: ConvergenceError | None) -> tuple[np.ndarray | None, ConvergenceError | None, np.ndarray]:
+                   error: ConvergenceError | None) -> tuple[np.ndarray | None, ConvergenceError | None]:
     """The assembly within the coordinate limits (:func:`assemble`) from each of ``starts`` in turn
     (Newton's solution, then the guess): trust-region reflective least squares from the start
     reflected into the limits (a coordinate beyond a limit by δ starts δ inside it), then Newton
@@ -406,13 +409,13 @@ def _within_limits(model: Model, starts: list[np.ndarray], t: float, rows: np.nd
         if solution is not None and _beyond_limits(model, solution, free) is None:
             try:
                 _refuse_half_turns(model, solution, t, A)
-                return solution, None, A
+                return solution, None
             except BranchError:             # a spurious root: the next start may avoid it
                 pass
         phi = evaluated(fit.x)[0]
         if best is None or np.max(np.abs(phi)) < np.max(np.abs(best[0])):
-            best = phi, at_limit, A
-    phi, at_limit, A = best
+            best = phi, at_limit
+    phi, at_limit = best
     worst = int(np.argmax(np.abs(phi)))
     name = model.coordinate_names
     if beyond is not None:
@@ -426,7 +429,7 @@ def _within_limits(model: Model, starts: list[np.ndarray], t: float, rows: np.nd
         f"{model.constraint_names[rows[worst]]!r}"
         + (f" with {', '.join(repr(name[k]) for k in np.flatnonzero(at_limit))} at a limit" if at_limit.any() else ""))
     failure.constraint = model.constraint_names[rows[worst]]
-    return None, failure, A
+    return None, failure
 
 
 def _refuse_half_turns(model: Model, q: np.ndarray, t: float, A: np.ndarray) -> None:
