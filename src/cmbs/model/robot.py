@@ -333,8 +333,9 @@ def _combined_inertia(parts: list[tuple[float, np.ndarray, np.ndarray]]) -> np.n
 
 def _measured_rest_lengths(springs: Sequence[JointSpring | PointSpring], kernel: RobotKernel,
                            q0: np.ndarray) -> list[JointSpring | PointSpring]:
-    """``springs`` with each point spring given no rest length given its length at ``q0``, written
-    into the kernel's (still writable) ``point_spring_reals`` too (:func:`measured_rest_length`)."""
+    """``springs`` with the rest length of each point spring that has none set to its length at
+    ``q0``, written into the kernel's (still writable) ``point_spring_reals`` too
+    (:func:`measured_rest_length`)."""
     point_springs = [spring for spring in springs if isinstance(spring, PointSpring)]
     if all(spring.rest_length is not None for spring in point_springs):
         return list(springs)
